@@ -1,0 +1,34 @@
+# Set-up and run targets. Each creates $(VENV) on first use and installs
+# remoteenv into it (non-editable, as a user would) before running.
+VENV ?= .venv
+PY := $(VENV)/bin/python
+PIP := $(PY) -m pip
+PYTHON3 ?= python3
+export MUJOCO_GL ?= egl
+
+.PHONY: demo test bench install deps clean
+
+$(VENV)/.deps: pyproject.toml
+	$(PYTHON3) -m venv $(VENV)
+	# torch first and pinned: a looser requirement pulls GBs of CUDA packages.
+	$(PIP) install --quiet torch==2.13.0
+	$(PIP) install --quiet ".[test,torch,sb3,video]"
+	touch $@
+
+deps: $(VENV)/.deps
+
+install: deps
+	$(PIP) install --quiet --no-deps --force-reinstall .
+
+demo: install
+	$(PY) -m remoteenv demo cartpole --continuous --episodes 3
+	$(PY) -m remoteenv demo reacher --episodes 3
+
+test: install
+	$(VENV)/bin/pytest
+
+bench: install
+	$(PY) -m remoteenv bench
+
+clean:
+	rm -rf $(VENV) build dist *.egg-info

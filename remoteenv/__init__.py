@@ -1,0 +1,38 @@
+"""remoteenv: a MuJoCo simulation in its own process, driven as a Gymnasium env.
+
+Agent-side API: :class:`OpenAIRemoteEnv`, :class:`Launcher`,
+:class:`RemoteEnvError`. Sim-side API lives in :mod:`remoteenv.sim`. Importing
+this package registers the shipped scenes: ``remoteenv/CartPole-v0`` and
+``remoteenv/Reacher-v0``.
+"""
+
+from remoteenv.errors import RemoteEnvError, RemoteEnvTimeout
+from remoteenv.launcher import Launcher
+from remoteenv.protocol import PROTOCOL_VERSION
+from remoteenv.remote_env import OpenAIRemoteEnv
+
+import remoteenv.scenes.cartpole  # noqa: E402,F401  (registers the id)
+import remoteenv.scenes.reacher  # noqa: E402,F401
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Launcher",
+    "OpenAIRemoteEnv",
+    "PROTOCOL_VERSION",
+    "RemoteEnvError",
+    "RemoteEnvTimeout",
+    "scene_path",
+]
+
+
+def scene_path(name: str) -> str:
+    """Path of a shipped scene script: ``scene_path("cartpole")``."""
+    import os
+
+    import remoteenv.scenes as scenes
+
+    path = os.path.join(os.path.dirname(scenes.__file__), name, f"{name}_scene.py")
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"no shipped scene named {name!r} (looked for {path})")
+    return path

@@ -1,0 +1,235 @@
+"""The remoteenv wire format. Both processes import this module; it is the spec.
+
+Transport
+---------
+ZeroMQ. The sim process binds one ROUTER socket; an agent connects one DEALER
+socket. Each message is a single ZeroMQ frame holding one msgpack document
+(the ROUTER additionally sees the peer's routing id as a first frame, which it
+echoes back unchanged). Nothing on the wire is ever unpickled or evaluated.
+
+Default addresses are ``ipc://<private temp dir>/sim-<instance>.sock`` or
+``tcp://127.0.0.1:<port chosen by the OS>``. Binding any other interface is an
+explicit choice of the user.
+
+Messages
+--------
+A request is a msgpack map::
+
+    {"seq": int, "cmd": str, ...command arguments}
+
+``seq`` is chosen by the client and strictly increases per connection. Every
+reply echoes it::
+
+    {"seq": int, "ok": true,  ...results}
+    {"seq": int, "ok": false, "error": {"kind": str, "message": str,
+                                         "traceback": str}}
+
+A client drops any reply whose ``seq`` is not the one it is waiting for (a
+stale reply from a request that timed out is never taken for the current one).
+A frame that cannot be decoded as a request gets an error reply with
+``seq = -1``. Error kinds: ``"protocol"`` (malformed request, unknown command,
+version mismatch), ``"invalid_action"``, ``"scene"`` (the env code raised),
+``"state"`` (e.g. step before reset).
+
+Commands (version 1)
+--------------------
+``handshake`` ``{"protocol": int}`` -> ``{"protocol", "env_id", "instance",
+"num_worlds", "observation_space", "action_space", "metadata",
+"reward_range", "options"}``. The server refuses a protocol version it does not
+speak, naming both versions. ``metadata`` holds ``render_modes``,
+``render_fps`` and ``dt`` (seconds of simulated time per env step).
+
+``reset`` ``{"world": int, "seed": int | nil, "options": map | nil}`` ->
+``{"obs", "info"}``.
+
+``step`` ``{"world": int, "action"}`` -> ``{"obs", "reward": float,
+"terminated": bool, "truncated": bool, "info": map}``.
+
+``render`` ``{"world": int}`` -> ``{"frame": uint8 array H x W x 3 | nil}``.
+
+``close`` ``{}`` -> ``{}``; the server then exits.
+
+``world`` defaults to 0 and addresses one of the ``num_worlds`` MuJoCo worlds
+a sim process hosts.
+
+Values
+------
+Plain msgpack types (nil, bool, int, float, str, bin, array, map with str
+keys). numpy arrays travel as msgpack extension type 1 whose payload is the
+msgpack array ``[dtype: str, shape: [int, ...], data: bin]`` with ``dtype``
+an explicit little-endian numpy type string from :data:`ARRAY_DTYPES` (``"<f4"``,
+``"|u1"``, ...) and ``data`` the C-ordered raw bytes. Decoders check that
+``len(data) == prod(shape) * itemsize`` and return a fresh, writable array that
+shares memory with nothing. numpy scalars are sent as plain ints, floats and
+bools.
+
+Spaces (Box, Discrete, MultiDiscrete, MultiBinary, Dict, Tuple) travel as maps,
+see :func:`space_to_wire`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import msgpack
+import numpy as np
+
+PROTOCOL_VERSION = 1
+
+#: Largest frame a peer accepts (bytes). Larger frames are dropped by ZeroMQ.
+MAX_MESSAGE_BYTES = 256 * 1024 * 1024
+
+_EXT_NDARRAY = 1
+
+#: The only dtypes that may appear on the wire.
+ARRAY_DTYPES = frozenset(
+    np.dtype(t).newbyteorder("<").str if np.dtype(t).itemsize > 1 else np.dtype(t).str
+    for t in (
+        np.bool_, np.int8, np.int16, np.int32, np.int64,
+        np.uint8, np.uint16, np.uint32, np.uint64,
+        np.float16, np.float32, np.float64,
+    )
+)
+_MAX_NDIM = 32
+
+
+class ProtocolError(ValueError):
+    """A frame does not follow this module's spec."""
+
+
+def _wire_dtype(dtype: np.dtype) -> str:
+    d = dtype.newbyteorder("<") if dtype.itemsize > 1 else dtype
+    s = d.str
+    if s not in ARRAY_DTYPES:
+        raise TypeError(f"numpy dtype {dtype} cannot be sent; allowed: {sorted(ARRAY_DTYPES)}")
+    return s
+
+
+def _default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        dtype = _wire_dtype(obj.dtype)
+        arr = np.ascontiguousarray(obj, dtype=np.dtype(dtype))
+        return msgpack.ExtType(
+            _EXT_NDARRAY,
+            msgpack.packb([dtype, list(arr.shape), arr.tobytes()], use_bin_type=True),
+        )
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating):
+        return float(obj)
+    if isinstance(obj, (tuple, set, frozenset)):
+        return list(obj)
+    raise TypeError(f"cannot send a {type(obj).__name__} on the wire: {obj!r:.200}")
+
+
+def _ext_hook(code: int, data: bytes) -> Any:
+    if code != _EXT_NDARRAY:
+        raise ProtocolError(f"unknown msgpack extension type {code}")
+    try:
+        dtype, shape, raw = msgpack.unpackb(data, raw=False, use_list=True, strict_map_key=True)
+    except Exception as exc:
+        raise ProtocolError(f"malformed array payload: {exc}") from None
+    if not isinstance(dtype, str) or dtype not in ARRAY_DTYPES:
+        raise ProtocolError(f"array dtype {dtype!r} is not allowed")
+    if (
+        not isinstance(shape, list)
+        or len(shape) > _MAX_NDIM
+        or not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in shape)
+    ):
+        raise ProtocolError(f"array shape {shape!r} is not a list of non-negative ints")
+    if not isinstance(raw, bytes):
+        raise ProtocolError("array data is not bin")
+    dt = np.dtype(dtype)
+    if math.prod(shape) * dt.itemsize != len(raw):
+        raise ProtocolError(
+            f"array of dtype {dtype} and shape {shape} needs "
+            f"{math.prod(shape) * dt.itemsize} bytes, got {len(raw)}"
+        )
+    # frombuffer is read-only and aliases the frame; copy into a fresh array.
+    out = np.empty(shape, dtype=dt.newbyteorder("=") if dt.itemsize > 1 else dt)
+    if raw:
+        out.reshape(-1)[:] = np.frombuffer(raw, dtype=dt)
+    return out
+
+
+def pack(obj: Any) -> bytes:
+    """Encode one message (a map) as msgpack bytes."""
+    return msgpack.packb(obj, default=_default, use_bin_type=True)
+
+
+def unpack(frame: bytes) -> Any:
+    """Decode one frame. Raises :class:`ProtocolError` for anything off-spec."""
+    if len(frame) > MAX_MESSAGE_BYTES:
+        raise ProtocolError(f"frame of {len(frame)} bytes exceeds {MAX_MESSAGE_BYTES}")
+    try:
+        return msgpack.unpackb(
+            frame, raw=False, ext_hook=_ext_hook, strict_map_key=True, use_list=True
+        )
+    except ProtocolError:
+        raise
+    except Exception as exc:  # msgpack raises several types for bad input
+        raise ProtocolError(f"undecodable frame ({type(exc).__name__}: {exc})") from None
+
+
+def decode_request(frame: bytes) -> dict[str, Any]:
+    """Decode and shape-check a request frame."""
+    msg = unpack(frame)
+    if not isinstance(msg, dict):
+        raise ProtocolError(f"a request must be a map, got {type(msg).__name__}")
+    seq = msg.get("seq")
+    if not isinstance(seq, int) or isinstance(seq, bool):
+        raise ProtocolError("a request needs an integer 'seq'")
+    if not isinstance(msg.get("cmd"), str):
+        raise ProtocolError("a request needs a string 'cmd'")
+    return msg
+
+
+def error_reply(seq: int, kind: str, message: str, traceback: str = "") -> dict[str, Any]:
+    return {"seq": seq, "ok": False, "error": {"kind": kind, "message": message, "traceback": traceback}}
+
+
+# ---------------------------------------------------------------- spaces
+
+
+def space_to_wire(space: Any) -> dict[str, Any]:
+    """Describe a Gymnasium space as a msgpack-able map."""
+    from gymnasium import spaces
+
+    if isinstance(space, spaces.Box):
+        return {"type": "Box", "low": space.low, "high": space.high, "dtype": _wire_dtype(space.dtype)}
+    if isinstance(space, spaces.Discrete):
+        return {"type": "Discrete", "n": int(space.n), "start": int(space.start)}
+    if isinstance(space, spaces.MultiDiscrete):
+        return {"type": "MultiDiscrete", "nvec": space.nvec, "start": space.start,
+                "dtype": _wire_dtype(space.dtype)}
+    if isinstance(space, spaces.MultiBinary):
+        return {"type": "MultiBinary", "n": list(np.atleast_1d(space.n).tolist())}
+    if isinstance(space, spaces.Dict):
+        return {"type": "Dict", "spaces": {k: space_to_wire(s) for k, s in space.spaces.items()}}
+    if isinstance(space, spaces.Tuple):
+        return {"type": "Tuple", "spaces": [space_to_wire(s) for s in space.spaces]}
+    raise TypeError(f"space {space!r} cannot be described on the wire")
+
+
+def space_from_wire(desc: dict[str, Any]) -> Any:
+    """Rebuild a Gymnasium space from :func:`space_to_wire`'s map."""
+    from gymnasium import spaces
+
+    kind = desc.get("type")
+    if kind == "Box":
+        return spaces.Box(low=desc["low"], high=desc["high"], dtype=np.dtype(desc["dtype"]))
+    if kind == "Discrete":
+        return spaces.Discrete(desc["n"], start=desc.get("start", 0))
+    if kind == "MultiDiscrete":
+        return spaces.MultiDiscrete(desc["nvec"], dtype=np.dtype(desc["dtype"]), start=desc.get("start"))
+    if kind == "MultiBinary":
+        n = desc["n"]
+        return spaces.MultiBinary(n[0] if len(n) == 1 else n)
+    if kind == "Dict":
+        return spaces.Dict({k: space_from_wire(s) for k, s in desc["spaces"].items()})
+    if kind == "Tuple":
+        return spaces.Tuple([space_from_wire(s) for s in desc["spaces"]])
+    raise ProtocolError(f"unknown space type {kind!r}")

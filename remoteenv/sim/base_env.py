@@ -1,0 +1,163 @@
+"""BaseEnv: the env code of a scene, running inside the sim process."""
+
+from __future__ import annotations
+
+import os
+from typing import Any, ClassVar, SupportsFloat
+
+import mujoco
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+
+
+class BaseEnv:
+    """One MuJoCo world and the env logic around it.
+
+    A scene subclasses this and implements :meth:`reset_model`,
+    :meth:`prepare_step` and :meth:`post_step`. The base class owns the
+    ``MjModel``/``MjData``, ``frame_skip``, the RNG and the declared spaces, and
+    drives a step as::
+
+        prepare_step(action)                 # e.g. write data.ctrl
+        mj_step(model, data) x frame_skip    # the physics substeps
+        post_step(action) -> obs, reward, terminated, info
+
+    One call of :meth:`step` is one *control tick*: ``dt = frame_skip *
+    model.opt.timestep`` seconds of simulated time. The sim runtime may also
+    drive the pieces itself (real-time mode applies an action at the substep
+    where it arrives), so subclasses must keep all per-step logic in these hooks.
+
+    Truncation (episode time limits) is the agent side's business
+    (``gymnasium.make``'s ``max_episode_steps``); ``post_step`` reports only
+    termination.
+
+    Class attributes a scene sets:
+        env_id: a name for the scene, reported in the handshake.
+        metadata: ``render_modes`` supported; ``render_fps`` is derived from dt.
+        default_camera: camera name used for rendering, or None for the free camera.
+    """
+
+    env_id: ClassVar[str] = "scene"
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"]}
+    default_camera: ClassVar[str | None] = None
+
+    observation_space: spaces.Space
+    action_space: spaces.Space
+
+    def __init__(
+        self,
+        model_path: str | os.PathLike[str],
+        frame_skip: int,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 480,
+    ) -> None:
+        if frame_skip < 1:
+            raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"{type(self).__name__} does not support render_mode={render_mode!r}; "
+                f"supported: {self.metadata['render_modes']}"
+            )
+        self.model = mujoco.MjModel.from_xml_path(os.fspath(model_path))
+        self.data = mujoco.MjData(self.model)
+        self.frame_skip = int(frame_skip)
+        self.observation_space = observation_space
+        self.action_space = action_space
+        self.render_mode = render_mode
+        self.width, self.height = int(width), int(height)
+        self._renderer: mujoco.Renderer | None = None
+        self._np_random: np.random.Generator | None = None
+        self._np_random_seed: int | None = None
+
+    # ------------------------------------------------------------ properties
+
+    @property
+    def dt(self) -> float:
+        """Simulated seconds per control tick (``frame_skip * timestep``)."""
+        return self.model.opt.timestep * self.frame_skip
+
+    @property
+    def np_random(self) -> np.random.Generator:
+        """The env's RNG, seeded by ``reset(seed=...)`` (random if never seeded)."""
+        if self._np_random is None:
+            self._np_random, self._np_random_seed = seeding.np_random()
+        return self._np_random
+
+    def seed_rng(self, seed: int | None) -> None:
+        """Reseed the RNG (as ``reset(seed=...)`` does) without resetting the world."""
+        self._np_random, self._np_random_seed = seeding.np_random(seed)
+
+    def default_action(self) -> Any:
+        """Action held before the agent's first one after a reset (real-time and
+        ``action_delay`` modes). ``None`` (the default) means "no action": the
+        scene's :meth:`prepare_step` and :meth:`post_step` must then apply and
+        score zero control."""
+        return None
+
+    # ------------------------------------------------------------ hooks
+
+    def reset_model(self, options: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
+        """Put ``self.data`` into a start state drawn from ``self.np_random``.
+
+        Called after ``mj_resetData``. Returns ``(obs, info)``.
+        """
+        raise NotImplementedError
+
+    def prepare_step(self, action: Any) -> None:
+        """Apply ``action`` (validated against ``action_space``, or ``None`` for
+        zero control, see :meth:`default_action`), e.g. to ``data.ctrl``."""
+        raise NotImplementedError
+
+    def post_step(self, action: Any) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
+        """After the substeps of one tick: ``(obs, reward, terminated, info)``."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------ driving
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        """Start an episode. ``seed`` reseeds the RNG; None continues the current stream."""
+        if seed is not None:
+            self.seed_rng(seed)
+        mujoco.mj_resetData(self.model, self.data)
+        obs, info = self.reset_model(options)
+        return obs, info
+
+    def substep(self) -> None:
+        """Advance the physics by one ``model.opt.timestep``."""
+        mujoco.mj_step(self.model, self.data)
+
+    def step(self, action: Any) -> tuple[Any, float, bool, dict[str, Any]]:
+        """One control tick: ``(obs, reward, terminated, info)``."""
+        self.prepare_step(action)
+        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        return self.post_step(action)
+
+    def set_state(self, qpos: np.ndarray, qvel: np.ndarray) -> None:
+        """Set generalized positions and velocities and recompute derived quantities."""
+        self.data.qpos[:] = qpos
+        self.data.qvel[:] = qvel
+        if self.model.na == 0:
+            self.data.act[:] = 0
+        mujoco.mj_forward(self.model, self.data)
+
+    def render(self) -> np.ndarray | None:
+        """An RGB frame (uint8, height x width x 3) of the current state, offscreen."""
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.model, height=self.height, width=self.width)
+        camera = self.default_camera if self.default_camera is not None else -1
+        self._renderer.update_scene(self.data, camera=camera)
+        return self._renderer.render().copy()
+
+    def close(self) -> None:
+        """Release the renderer. Called once when the sim process stops."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

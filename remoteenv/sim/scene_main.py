@@ -1,0 +1,70 @@
+"""The command line every scene script shares: ``python <scene script> --address ...``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any, Callable, Sequence
+
+from remoteenv.sim.base_env import BaseEnv
+from remoteenv.sim.server import RemoteControlledAgent
+
+
+def scene_argument_parser(description: str | None = None) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(description=description)
+    p.add_argument("--address", required=True,
+                   help="ZeroMQ endpoint to bind, e.g. ipc:///tmp/d/sim-0.sock or tcp://127.0.0.1:*")
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of the worlds' RNGs until the first reset(seed=...); world w uses seed + w")
+    p.add_argument("--instance", type=int, default=0, help="index of this sim process")
+    p.add_argument("--worlds", type=int, default=1, help="number of MuJoCo worlds this process hosts")
+    p.add_argument("--env-kwargs", default="{}", help="JSON map of keyword arguments for the env class")
+    p.add_argument("--render-mode", default=None, help="render mode of the env, e.g. rgb_array")
+    p.add_argument("--real-time", action="store_true", help="run physics on a paced wall clock")
+    p.add_argument("--real-time-factor", type=float, default=1.0,
+                   help="simulated seconds per wall-clock second in real-time mode")
+    p.add_argument("--action-delay", type=int, default=0,
+                   help="lock-step: an action takes effect this many control ticks later")
+    p.add_argument("--parent-pid", type=int, default=None,
+                   help="exit when this process stops being our parent")
+    p.add_argument("--ready-file", default=None, help="write the bound endpoint here as JSON")
+    p.add_argument("--allow-remote", action="store_true",
+                   help="permit binding a non-loopback interface (requires --curve-secret-key-file)")
+    p.add_argument("--curve-secret-key-file", default=None,
+                   help="file holding this server's Z85 CURVE secret key")
+    return p
+
+
+def run_scene(
+    env_factory: Callable[..., BaseEnv], argv: Sequence[str] | None = None, description: str | None = None
+) -> None:
+    """Parse the scene command line, build the worlds with ``env_factory(render_mode=..., **env_kwargs)``
+    and serve them until told to stop. A scene script's ``main`` is one call of this."""
+    args = scene_argument_parser(description).parse_args(argv)
+    env_kwargs: dict[str, Any] = json.loads(args.env_kwargs)
+    if not isinstance(env_kwargs, dict):
+        sys.exit(f"--env-kwargs must be a JSON map, got {args.env_kwargs!r}")
+    if args.render_mode is not None:
+        env_kwargs["render_mode"] = args.render_mode
+    envs = [env_factory(**env_kwargs) for _ in range(args.worlds)]
+    if args.seed is not None:
+        for w, env in enumerate(envs):
+            env.seed_rng(args.seed + w)
+    secret = None
+    if args.curve_secret_key_file:
+        with open(args.curve_secret_key_file, "rb") as f:
+            secret = f.read().strip()
+    server = RemoteControlledAgent(
+        envs,
+        args.address,
+        instance=args.instance,
+        parent_pid=args.parent_pid,
+        ready_file=args.ready_file,
+        real_time=args.real_time,
+        real_time_factor=args.real_time_factor,
+        action_delay=args.action_delay,
+        allow_remote=args.allow_remote,
+        curve_secret_key=secret,
+    )
+    server.serve()

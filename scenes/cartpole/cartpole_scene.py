@@ -1,0 +1,98 @@
+"""CartPole scene, sim side: balance a pole on a cart (CartPole-v1's constants).
+
+obs (float32): ``[x (m), x_dot (m/s), theta (rad), theta_dot (rad/s)]``,
+theta = 0 upright. Actions: ``Discrete(2)`` (0 pushes with -10 N, 1 with
++10 N) or, with ``continuous=True``, ``Box(-1, 1, (1,))`` scaled to +-10 N.
+Reward +1 per step; terminated when ``|x| > 2.4`` or ``|theta| > 12 deg``.
+The agent side truncates after 500 steps. Control dt is 0.02 s (10 physics
+substeps of 0.002 s).
+
+Run by the launcher as ``python cartpole_scene.py --address ... --seed ...``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from remoteenv.sim import BaseEnv, run_scene
+
+MODEL_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "cartpole.xml")
+
+X_THRESHOLD = 2.4
+THETA_THRESHOLD = 12 * 2 * math.pi / 360
+
+
+class CartPoleEnv(BaseEnv):
+    env_id = "remoteenv/CartPole-v0"
+    metadata = {"render_modes": ["rgb_array"]}
+    default_camera = "side"
+
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        continuous: bool = False,
+        width: int = 600,
+        height: int = 400,
+    ) -> None:
+        self.continuous = bool(continuous)
+        action_space: spaces.Space = (
+            spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32) if self.continuous else spaces.Discrete(2)
+        )
+        high = np.array(
+            [X_THRESHOLD * 2, np.finfo(np.float32).max, THETA_THRESHOLD * 2, np.finfo(np.float32).max],
+            dtype=np.float32,
+        )
+        super().__init__(
+            MODEL_PATH,
+            frame_skip=10,
+            observation_space=spaces.Box(-high, high, dtype=np.float32),
+            action_space=action_space,
+            render_mode=render_mode,
+            width=width,
+            height=height,
+        )
+        self._terminated = False
+
+    def reset_model(self, options: dict[str, Any] | None) -> tuple[np.ndarray, dict[str, Any]]:
+        options = options or {}
+        low, high = float(options.get("low", -0.05)), float(options.get("high", 0.05))
+        x, x_dot, theta, theta_dot = self.np_random.uniform(low=low, high=high, size=(4,))
+        self.set_state(np.array([x, theta]), np.array([x_dot, theta_dot]))
+        self._terminated = False
+        return self._obs(), {}
+
+    def force_fraction(self, action: Any) -> float:
+        """Cart force as a fraction of 10 N for ``action`` (None: no force)."""
+        if action is None:
+            return 0.0
+        if self.continuous:
+            return float(np.clip(action[0], -1.0, 1.0))
+        return 1.0 if int(action) == 1 else -1.0
+
+    def prepare_step(self, action: Any) -> None:
+        self.data.ctrl[0] = self.force_fraction(action)
+
+    def post_step(self, action: Any) -> tuple[np.ndarray, float, bool, dict[str, Any]]:
+        obs = self._obs()
+        x, theta = float(obs[0]), float(obs[2])
+        already = self._terminated
+        self._terminated = already or abs(x) > X_THRESHOLD or abs(theta) > THETA_THRESHOLD
+        # As in CartPole-v1: +1 per step including the terminating one, 0 after it.
+        return obs, 0.0 if already else 1.0, self._terminated, {}
+
+    def _obs(self) -> np.ndarray:
+        d = self.data
+        return np.array([d.qpos[0], d.qvel[0], d.qpos[1], d.qvel[1]], dtype=np.float32)
+
+
+def main(argv: list[str] | None = None) -> None:
+    run_scene(CartPoleEnv, argv, description=__doc__)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,90 @@
+"""Reacher scene, sim side: a two-link arm reaching for a random target.
+
+Semantics follow the code of Gymnasium's Reacher-v5: obs is
+``[cos q0, cos q1, sin q0, sin q1, target x, target y, q0_dot, q1_dot,
+(fingertip - target) x, (fingertip - target) y]`` (float64, m and rad/s);
+reward is ``-|fingertip - target| - |a|^2`` computed after stepping; the
+episode never terminates (the agent side truncates after 50 steps).
+
+Run by the launcher as ``python reacher_scene.py --address ... --seed ...``.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from remoteenv.sim import BaseEnv, run_scene
+
+MODEL_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "reacher.xml")
+
+
+class ReacherEnv(BaseEnv):
+    env_id = "remoteenv/Reacher-v0"
+    metadata = {"render_modes": ["rgb_array"]}
+    default_camera = "overhead"
+
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        reward_dist_weight: float = 1.0,
+        reward_control_weight: float = 1.0,
+        width: int = 480,
+        height: int = 480,
+    ) -> None:
+        super().__init__(
+            MODEL_PATH,
+            frame_skip=2,
+            observation_space=spaces.Box(-np.inf, np.inf, shape=(10,), dtype=np.float64),
+            action_space=spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32),
+            render_mode=render_mode,
+            width=width,
+            height=height,
+        )
+        self.reward_dist_weight = float(reward_dist_weight)
+        self.reward_control_weight = float(reward_control_weight)
+        self._fingertip = self.model.body("fingertip").id
+        self._target = self.model.body("target").id
+
+    def reset_model(self, options: dict[str, Any] | None) -> tuple[np.ndarray, dict[str, Any]]:
+        rng = self.np_random
+        qpos = self.model.qpos0 + rng.uniform(low=-0.1, high=0.1, size=self.model.nq)
+        while True:
+            goal = rng.uniform(low=-0.2, high=0.2, size=2)
+            if np.linalg.norm(goal) < 0.2:
+                break
+        qpos[-2:] = goal
+        qvel = rng.uniform(low=-0.005, high=0.005, size=self.model.nv)
+        qvel[-2:] = 0.0
+        self.set_state(qpos, qvel)
+        return self._obs(), {}
+
+    def prepare_step(self, action: np.ndarray | None) -> None:
+        self.data.ctrl[:] = 0.0 if action is None else action
+
+    def post_step(self, action: np.ndarray | None) -> tuple[np.ndarray, float, bool, dict[str, Any]]:
+        # Like Gymnasium, distance uses body positions as left by mj_step.
+        vec = self.data.xpos[self._fingertip] - self.data.xpos[self._target]
+        reward_dist = -float(np.linalg.norm(vec)) * self.reward_dist_weight
+        ctrl = 0.0 if action is None else float(np.square(action).sum())
+        reward_ctrl = -ctrl * self.reward_control_weight
+        info = {"reward_dist": reward_dist, "reward_ctrl": reward_ctrl}
+        return self._obs(), reward_dist + reward_ctrl, False, info
+
+    def _obs(self) -> np.ndarray:
+        qpos, qvel = self.data.qpos, self.data.qvel
+        tip_minus_target = self.data.xpos[self._fingertip] - self.data.xpos[self._target]
+        return np.concatenate(
+            [np.cos(qpos[:2]), np.sin(qpos[:2]), qpos[2:], qvel[:2], tip_minus_target[:2]]
+        )
+
+
+def main(argv: list[str] | None = None) -> None:
+    run_scene(ReacherEnv, argv, description=__doc__)
+
+
+if __name__ == "__main__":
+    main()
