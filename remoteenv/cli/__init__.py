@@ -1,0 +1,29 @@
+"""``python -m remoteenv <command>``: one module per command, each with
+``add_parser(subparsers)`` and ``run(args) -> int``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Sequence
+
+#: Command modules, in the order ``--help`` lists them.
+COMMANDS = ["demo", "bench"]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m remoteenv",
+        description="remoteenv: MuJoCo simulations in their own processes, driven as Gymnasium envs.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        module = importlib.import_module(f"remoteenv.cli.{name}")
+        module.add_parser(sub)
+    args = parser.parse_args(argv)
+    return int(args.run(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

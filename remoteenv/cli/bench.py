@@ -1,0 +1,41 @@
+"""``python -m remoteenv bench``: throughput (default), ``--real-time`` pacing, ``--soak``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+from typing import Any
+
+#: Benchmark modules in remoteenv.benchmarks; the default one first.
+BENCHMARKS = {"throughput": None, "real_time": "--real-time", "soak": "--soak"}
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "bench",
+        help="measure remoteenv against in-process Gymnasium",
+        description="Benchmarks, each measured side by side in one run on this machine. "
+        "Without a mode flag: steps/s of remote envs next to in-process Gymnasium. "
+        "--real-time: pacing and action-application delay of real-time mode. "
+        "--soak: a long run that reports agent and sim memory.",
+    )
+    mode = p.add_mutually_exclusive_group()
+    for name, flag in BENCHMARKS.items():
+        if flag:
+            mode.add_argument(flag, dest="mode", action="store_const", const=name,
+                              help=f"run the {name.replace('_', '-')} benchmark")
+    p.set_defaults(mode="throughput", run=run)
+    for name in BENCHMARKS:
+        try:
+            module = importlib.import_module(f"remoteenv.benchmarks.{name}")
+        except ModuleNotFoundError:
+            continue
+        module.add_arguments(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        module = importlib.import_module(f"remoteenv.benchmarks.{args.mode}")
+    except ModuleNotFoundError:
+        raise SystemExit(f"benchmark {args.mode!r} is not available in this build") from None
+    return int(module.run(args) or 0)
