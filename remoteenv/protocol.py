@@ -109,7 +109,7 @@ def _wire_dtype(dtype: np.dtype) -> str:
 def _default(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
         dtype = _wire_dtype(obj.dtype)
-        arr = np.ascontiguousarray(obj, dtype=np.dtype(dtype))
+        arr = np.asarray(obj, dtype=np.dtype(dtype), order="C")  # keeps 0-d arrays 0-d
         return msgpack.ExtType(
             _EXT_NDARRAY,
             msgpack.packb([dtype, list(arr.shape), arr.tobytes()], use_bin_type=True),

@@ -1,0 +1,83 @@
+"""Shared fixtures. Sim processes started by a test are stopped by it; the
+autouse check below fails any test that leaves one behind."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import remoteenv  # noqa: E402  (registers the scene ids)
+
+
+def pid_alive(pid: int) -> bool:
+    """True while ``pid`` exists and is not a zombie."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            state = f.read().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state != "Z"
+
+
+def wait_gone(pid: int, timeout: float = 5.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if not pid_alive(pid):
+            return True
+        time.sleep(0.02)
+    return not pid_alive(pid)
+
+
+def _sim_children() -> set[int]:
+    """Pids of running scene processes whose parent is this test process."""
+    me = os.getpid()
+    found = set()
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                rest = f.read().rsplit(")", 1)[1].split()
+            if int(rest[1]) != me or rest[0] == "Z":
+                continue
+            with open(f"/proc/{entry}/cmdline", "rb") as f:
+                cmd = f.read()
+        except (FileNotFoundError, ProcessLookupError, IndexError):
+            continue
+        if b"--ready-file" in cmd:
+            found.add(int(entry))
+    return found
+
+
+@pytest.fixture(autouse=True)
+def no_leftover_sims():
+    """Fail a test that leaves a sim process of its own running."""
+    before = _sim_children()
+    yield
+    leftover = _sim_children() - before
+    deadline = time.monotonic() + 5.0
+    while leftover and time.monotonic() < deadline:
+        time.sleep(0.05)
+        leftover = {p for p in leftover if pid_alive(p)}
+    assert not leftover, f"sim processes left running after the test: {sorted(leftover)}"
+
+
+@pytest.fixture
+def scene_path():
+    return remoteenv.scene_path
+
+
+@pytest.fixture(name="pid_alive")
+def pid_alive_fixture():
+    """The function ``pid_alive(pid) -> bool`` (tests cannot import conftest)."""
+    return pid_alive
+
+
+@pytest.fixture(name="wait_gone")
+def wait_gone_fixture():
+    """The function ``wait_gone(pid, timeout=5.0) -> bool``."""
+    return wait_gone
