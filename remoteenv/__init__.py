@@ -1,6 +1,6 @@
 """remoteenv: a MuJoCo simulation in its own process, driven as a Gymnasium env.
 
-Agent-side API: :class:`OpenAIRemoteEnv`, :class:`Launcher`,
+Agent-side API: :class:`OpenAIRemoteEnv`, :class:`RemoteVectorEnv`, :class:`Launcher`,
 :class:`RemoteEnvError`. Sim-side API lives in :mod:`remoteenv.sim`. Importing
 this package registers the shipped scenes: ``remoteenv/CartPole-v0`` and
 ``remoteenv/Reacher-v0``.
@@ -10,6 +10,7 @@ from remoteenv.errors import RemoteEnvError, RemoteEnvTimeout
 from remoteenv.launcher import Launcher
 from remoteenv.protocol import PROTOCOL_VERSION
 from remoteenv.remote_env import OpenAIRemoteEnv
+from remoteenv.vector_env import RemoteVectorEnv
 
 import remoteenv.scenes.cartpole  # noqa: E402,F401  (registers the id)
 import remoteenv.scenes.reacher  # noqa: E402,F401
@@ -22,6 +23,7 @@ __all__ = [
     "PROTOCOL_VERSION",
     "RemoteEnvError",
     "RemoteEnvTimeout",
+    "RemoteVectorEnv",
     "scene_path",
 ]
 

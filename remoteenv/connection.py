@@ -32,6 +32,8 @@ class Connection:
         death_check: returns a description of why the sim process is gone,
             or None while it lives. None if there is no local process to watch.
         curve_server_key: the sim's public Z85 CURVE key; enables encryption.
+        curve_client_keypair: ``(public, secret)`` Z85 client keys the sim
+            admits; default a fresh pair (enough for a sim that admits any client).
     """
 
     def __init__(
@@ -42,12 +44,14 @@ class Connection:
         timeout: float | None = 60.0,
         death_check: Callable[[], str | None] | None = None,
         curve_server_key: bytes | None = None,
+        curve_client_keypair: tuple[bytes, bytes] | None = None,
     ) -> None:
         self.endpoint = endpoint
         self.instance = instance
         self.timeout = timeout
         self.death_check = death_check
         self.curve_server_key = curve_server_key
+        self.curve_client_keypair = curve_client_keypair
         self._ctx = zmq.Context.instance()
         self._seq = 0
         self.socket: zmq.Socket | None = None
@@ -60,7 +64,7 @@ class Connection:
         sock.setsockopt(zmq.MAXMSGSIZE, protocol.MAX_MESSAGE_BYTES)
         sock.setsockopt(zmq.RCVTIMEO, int(LIVENESS_CHECK_S * 1000))
         if self.curve_server_key is not None:
-            public, secret = zmq.curve_keypair()
+            public, secret = self.curve_client_keypair or zmq.curve_keypair()
             sock.curve_serverkey = self.curve_server_key
             sock.curve_publickey = public
             sock.curve_secretkey = secret
@@ -124,6 +128,31 @@ class Connection:
     def request(self, cmd: str, timeout: float | None = ..., **args: Any) -> dict[str, Any]:  # type: ignore[assignment]
         """Send ``cmd`` and wait for its reply (see :meth:`receive`)."""
         return self.receive(self.send(cmd, **args), timeout, what=f"'{cmd}'")
+
+    def try_receive(self, seq: int, what: str = "reply") -> dict[str, Any] | None:
+        """The reply to request ``seq`` if it has arrived, else None; never blocks.
+
+        Drops stale replies and raises like :meth:`receive`. Lets a caller wait
+        on many connections with one ``zmq.Poller`` on their :attr:`socket`.
+        """
+        sock = self.socket
+        assert sock is not None
+        while True:
+            try:
+                frame = sock.recv(zmq.NOBLOCK, copy=True)
+            except zmq.Again:
+                return None
+            reply = self._decode(frame)
+            if reply.get("seq") == seq:
+                if not reply.get("ok"):
+                    self._raise(reply, what)
+                return reply
+            if reply.get("seq") == -1 and not reply.get("ok", True):
+                self._raise(reply, what)
+
+    def check_alive(self, what: str = "a reply") -> None:
+        """Raise :class:`RemoteEnvError` (kind ``"died"``) if the sim process is gone."""
+        self._check_alive(what)
 
     def close(self) -> None:
         if self.socket is not None:

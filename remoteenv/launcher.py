@@ -24,8 +24,9 @@ import weakref
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
-from remoteenv.addresses import ipc_address, ipc_path, tcp_loopback_address
+from remoteenv.addresses import ipc_address, ipc_path, is_loopback, tcp_loopback_address
 from remoteenv.errors import RemoteEnvError
+from remoteenv.keys import KeyPair, generate_keypair, write_public_keys, write_secret_key
 
 _STDERR_TAIL_LINES = 20
 
@@ -40,6 +41,10 @@ class SimProcess:
     ready_file: str
     endpoint: str | None = None
     restarts: int = 0
+    #: The sim's public Z85 CURVE key when CURVE is on, else None.
+    curve_server_key: bytes | None = None
+    #: Where this process's stderr starts in the log (a restart appends to it).
+    log_offset: int = 0
 
     @property
     def pid(self) -> int:
@@ -51,7 +56,7 @@ class SimProcess:
             with open(self.log_path, "rb") as f:
                 f.seek(0, os.SEEK_END)
                 size = f.tell()
-                f.seek(max(0, size - 16384))
+                f.seek(max(self.log_offset, size - 16384))
                 text = f.read().decode("utf-8", "replace")
         except OSError:
             return ""
@@ -123,6 +128,13 @@ class Launcher:
         startup_timeout: seconds to wait for a sim to report ready.
         real_time, real_time_factor, action_delay: stepping mode of the sims.
         extra_args: more command-line arguments for the scene script.
+        bind_host: bind tcp on this interface (OS-assigned port) instead of the
+            default. Anything but loopback turns CURVE on and cannot turn it off.
+        curve: encrypt and authenticate with ZMQ CURVE. Each sim gets a fresh
+            server key pair (secret in the private dir, mode 0600); this
+            launcher holds the one client key pair the sims admit
+            (:attr:`curve_client_keypair`). Default: on iff ``bind_host`` is
+            beyond loopback.
     """
 
     def __init__(
@@ -140,6 +152,8 @@ class Launcher:
         real_time_factor: float = 1.0,
         action_delay: int = 0,
         extra_args: Sequence[str] = (),
+        bind_host: str | None = None,
+        curve: bool | None = None,
     ) -> None:
         self.scene = os.path.abspath(os.fspath(scene))
         if not os.path.isfile(self.scene):
@@ -159,6 +173,20 @@ class Launcher:
         self.real_time_factor = real_time_factor
         self.action_delay = action_delay
         self.extra_args = list(extra_args)
+        self.bind_address: str | None = None
+        if bind_host is not None:
+            self.transport = "tcp"
+            self.bind_address = f"tcp://{bind_host}:*"
+        remote = self.bind_address is not None and not is_loopback(self.bind_address)
+        if remote and curve is False:
+            raise ValueError(
+                f"binding {bind_host!r} (beyond loopback) requires CURVE; drop curve=False"
+            )
+        self.remote = remote
+        #: The client key pair the sims admit, when CURVE is on.
+        self.curve_client_keypair: KeyPair | None = (
+            generate_keypair() if (remote or bool(curve)) else None
+        )
         try:
             json.dumps(self.env_kwargs)
         except TypeError as exc:
@@ -229,7 +257,9 @@ class Launcher:
 
     def _spawn(self, instance: int) -> SimProcess:
         workdir = self._state.workdir
-        if self.transport == "ipc":
+        if self.bind_address is not None:
+            address = self.bind_address
+        elif self.transport == "ipc":
             address = ipc_address(workdir, instance)
         else:
             address = tcp_loopback_address()
@@ -246,7 +276,22 @@ class Launcher:
             "--env-kwargs", json.dumps(self.env_kwargs),
             "--parent-pid", str(os.getpid()),
             "--ready-file", ready_file,
+            "--private-dir", workdir,
         ]
+        server_key = None
+        if self.curve_client_keypair is not None:
+            server = generate_keypair()
+            server_key = server.public
+            secret_file = os.path.join(workdir, f"sim-{instance}.curve_secret")
+            clients_file = os.path.join(workdir, f"sim-{instance}.curve_clients")
+            for path in (secret_file, clients_file):
+                if os.path.exists(path):
+                    os.unlink(path)
+            write_secret_key(secret_file, server.secret)
+            write_public_keys(clients_file, [self.curve_client_keypair.public])
+            cmd += ["--curve-secret-key-file", secret_file, "--curve-client-keys-file", clients_file]
+            if self.remote:
+                cmd += ["--allow-remote"]
         seed = self.instance_seed(instance)
         if seed is not None:
             cmd += ["--seed", str(seed)]
@@ -261,10 +306,12 @@ class Launcher:
         if self.render_mode != "human":
             env.setdefault("MUJOCO_GL", "egl")
         with open(log_path, "ab") as log:
+            log_offset = log.tell()
             proc = subprocess.Popen(
                 cmd, stdin=subprocess.DEVNULL, stderr=log, env=env, start_new_session=True
             )
-        return SimProcess(instance=instance, proc=proc, log_path=log_path, ready_file=ready_file)
+        return SimProcess(instance=instance, proc=proc, log_path=log_path, ready_file=ready_file,
+                          curve_server_key=server_key, log_offset=log_offset)
 
     def _wait_ready(self, sim: SimProcess) -> None:
         deadline = time.monotonic() + self.startup_timeout
@@ -273,7 +320,7 @@ class Launcher:
             try:
                 with open(sim.ready_file) as f:
                     info = json.load(f)
-                sim.endpoint = str(info["endpoint"])
+                sim.endpoint = str(info["endpoint"]).replace("tcp://0.0.0.0:", "tcp://127.0.0.1:")
                 return
             except (FileNotFoundError, json.JSONDecodeError, KeyError):
                 pass

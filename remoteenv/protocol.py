@@ -49,6 +49,36 @@ speak, naming both versions. ``metadata`` holds ``render_modes``,
 
 ``close`` ``{}`` -> ``{}``; the server then exits.
 
+``timing`` ``{"clear": bool}`` -> ``{"worlds": [map, ...]}`` (real-time sims
+only): per world, ``pacing_error_s`` and ``apply_delay_s`` summaries
+(``count``, ``mean``, ``p50``, ``p99``, ``max``, wall seconds), ``overruns``,
+``substeps``, ``period_s``; ``clear`` resets them after replying. In real
+time a ``step`` reply is sent when its action has been in force for one
+control tick (see :mod:`remoteenv.sim.real_time`).
+
+``reset_batch`` ``{"worlds": [int, ...], "seeds": [int | nil, ...] | nil,
+"options": map | nil}`` -> ``{"obs", "info": infos}`` (lock-step sims only):
+resets the listed worlds in order, world ``worlds[j]`` with ``seeds[j]``.
+
+``step_batch`` ``{"ops": [int, ...], "actions"}`` -> ``{"obs", "reward":
+float64 array, "terminated": bool array, "truncated": bool array, "info":
+infos, "final": [[world, obs, info], ...]}`` (lock-step sims only): one
+request for worlds ``0 .. n-1`` with ``n = len(ops)``; ``actions`` holds their
+``n`` actions, stacked in one array (Box: shape ``(n, *shape)``; Discrete:
+ints of shape ``(n,)``) or as a list. ``ops[w]`` says what world ``w`` does:
+0 step; 1 reset (action ignored; reward 0, not terminated, not truncated,
+info = the reset's info); 2 step, then reset if the step terminated or
+truncated; 3 step, then reset (the agent's time limit ends the episode). A
+world reset after a step is listed in ``final`` with the step's obs and info,
+and its ``obs``/``info`` entries are the reset's.
+
+In both, ``obs`` is one array of shape ``(n, *obs_shape)`` when every world's
+obs is an array of one shape and dtype, else a list of ``n`` obs. ``infos`` is
+``{"columns": {key: [values, present]}}`` when every info value is a bool,
+int or float with one type per key (``values``: array of ``n``, bool, int64
+or float64, 0 where absent; ``present``: bool array of ``n``), else
+``{"maps": [map, ...]}``, one info map per world.
+
 ``world`` defaults to 0 and addresses one of the ``num_worlds`` MuJoCo worlds
 a sim process hosts.
 

@@ -8,7 +8,8 @@ sim's handshake, so they are declared once, in the scene.
 from __future__ import annotations
 
 import os
-from typing import Any, SupportsFloat
+import time
+from typing import Any, Mapping, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -16,7 +17,9 @@ import numpy as np
 from remoteenv import protocol
 from remoteenv.connection import Connection
 from remoteenv.errors import RemoteEnvError
-from remoteenv.launcher import Launcher
+from remoteenv.latency import LatencyStats
+from remoteenv.launcher import Launcher, SimProcess
+from remoteenv.restart import RestartBudget, restarted_info
 
 
 def check_action(space: gym.Space, action: Any, where: str = "") -> Any:
@@ -29,9 +32,10 @@ def check_action(space: gym.Space, action: Any, where: str = "") -> Any:
         arr = arr.astype(space.dtype, copy=False)
         if arr.shape != space.shape:
             raise ValueError(f"{where}action of shape {arr.shape} does not fit {space}: {action!r:.200}")
-        if np.isnan(arr).any() if arr.dtype.kind == "f" else False:
-            raise ValueError(f"{where}action {action!r:.200} contains NaN; space {space}")
-        if not space.contains(arr):
+        # Box.contains without its generic checks; NaN fails both comparisons.
+        if not ((arr >= space.low).all() and (arr <= space.high).all()):
+            if arr.dtype.kind == "f" and np.isnan(arr).any():
+                raise ValueError(f"{where}action {action!r:.200} contains NaN; space {space}")
             raise ValueError(f"{where}action {action!r:.200} is outside {space}")
         return arr
     if isinstance(space, gym.spaces.Discrete):
@@ -67,9 +71,34 @@ class OpenAIRemoteEnv(gym.Env):
             :class:`remoteenv.RemoteEnvTimeout` (a dead sim is reported within
             ~0.1 s regardless).
         startup_timeout: seconds to wait for the sim to start.
+        call_timeouts: per-command timeouts that override ``timeout``, e.g.
+            ``{"reset": 120.0, "step": 5.0}`` (commands: handshake, reset,
+            step, render, close).
+        restart_on_failure: when the sim process dies or times out, launch a
+            fresh one. A failed ``step`` then returns the last observation
+            with ``truncated=True``, reward 0.0 and
+            ``info["remoteenv_restarted"] = True``; a failed ``reset`` is
+            retried on the new sim and its info says the same.
+        max_restarts: restarts allowed over this env's life; the next failure
+            is raised as :class:`remoteenv.RemoteEnvError`.
+        bind_host: have the sim bind tcp on this interface; beyond loopback
+            this turns on CURVE (see :class:`remoteenv.Launcher`).
+        curve: encrypt and authenticate with ZMQ CURVE even on loopback.
+        attach: instead of launching a sim, drive instance 0 of the sims named
+            by this launch-info file (see :mod:`remoteenv.attach`, and
+            :meth:`attach` for other instances). The launch options above are
+            then ignored, and ``close`` leaves the sim running.
+
+    Attributes:
+        latency_stats: :class:`remoteenv.latency.LatencyStats` of every step so
+            far: action latency (mean/p50/p99/max, seconds and ticks), wall
+            round trip, late actions, pacing overruns. With ``real_time`` or
+            ``action_delay`` each step's info also carries the timing keys
+            (see README, real time) plus ``wall_round_trip_s``, the wall
+            seconds from sending the step to receiving its reply.
     """
 
-    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": None}
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array", "human"], "render_fps": None}
 
     def __init__(
         self,
@@ -83,13 +112,34 @@ class OpenAIRemoteEnv(gym.Env):
         transport: str = "ipc",
         timeout: float | None = 60.0,
         startup_timeout: float = 60.0,
+        call_timeouts: Mapping[str, float | None] | None = None,
+        restart_on_failure: bool = False,
+        max_restarts: int = 3,
+        bind_host: str | None = None,
+        curve: bool | None = None,
+        attach: Any = None,
         **scene_kwargs: Any,
     ) -> None:
         self.render_mode = render_mode
+        self.timeout = timeout
+        self.call_timeouts: dict[str, float | None] = dict(call_timeouts or {})
+        self.startup_timeout = startup_timeout
+        self.restarts = RestartBudget(restart_on_failure, max_restarts)
+        self.latency_stats = LatencyStats()
+        self._timed_steps = bool(real_time or action_delay)
+        self._last_obs: Any = None
         self.scene = os.fspath(scene)
         self._launcher: Launcher | None = None
         self._conn: Connection | None = None
-        self._launcher = Launcher(
+        if attach is not None:
+            from remoteenv.attach import AttachedSims
+
+            if restart_on_failure:
+                raise ValueError("restart_on_failure needs sims this env launched; attached sims "
+                                 "belong to the launch command")
+            attach = attach if isinstance(attach, AttachedSims) else AttachedSims(attach, [0])
+            self._timed_steps = attach.timed_steps
+        self._launcher = attach if attach is not None else Launcher(
             self.scene,
             1,
             seed=seed,
@@ -100,16 +150,40 @@ class OpenAIRemoteEnv(gym.Env):
             real_time=real_time,
             real_time_factor=real_time_factor,
             action_delay=action_delay,
+            bind_host=bind_host,
+            curve=curve,
         )
-        sim = self._launcher.sims[0]
         try:
-            self._conn = Connection(
-                sim.endpoint or "", instance=0, timeout=timeout, death_check=sim.death
-            )
-            self._handshake(startup_timeout)
+            self._connect(self._launcher.sims[0])
         except BaseException:
             self.close()
             raise
+
+    @classmethod
+    def attach(
+        cls, launch_info: str | os.PathLike[str], instance: int = 0, **kwargs: Any
+    ) -> "OpenAIRemoteEnv":
+        """Drive sim ``instance`` of a launch-info file written by ``python -m
+        remoteenv launch`` (or by any server speaking the protocol). ``kwargs``:
+        ``render_mode`` (default: the one the sims were launched with),
+        ``timeout``, ``call_timeouts``, ``startup_timeout`` (the handshake's).
+        No time limit is applied; wrap in ``gymnasium.wrappers.TimeLimit`` or use
+        ``gymnasium.make(env_id, attach=path)``. Closing the env leaves the sim running."""
+        from remoteenv.attach import AttachedSims
+
+        sims = AttachedSims(launch_info, [instance])
+        kwargs.setdefault("render_mode", sims.info.render_mode)
+        return cls(sims.scene, attach=sims, **kwargs)
+
+    def _connect(self, sim: SimProcess) -> None:
+        assert self._launcher is not None
+        client = self._launcher.curve_client_keypair
+        self._conn = Connection(
+            sim.endpoint or "", instance=sim.instance, timeout=self.timeout, death_check=sim.death,
+            curve_server_key=sim.curve_server_key,
+            curve_client_keypair=None if client is None else (client.public, client.secret),
+        )
+        self._handshake(self.call_timeouts.get("handshake", self.startup_timeout))
 
     # ------------------------------------------------------------ setup
 
@@ -145,17 +219,46 @@ class OpenAIRemoteEnv(gym.Env):
     ) -> tuple[Any, dict[str, Any]]:
         """Start an episode in the sim. ``seed`` is forwarded and reseeds the sim's RNG."""
         super().reset(seed=seed)
-        reply = self._request("reset", seed=seed, options=options)
-        return reply["obs"], reply["info"]
+        restarted: dict[str, Any] = {}
+        while True:
+            try:
+                reply = self._request("reset", seed=seed, options=options)
+                break
+            except RemoteEnvError as err:
+                if not self.restarts.covers(err):
+                    raise
+                restarted = restarted_info(err, self._restart(err))
+        self._last_obs = reply["obs"]
+        return reply["obs"], {**reply["info"], **restarted}
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         """Advance the sim by one control tick (``self.dt`` simulated seconds)."""
         wire_action = check_action(self.action_space, action)
-        reply = self._request("step", action=wire_action)
-        return reply["obs"], reply["reward"], reply["terminated"], reply["truncated"], reply["info"]
+        try:
+            sent = time.perf_counter()
+            reply = self._request("step", action=wire_action)
+            round_trip = time.perf_counter() - sent
+        except RemoteEnvError as err:
+            if not self.restarts.covers(err):
+                raise
+            info = restarted_info(err, self._restart(err))
+            # The episode is lost with the process: end it as truncated at the
+            # last observation the agent saw; the next reset() starts afresh.
+            return self._last_obs, 0.0, False, True, info
+        self._last_obs = reply["obs"]
+        info = reply["info"]
+        if self._timed_steps:
+            info["wall_round_trip_s"] = round_trip
+        self.latency_stats.record(info, round_trip)
+        return reply["obs"], reply["reward"], reply["terminated"], reply["truncated"], info
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
-        """With ``render_mode="rgb_array"``: the current frame, uint8 H x W x 3."""
+        """With ``render_mode="rgb_array"``: the current frame, uint8 H x W x 3.
+        With ``"human"``: redraw the sim's MuJoCo viewer window (it also redraws
+        after every step) and return None."""
+        if self.render_mode == "human":
+            self._request("render")
+            return None
         if self.render_mode != "rgb_array":
             return None
         return self._request("render")["frame"]
@@ -165,7 +268,8 @@ class OpenAIRemoteEnv(gym.Env):
         conn, self._conn = self._conn, None
         if conn is not None:
             try:
-                conn.request("close", timeout=1.0)
+                if not getattr(self._launcher, "attached", False):  # attached sims outlive the env
+                    conn.request("close", timeout=1.0)
             except RemoteEnvError:
                 pass
             conn.close()
@@ -180,4 +284,19 @@ class OpenAIRemoteEnv(gym.Env):
                 f"{cmd} on a closed OpenAIRemoteEnv ({os.path.basename(self.scene)}); create a new env",
                 kind="state",
             )
-        return self._conn.request(cmd, **args)
+        return self._conn.request(cmd, timeout=self.call_timeouts.get(cmd, self.timeout), **args)
+
+    def _restart(self, err: RemoteEnvError) -> int:
+        """Relaunch the sim after ``err`` (spending restarts until one comes up);
+        returns the restarts spent so far."""
+        while True:
+            count = self.restarts.spend(err)
+            if self._conn is not None:
+                self._conn.close()
+                self._conn = None
+            assert self._launcher is not None
+            try:
+                self._connect(self._launcher.restart(0))
+                return count
+            except RemoteEnvError as again:
+                err = again

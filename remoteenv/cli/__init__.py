@@ -9,7 +9,7 @@ import sys
 from typing import Sequence
 
 #: Command modules, in the order ``--help`` lists them.
-COMMANDS = ["demo", "bench"]
+COMMANDS = ["demo", "bench", "keys", "launch"]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

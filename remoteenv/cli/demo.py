@@ -27,6 +27,17 @@ def add_parser(sub: Any) -> None:
                    help="cartpole: Box(-1, 1) action instead of Discrete(2)")
     p.add_argument("--random", action="store_true", help="random actions instead of the controller")
     p.add_argument("--transport", choices=["ipc", "tcp"], default="ipc", help="socket transport")
+    p.add_argument("--record", metavar="DIR", default=None,
+                   help="render offscreen and write one mp4 per episode into DIR "
+                   "(gymnasium.wrappers.RecordVideo; needs moviepy, the [video] extra)")
+    p.add_argument("--real-time", action="store_true",
+                   help="run the sim on a paced wall clock: it keeps going while the agent thinks")
+    p.add_argument("--real-time-factor", type=float, default=1.0,
+                   help="with --real-time: simulated seconds per wall-clock second (default 1.0)")
+    p.add_argument("--think-ms", type=float, default=0.0,
+                   help="the agent sleeps this many ms before each action (default 0)")
+    p.add_argument("--action-delay", type=int, default=0,
+                   help="lock-step: each action takes effect this many ticks later (default 0)")
     p.set_defaults(run=run)
 
 
@@ -49,6 +60,16 @@ def make_env(args: argparse.Namespace) -> gym.Env:
     kwargs: dict[str, Any] = {"transport": args.transport}
     if args.scene == "cartpole":
         kwargs["continuous"] = args.continuous
+    if getattr(args, "real_time", False):
+        kwargs.update(real_time=True, real_time_factor=args.real_time_factor)
+    if getattr(args, "action_delay", 0):
+        kwargs["action_delay"] = args.action_delay
+    if getattr(args, "record", None):
+        kwargs["render_mode"] = "rgb_array"
+        env = gym.make(SCENES[args.scene], **kwargs)
+        return gym.wrappers.RecordVideo(
+            env, args.record, episode_trigger=lambda episode: True, name_prefix=args.scene
+        )
     return gym.make(SCENES[args.scene], **kwargs)
 
 
@@ -69,6 +90,8 @@ def run(args: argparse.Namespace) -> int:
             ret, steps, done = 0.0, 0, False
             start = time.perf_counter()
             while not done:
+                if args.think_ms > 0:
+                    time.sleep(args.think_ms / 1e3)
                 obs, reward, terminated, truncated, _ = env.step(policy(obs))
                 ret += float(reward)
                 steps += 1
@@ -80,6 +103,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"episode {episode}: return {ret:9.3f}  steps {steps:4d} ({end})  "
                   f"{steps / elapsed:8.0f} steps/s")
         print(f"all episodes: {total_steps} steps, {total_steps / max(total_time, 1e-9):.0f} steps/s")
+        if args.real_time or args.action_delay or args.think_ms > 0:
+            print("latency stats (env.unwrapped.latency_stats):")
+            print(env.unwrapped.latency_stats.format())
     finally:
         env.close()
     return 0

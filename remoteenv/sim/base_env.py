@@ -70,6 +70,11 @@ class BaseEnv:
         self.render_mode = render_mode
         self.width, self.height = int(width), int(height)
         self._renderer: mujoco.Renderer | None = None
+        self._viewer: Any = None
+        if render_mode == "human":
+            from remoteenv.sim.viewer import HumanViewer
+
+            self._viewer = HumanViewer(self.model, self.data)
         self._np_random: np.random.Generator | None = None
         self._np_random_seed: int | None = None
 
@@ -131,12 +136,17 @@ class BaseEnv:
     def substep(self) -> None:
         """Advance the physics by one ``model.opt.timestep``."""
         mujoco.mj_step(self.model, self.data)
+        if self._viewer is not None:
+            self._viewer.sync(max_fps=60.0)  # real-time mode drives substeps, not step()
 
     def step(self, action: Any) -> tuple[Any, float, bool, dict[str, Any]]:
         """One control tick: ``(obs, reward, terminated, info)``."""
         self.prepare_step(action)
         mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
-        return self.post_step(action)
+        result = self.post_step(action)
+        if self._viewer is not None:
+            self._viewer.sync()
+        return result
 
     def set_state(self, qpos: np.ndarray, qvel: np.ndarray) -> None:
         """Set generalized positions and velocities and recompute derived quantities."""
@@ -147,7 +157,11 @@ class BaseEnv:
         mujoco.mj_forward(self.model, self.data)
 
     def render(self) -> np.ndarray | None:
-        """An RGB frame (uint8, height x width x 3) of the current state, offscreen."""
+        """rgb_array: an RGB frame (uint8, height x width x 3) of the current state, offscreen.
+        human: draw the current state in the sim's viewer window; returns None."""
+        if self._viewer is not None:
+            self._viewer.sync()  # render_mode="human": draw in the sim's viewer window
+            return None
         if self.render_mode != "rgb_array":
             return None
         if self._renderer is None:
@@ -161,3 +175,6 @@ class BaseEnv:
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None

@@ -7,6 +7,7 @@ import json
 import sys
 from typing import Any, Callable, Sequence
 
+from remoteenv.keys import read_key, read_keys
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.server import RemoteControlledAgent
 
@@ -33,6 +34,12 @@ def scene_argument_parser(description: str | None = None) -> argparse.ArgumentPa
                    help="permit binding a non-loopback interface (requires --curve-secret-key-file)")
     p.add_argument("--curve-secret-key-file", default=None,
                    help="file holding this server's Z85 CURVE secret key")
+    p.add_argument("--curve-client-keys-file", default=None,
+                   help="file of Z85 CURVE public keys (one a line) of the clients allowed to "
+                   "connect; without it any client knowing the server's public key may")
+    p.add_argument("--private-dir", default=None,
+                   help="the launcher's private dir: if the agent dies, remove this instance's "
+                   "sim-<instance>.* files from it, and the dir once empty")
     return p
 
 
@@ -51,10 +58,11 @@ def run_scene(
     if args.seed is not None:
         for w, env in enumerate(envs):
             env.seed_rng(args.seed + w)
-    secret = None
+    secret = client_keys = None
     if args.curve_secret_key_file:
-        with open(args.curve_secret_key_file, "rb") as f:
-            secret = f.read().strip()
+        secret = read_key(args.curve_secret_key_file)
+    if args.curve_client_keys_file:
+        client_keys = read_keys(args.curve_client_keys_file)
     server = RemoteControlledAgent(
         envs,
         args.address,
@@ -66,5 +74,7 @@ def run_scene(
         action_delay=args.action_delay,
         allow_remote=args.allow_remote,
         curve_secret_key=secret,
+        curve_client_keys=client_keys,
+        private_dir=args.private_dir,
     )
     server.serve()

@@ -15,10 +15,12 @@ from typing import Any, Callable
 
 import numpy as np
 import zmq
+from gymnasium import spaces
 
 from remoteenv import protocol
 from remoteenv.addresses import is_loopback
 from remoteenv.sim.base_env import BaseEnv
+from remoteenv.sim.orphan import ParentWatch, parent_alive, remove_private_files
 from remoteenv.sim.stepping import LockStepper, make_stepper
 
 _PARENT_CHECK_S = 0.25
@@ -47,6 +49,13 @@ class RemoteControlledAgent:
         real_time, real_time_factor, action_delay: stepping mode, see
             :mod:`remoteenv.sim.stepping`.
         allow_remote: permit binding a non-loopback interface.
+        curve_secret_key: this server's Z85 CURVE secret key; turns on CURVE
+            encryption (required beyond loopback).
+        curve_client_keys: with CURVE, the Z85 public keys of the clients
+            allowed to connect (checked by a ZAP handler); None admits any
+            client that knows the server's public key.
+        private_dir: the launcher's private dir; if the agent dies, this sim
+            removes its ``sim-<instance>.*`` files from it (and the dir, last).
     """
 
     def __init__(
@@ -62,6 +71,8 @@ class RemoteControlledAgent:
         action_delay: int = 0,
         allow_remote: bool = False,
         curve_secret_key: bytes | None = None,
+        curve_client_keys: list[bytes] | None = None,
+        private_dir: str | None = None,
     ) -> None:
         if not envs:
             raise ValueError("RemoteControlledAgent needs at least one env")
@@ -73,6 +84,9 @@ class RemoteControlledAgent:
         self.envs = envs
         self.instance = instance
         self.parent_pid = parent_pid
+        self.private_dir = private_dir
+        self.orphaned = False
+        self._authenticator: Any = None
         self.steppers = [
             make_stepper(env, real_time=real_time, real_time_factor=real_time_factor,
                          action_delay=action_delay)
@@ -84,6 +98,8 @@ class RemoteControlledAgent:
         self.socket.setsockopt(zmq.LINGER, 0)
         self.socket.setsockopt(zmq.MAXMSGSIZE, protocol.MAX_MESSAGE_BYTES)
         if curve_secret_key is not None:
+            if curve_client_keys is not None:
+                self._authenticator = _start_client_key_check(self._ctx, curve_client_keys)
             self.socket.curve_server = True
             self.socket.curve_secretkey = curve_secret_key
         elif not is_loopback(address):
@@ -97,6 +113,10 @@ class RemoteControlledAgent:
             "render": self._render,
             "close": self._close,
         }
+        if not real_time:
+            from remoteenv.sim.batch import BatchCommands
+
+            self._handlers.update(BatchCommands(self).handlers())
         self._running = True
         if ready_file:
             tmp = f"{ready_file}.tmp"
@@ -113,6 +133,10 @@ class RemoteControlledAgent:
             raise SystemExit(128 + signum)
 
         signal.signal(signal.SIGTERM, _stop)
+        watch = None
+        if self.parent_pid is not None:
+            watch = ParentWatch(self.parent_pid, self.private_dir, self.instance)
+            watch.start()
         try:
             if self.real_time:
                 from remoteenv.sim.real_time import serve_real_time
@@ -122,6 +146,10 @@ class RemoteControlledAgent:
                 self._serve_lockstep()
         finally:
             self.shutdown()
+            if self.private_dir and self.parent_pid is not None and not parent_alive(self.parent_pid):
+                remove_private_files(self.private_dir, self.instance)
+            if watch is not None:
+                watch.finished()
 
     def _serve_lockstep(self) -> None:
         sock = self.socket
@@ -136,7 +164,7 @@ class RemoteControlledAgent:
             frames = sock.recv_multipart(copy=True)
             if len(frames) != 2:
                 continue  # not a DEALER-framed request: drop
-            sock.send_multipart([frames[0], protocol.pack(self.handle_frame(frames[1]))])
+            sock.send_multipart([frames[0], self.pack_reply(self.handle_frame(frames[1]))])
             now = time.monotonic()
             if now - last_check > _PARENT_CHECK_S:
                 self.check_parent()
@@ -144,8 +172,22 @@ class RemoteControlledAgent:
 
     def check_parent(self) -> None:
         """Stop serving if the agent that launched us is gone."""
-        if self.parent_pid is not None and os.getppid() != self.parent_pid:
+        if self.parent_pid is not None and not parent_alive(self.parent_pid):
+            self.orphaned = True
             self._running = False
+
+    def pack_reply(self, reply: dict[str, Any]) -> bytes:
+        """Encode a reply; one that cannot go on the wire becomes a typed error (never raises)."""
+        try:
+            return protocol.pack(reply)
+        except Exception as exc:
+            seq = reply.get("seq", -1)
+            return protocol.pack(protocol.error_reply(
+                seq if isinstance(seq, int) else -1, "scene",
+                f"the reply to this request cannot be sent on the wire ({type(exc).__name__}: {exc}); "
+                "scene code must return numpy arrays, numbers, strings, lists and str-keyed maps",
+                traceback.format_exc(),
+            ))
 
     def handle_frame(self, frame: bytes) -> dict[str, Any]:
         """Decode one request frame and compute its reply (never raises)."""
@@ -183,6 +225,8 @@ class RemoteControlledAgent:
             except Exception:
                 traceback.print_exc()
         self.socket.close(linger=0)
+        if self._authenticator is not None:
+            self._authenticator.stop()
         if self.endpoint.startswith("ipc://"):
             path = self.endpoint[len("ipc://"):]
             for p in (path,):
@@ -256,6 +300,22 @@ class RemoteControlledAgent:
         return {}
 
 
+def _start_client_key_check(ctx: zmq.Context, client_keys: list[bytes]) -> Any:
+    """Run a ZAP handler thread that admits only CURVE clients whose public key is listed."""
+    from zmq.auth.thread import ThreadAuthenticator
+
+    allowed = frozenset(bytes(k).strip() for k in client_keys)
+
+    class _Allowed:
+        def callback(self, domain: str, key: bytes) -> bool:
+            return bytes(key) in allowed
+
+    auth = ThreadAuthenticator(ctx)
+    auth.start()
+    auth.configure_curve_callback("*", credentials_provider=_Allowed())
+    return auth
+
+
 def validate_action(env: BaseEnv, action: Any) -> Any:
     """Convert a decoded action to the space's type and check it is inside the space."""
     space = env.action_space
@@ -265,7 +325,14 @@ def validate_action(env: BaseEnv, action: Any) -> Any:
                 if not np.can_cast(action.dtype, space.dtype, casting="same_kind"):
                     raise ValueError(f"dtype {action.dtype} does not fit {space.dtype}")
                 action = action.astype(space.dtype)
-        ok = space.contains(action)
+        if (
+            type(space) is spaces.Box and isinstance(action, np.ndarray)
+            and action.shape == space.shape and action.dtype == space.dtype
+        ):
+            # Box.contains, without its generic checks (NaN compares False).
+            ok = bool((action >= space.low).all()) and bool((action <= space.high).all())
+        else:
+            ok = space.contains(action)
     except Exception as exc:
         raise RequestError("invalid_action", f"action {action!r:.200} does not fit {space}: {exc}") from None
     if not ok:

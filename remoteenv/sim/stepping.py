@@ -20,7 +20,10 @@ class LockStepper:
     at tick ``t + k`` (ticks counted from 0 after a reset); during the first
     ``k`` ticks the scene's default action is applied (see
     :meth:`BaseEnv.default_action`). The reply's ``info["applied_action"]``
-    is then the action actually in force, or ``None`` for the default.
+    is then the action actually in force, or ``None`` for the default, and
+    the info carries real-time mode's timing keys with their exact values:
+    ``sim_time``, ``ticks_elapsed`` = 1, ``latency_ticks`` = k, ``latency_s``
+    = k * dt and ``late`` = True (a whole tick runs before the action counts).
     """
 
     def __init__(self, env: BaseEnv, action_delay: int = 0) -> None:
@@ -48,6 +51,12 @@ class LockStepper:
         if self.action_delay:
             info = dict(info)
             info["applied_action"] = action
+            # The timing keys of real-time mode, exact by construction here.
+            info["sim_time"] = float(self.env.data.time)
+            info["ticks_elapsed"] = 1
+            info["latency_ticks"] = float(self.action_delay)
+            info["latency_s"] = self.action_delay * self.env.dt
+            info["late"] = True
         return {
             "obs": obs,
             "reward": float(reward),

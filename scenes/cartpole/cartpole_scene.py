@@ -29,7 +29,7 @@ THETA_THRESHOLD = 12 * 2 * math.pi / 360
 
 class CartPoleEnv(BaseEnv):
     env_id = "remoteenv/CartPole-v0"
-    metadata = {"render_modes": ["rgb_array"]}
+    metadata = {"render_modes": ["rgb_array", "human"]}
     default_camera = "side"
 
     def __init__(

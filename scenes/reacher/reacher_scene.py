@@ -24,7 +24,7 @@ MODEL_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "reacher.x
 
 class ReacherEnv(BaseEnv):
     env_id = "remoteenv/Reacher-v0"
-    metadata = {"render_modes": ["rgb_array"]}
+    metadata = {"render_modes": ["rgb_array", "human"]}
     default_camera = "overhead"
 
     def __init__(

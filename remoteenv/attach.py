@@ -1,0 +1,268 @@
+"""Launch-info files: drive sims that another process started.
+
+Runs in the agent process. ``python -m remoteenv launch <scene> --out
+launch.json`` starts sims and writes a launch-info file;
+``OpenAIRemoteEnv.attach("launch.json")`` (or ``gymnasium.make(id,
+attach="launch.json")``) and ``RemoteVectorEnv.attach("launch.json")`` drive
+them from any other process. Nothing in the file is a secret: the spaces come
+from each sim's handshake; when CURVE is on, the file names the sims' public
+keys and the path of the client secret key file (mode 0600) written beside it.
+
+File format (JSON, ``"format": "remoteenv-launch/1"``)::
+
+    {"format": "remoteenv-launch/1",
+     "scene": "/path/to/cartpole_scene.py",   # the scene script the sims run
+     "env_id": "remoteenv/CartPole-v0",        # from the handshake
+     "host": "machine name",                   # where the sims run
+     "launcher_pid": 1234,                     # the launch command's pid
+     "worlds_per_instance": 1,
+     "render_mode": null | "rgb_array",
+     "stepping": {"real_time": false, "real_time_factor": 1.0, "action_delay": 0},
+     "instances": [{"instance": 0, "endpoint": "ipc:///tmp/.../sim-0.sock",
+                    "pid": 1235, "curve_server_key": null | "<Z85 public key>"}],
+     "curve_client_secret_key_file": null | "launch.client.key_secret"}
+
+Any server that speaks :mod:`remoteenv.protocol` can be named in such a file
+(``pid`` may be null); that is how an agent drives, say, a real robot bridge.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+from remoteenv.errors import RemoteEnvError
+from remoteenv.keys import KeyPair, load_keypair
+
+FORMAT = "remoteenv-launch/1"
+
+
+def _pid_state(pid: int) -> str | None:
+    """The /proc state letter of ``pid``, or None if there is no such process."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        return None
+    except OSError:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return None
+        except PermissionError:
+            pass
+        return "?"
+
+
+@dataclass
+class AttachedSim:
+    """One sim named in a launch-info file (the attach-side twin of ``SimProcess``)."""
+
+    instance: int
+    endpoint: str
+    pid: int | None = None
+    curve_server_key: bytes | None = None
+    #: True when the sim runs on this machine, so its pid can be watched.
+    local: bool = True
+    restarts: int = 0
+
+    def death(self) -> str | None:
+        """Why the sim's process is gone, or None while it runs (or cannot be watched)."""
+        if not self.local or self.pid is None:
+            return None
+        state = _pid_state(self.pid)
+        if state is None or state == "Z":
+            return (f"pid {self.pid} is gone; the sims of a launch-info file live as long as "
+                    "the launch command that started them")
+        return None
+
+
+@dataclass
+class LaunchInfo:
+    """The content of a launch-info file (see the module docstring)."""
+
+    scene: str
+    instances: list[AttachedSim]
+    env_id: str | None = None
+    host: str = field(default_factory=socket.gethostname)
+    launcher_pid: int | None = None
+    worlds_per_instance: int = 1
+    render_mode: str | None = None
+    real_time: bool = False
+    real_time_factor: float = 1.0
+    action_delay: int = 0
+    curve_client_secret_key_file: str | None = None
+    path: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "format": FORMAT,
+            "scene": self.scene,
+            "env_id": self.env_id,
+            "host": self.host,
+            "launcher_pid": self.launcher_pid,
+            "worlds_per_instance": self.worlds_per_instance,
+            "render_mode": self.render_mode,
+            "stepping": {"real_time": self.real_time, "real_time_factor": self.real_time_factor,
+                         "action_delay": self.action_delay},
+            "instances": [
+                {"instance": s.instance, "endpoint": s.endpoint, "pid": s.pid,
+                 "curve_server_key": None if s.curve_server_key is None else s.curve_server_key.decode()}
+                for s in self.instances
+            ],
+            "curve_client_secret_key_file": self.curve_client_secret_key_file,
+        }
+
+    def client_keypair(self) -> KeyPair | None:
+        """The CURVE client key pair the sims admit, or None if CURVE is off."""
+        if self.curve_client_secret_key_file is None:
+            return None
+        path = self.curve_client_secret_key_file
+        if not os.path.isabs(path) and self.path is not None:
+            path = os.path.join(os.path.dirname(os.path.abspath(self.path)), path)
+        try:
+            return load_keypair(path)
+        except OSError as exc:
+            raise RemoteEnvError(
+                f"launch-info file {self.path} needs the CURVE client secret key {path}, which cannot "
+                f"be read ({exc}); copy it (mode 0600) next to the launch-info file",
+                kind="launch",
+            ) from None
+
+
+def write_launch_info(path: str | os.PathLike[str], info: LaunchInfo) -> None:
+    """Write ``info`` to ``path`` atomically (readers never see half a file)."""
+    path = os.fspath(path)
+    tmp = f"{path}.tmp-{os.getpid()}"
+    with open(tmp, "w") as f:
+        json.dump(info.to_json(), f, indent=2)
+        f.write("\n")
+    os.replace(tmp, path)
+    info.path = path
+
+
+def read_launch_info(path: str | os.PathLike[str]) -> LaunchInfo:
+    """Read a launch-info file; raise :class:`RemoteEnvError` (kind ``"launch"``)
+    saying what is wrong with it."""
+    path = os.fspath(path)
+    try:
+        with open(path) as f:
+            doc = json.load(f)
+    except FileNotFoundError:
+        raise RemoteEnvError(
+            f"no launch-info file at {path}: start the sims with "
+            f"`python -m remoteenv launch <scene> --out {path}` and keep that command running",
+            kind="launch",
+        ) from None
+    except (OSError, json.JSONDecodeError) as exc:
+        raise RemoteEnvError(f"cannot read launch-info file {path}: {exc}", kind="launch") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+        raise RemoteEnvError(f"{path} is not a launch-info file of format {FORMAT!r} (found {found!r})",
+                             kind="launch")
+    try:
+        host = str(doc.get("host") or socket.gethostname())
+        local = host == socket.gethostname()
+        instances = [
+            AttachedSim(
+                instance=int(s["instance"]),
+                endpoint=str(s["endpoint"]),
+                pid=None if s.get("pid") is None else int(s["pid"]),
+                curve_server_key=None if not s.get("curve_server_key") else str(s["curve_server_key"]).encode(),
+                local=local,
+            )
+            for s in doc["instances"]
+        ]
+        stepping = doc.get("stepping") or {}
+        info = LaunchInfo(
+            scene=str(doc.get("scene") or ""),
+            instances=instances,
+            env_id=doc.get("env_id"),
+            host=host,
+            launcher_pid=doc.get("launcher_pid"),
+            worlds_per_instance=int(doc.get("worlds_per_instance", 1)),
+            render_mode=doc.get("render_mode"),
+            real_time=bool(stepping.get("real_time", False)),
+            real_time_factor=float(stepping.get("real_time_factor", 1.0)),
+            action_delay=int(stepping.get("action_delay", 0)),
+            curve_client_secret_key_file=doc.get("curve_client_secret_key_file"),
+            path=path,
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise RemoteEnvError(f"launch-info file {path} is malformed: {type(exc).__name__}: {exc}",
+                             kind="launch") from None
+    if not instances:
+        raise RemoteEnvError(f"launch-info file {path} names no sim instances", kind="launch")
+    return info
+
+
+class AttachedSims:
+    """Sims named by a launch-info file, in the shape the envs expect of a
+    :class:`remoteenv.Launcher` (``sims``, ``pids``, ``endpoints``,
+    ``curve_client_keypair``, ``close``). Closing it leaves the sims running:
+    the launch command that started them owns them.
+
+    Args:
+        info: the launch info, or the path of a launch-info file.
+        instances: which of its instances to use (default: all, in order).
+    """
+
+    #: Envs built on attached sims do not ask the sims to exit when closed.
+    attached = True
+
+    def __init__(self, info: LaunchInfo | str | os.PathLike[str], instances: Sequence[int] | None = None) -> None:
+        if not isinstance(info, LaunchInfo):
+            info = read_launch_info(info)
+        self.info = info
+        by_index = {s.instance: s for s in info.instances}
+        wanted = list(by_index) if instances is None else list(instances)
+        missing = [i for i in wanted if i not in by_index]
+        if missing:
+            raise RemoteEnvError(
+                f"launch-info file {info.path} has no instance(s) {missing}; it has {sorted(by_index)}",
+                kind="launch",
+            )
+        self.sims = [by_index[i] for i in wanted]
+        self.curve_client_keypair = info.client_keypair()
+        self.worlds_per_instance = info.worlds_per_instance
+        self.num_instances = len(self.sims)
+        self._closed = False
+
+    @property
+    def scene(self) -> str:
+        return self.info.scene
+
+    @property
+    def endpoints(self) -> list[str]:
+        return [s.endpoint for s in self.sims]
+
+    @property
+    def pids(self) -> list[int | None]:
+        return [s.pid for s in self.sims]
+
+    @property
+    def timed_steps(self) -> bool:
+        """True if the sims run real time or with an action delay."""
+        return bool(self.info.real_time or self.info.action_delay)
+
+    def restart(self, instance: int) -> AttachedSim:
+        raise RemoteEnvError(
+            f"cannot restart sim instance {instance}: it was started by the launch command "
+            f"(pid {self.info.launcher_pid}), not by this process; restart that command",
+            kind="launch",
+            instance=instance,
+        )
+
+    def close(self) -> None:
+        """Forget the sims (they keep running)."""
+        self._closed = True
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+
+__all__ = ["AttachedSim", "AttachedSims", "LaunchInfo", "read_launch_info", "write_launch_info"]

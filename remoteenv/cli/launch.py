@@ -1,0 +1,154 @@
+"""``python -m remoteenv launch <scene>``: start sims for other processes to attach to.
+
+The command starts the sims, writes a launch-info file (see
+:mod:`remoteenv.attach`) and stays in the foreground. The sims live exactly as
+long as the command: on Ctrl-C or SIGTERM it stops them and removes the
+launch-info file (and the client key file); if the command is killed outright,
+the sims notice their parent is gone and exit by themselves. If a sim dies,
+the command stops the others and exits with status 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import socket
+import sys
+import time
+from typing import Any
+
+_WATCH_S = 0.2
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "launch",
+        help="start sims and write a launch-info file for OpenAIRemoteEnv.attach",
+        description="Start sim processes of a scene, write a launch-info file other processes "
+        "attach to (OpenAIRemoteEnv.attach, RemoteVectorEnv.attach, gymnasium.make(id, "
+        "attach=FILE)), and keep them running until Ctrl-C / SIGTERM.",
+    )
+    p.add_argument("scene", help="shipped scene name (cartpole, reacher) or path of a scene script")
+    p.add_argument("--instances", type=int, default=1, help="sim processes to start (default 1)")
+    p.add_argument("--worlds", type=int, default=1, help="MuJoCo worlds per sim process (default 1)")
+    p.add_argument("--out", default="launch.json", help="launch-info file to write (default launch.json)")
+    p.add_argument("--seed", type=int, default=None, help="RNG seed; instance i uses seed + i * worlds")
+    p.add_argument("--env-kwargs", default="{}", help="JSON map of keyword arguments for the scene's env")
+    p.add_argument("--render-mode", default=None, choices=["rgb_array", "human"],
+                   help="render mode of the sims")
+    p.add_argument("--transport", choices=["ipc", "tcp"], default="ipc",
+                   help="ipc socket in a private dir (default) or tcp on 127.0.0.1")
+    p.add_argument("--bind-host", default=None,
+                   help="bind tcp on this interface; beyond loopback this turns CURVE on")
+    p.add_argument("--public-host", default=None,
+                   help="host name other machines reach the sims by, written into the file "
+                   "(default: --bind-host, or this machine's name for 0.0.0.0)")
+    p.add_argument("--curve", action="store_true", help="encrypt with ZMQ CURVE even on loopback")
+    p.add_argument("--real-time", action="store_true", help="run the sims on a paced wall clock")
+    p.add_argument("--real-time-factor", type=float, default=1.0,
+                   help="simulated seconds per wall-clock second in real-time mode")
+    p.add_argument("--action-delay", type=int, default=0,
+                   help="lock-step: an action takes effect this many ticks later")
+    p.set_defaults(run=run)
+
+
+def _scene_script(scene: str) -> str:
+    from remoteenv import scene_path
+
+    if os.path.isfile(scene):
+        return os.path.abspath(scene)
+    return scene_path(scene)
+
+
+def _advertised(endpoint: str, args: argparse.Namespace) -> str:
+    """The endpoint as another machine should dial it."""
+    if not args.bind_host or not endpoint.startswith("tcp://"):
+        return endpoint
+    host = args.public_host or (socket.gethostname() if args.bind_host in ("0.0.0.0", "*") else args.bind_host)
+    port = endpoint.rsplit(":", 1)[1]
+    return f"tcp://{host}:{port}"
+
+
+def run(args: argparse.Namespace) -> int:
+    from remoteenv import protocol
+    from remoteenv.attach import AttachedSim, LaunchInfo, write_launch_info
+    from remoteenv.connection import Connection
+    from remoteenv.errors import RemoteEnvError
+    from remoteenv.keys import write_secret_key
+    from remoteenv.launcher import Launcher
+
+    env_kwargs = json.loads(args.env_kwargs)
+    if not isinstance(env_kwargs, dict):
+        raise SystemExit(f"--env-kwargs must be a JSON map, got {args.env_kwargs!r}")
+    out = os.path.abspath(args.out)
+    key_file = f"{os.path.splitext(out)[0]}.client.key_secret"
+
+    def _stop(signum: int, _frame: Any) -> None:
+        raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGTERM, _stop)
+    written: list[str] = []
+    try:
+        launcher = Launcher(
+            _scene_script(args.scene), args.instances, seed=args.seed,
+            worlds_per_instance=args.worlds, env_kwargs=env_kwargs, render_mode=args.render_mode,
+            transport=args.transport, real_time=args.real_time, real_time_factor=args.real_time_factor,
+            action_delay=args.action_delay, bind_host=args.bind_host, curve=True if args.curve else None,
+        )
+    except (RemoteEnvError, FileNotFoundError, ValueError) as exc:
+        print(f"launch failed: {exc}", file=sys.stderr)
+        return 1
+    try:
+        keys = launcher.curve_client_keypair
+        first = launcher.sims[0]
+        conn = Connection(first.endpoint or "", instance=0, death_check=first.death,
+                          curve_server_key=first.curve_server_key,
+                          curve_client_keypair=None if keys is None else (keys.public, keys.secret))
+        try:
+            env_id = conn.request("handshake", protocol=protocol.PROTOCOL_VERSION)["env_id"]
+        finally:
+            conn.close()
+        if keys is not None:
+            if os.path.exists(key_file):
+                os.unlink(key_file)  # a stale key of an earlier launch
+            write_secret_key(key_file, keys.secret)
+            written.append(key_file)
+        info = LaunchInfo(
+            scene=launcher.scene, env_id=env_id, host=socket.gethostname(), launcher_pid=os.getpid(),
+            worlds_per_instance=args.worlds, render_mode=args.render_mode, real_time=args.real_time,
+            real_time_factor=args.real_time_factor, action_delay=args.action_delay,
+            curve_client_secret_key_file=None if keys is None else os.path.basename(key_file),
+            instances=[
+                AttachedSim(instance=s.instance, endpoint=_advertised(s.endpoint or "", args),
+                            pid=s.pid, curve_server_key=s.curve_server_key)
+                for s in launcher.sims
+            ],
+        )
+        write_launch_info(out, info)
+        written.append(out)
+        for s in info.instances:
+            print(f"instance {s.instance}: pid {s.pid} at {s.endpoint}")
+        print(f"{env_id}: {args.instances} sim(s) running; wrote {out}. "
+              "Attach with OpenAIRemoteEnv.attach(FILE); Ctrl-C or SIGTERM stops them.", flush=True)
+        while True:
+            for sim in launcher.sims:
+                why = sim.death()
+                if why is not None:
+                    print(f"sim instance {sim.instance} stopped: {why}; stopping the others",
+                          file=sys.stderr)
+                    return 1
+            time.sleep(_WATCH_S)
+    except KeyboardInterrupt:
+        return 0
+    except SystemExit as exc:
+        return 0 if exc.code == 128 + signal.SIGTERM else int(exc.code or 0)
+    finally:
+        for path in written:
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
+        launcher.close()
+        print("sims stopped", flush=True)

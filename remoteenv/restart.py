@@ -1,0 +1,60 @@
+"""Restart bookkeeping for ``restart_on_failure``: which failures a relaunch
+cures, how many relaunches an env may spend, and what the agent is told.
+
+Runs in the agent process; used by the single and the vector env.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from remoteenv.errors import RemoteEnvError
+
+#: Error kinds a fresh sim process can cure: the process died, or it is alive
+#: but stopped answering. A scene exception or a bad action would only repeat.
+RESTARTABLE_KINDS = frozenset({"died", "timeout"})
+
+#: Keys of the ``info`` map of a step or reset that followed a restart.
+INFO_RESTARTED = "remoteenv_restarted"
+INFO_RESTARTS = "remoteenv_restarts"
+INFO_ERROR = "remoteenv_error"
+
+
+class RestartBudget:
+    """Counts the relaunches of one env (all its instances together) against a cap.
+
+    Args:
+        enabled: ``restart_on_failure``; when False nothing is ever restarted.
+        max_restarts: relaunches allowed over the env's lifetime; the failure
+            after the last one is raised.
+    """
+
+    def __init__(self, enabled: bool, max_restarts: int) -> None:
+        if max_restarts < 0:
+            raise ValueError(f"max_restarts must be >= 0, got {max_restarts}")
+        self.enabled = bool(enabled)
+        self.max_restarts = int(max_restarts)
+        self.count = 0
+
+    def covers(self, err: RemoteEnvError) -> bool:
+        """True if ``err`` is a failure a restart cures and restarts are on."""
+        return self.enabled and err.kind in RESTARTABLE_KINDS
+
+    def spend(self, err: RemoteEnvError) -> int:
+        """Take one restart for ``err``; raise an error naming the cap if none is left.
+
+        Returns the number of restarts spent so far, this one included."""
+        if self.count >= self.max_restarts:
+            raise type(err)(
+                f"giving up after {self.count} restart(s) (max_restarts={self.max_restarts}); "
+                f"last failure: {err}",
+                kind=err.kind,
+                instance=err.instance,
+            ) from err
+        self.count += 1
+        return self.count
+
+
+def restarted_info(err: RemoteEnvError, restarts: int) -> dict[str, Any]:
+    """The ``info`` entries that report a restart caused by ``err``."""
+    return {INFO_RESTARTED: True, INFO_RESTARTS: restarts, INFO_ERROR: str(err)}

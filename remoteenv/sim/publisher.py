@@ -1,0 +1,224 @@
+"""Frame publisher: a sim process that streams rendered frames and labels.
+
+Runs in the sim process; the agent-side reader is
+:class:`remoteenv.torch.RemoteIterableDataset`. This is blendtorch's other
+half: instead of answering step requests, the sim drives its own world with
+random actions and pushes what it renders.
+
+Started as ``python publisher.py --scene <scene script> --address ...``: the
+scene command line of :mod:`remoteenv.sim.scene_main` plus the flags below,
+so :class:`remoteenv.Launcher` starts publishers exactly like sims
+(``Launcher(publisher.__file__, extra_args=["--scene", ...])``).
+
+Wire
+----
+The publisher binds one ZeroMQ PUSH socket (loopback or ipc only) and sends
+one msgpack map per frame, encoded with :mod:`remoteenv.protocol` (numpy
+arrays as extension type 1; never pickle)::
+
+    {"instance": int, "index": int, "episode": int, "step": int,
+     "frame": uint8 array H x W x 3, "labels": map}
+
+``index`` counts this publisher's items from 0 without gaps, so a reader can
+prove it lost nothing. ``step`` is the control tick within ``episode`` (0 is
+the state right after reset). ``labels`` come from the scene: if its env class
+defines ``stream_labels(self, obs, info) -> dict``, that; otherwise
+``{"obs", "qpos", "qvel", "sim_time"}``.
+
+Exactly one reader should connect to each publisher (a PUSH socket deals its
+items round-robin among connected readers). The publisher blocks while no
+reader is connected or the reader's queue is full, so nothing is dropped.
+After ``--items`` frames (or never, without the flag) it stops producing but
+keeps its socket open until SIGTERM/SIGINT or the launching process exits, so
+frames still queued reach the reader.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import signal
+import sys
+import time
+from typing import Any, Sequence
+
+if __name__ == "__main__" and sys.path and os.path.abspath(sys.path[0]) == os.path.dirname(
+    os.path.abspath(__file__)
+):
+    # Run as a script: keep this folder's module names (server, viewer, ...) off the import path.
+    sys.path.pop(0)
+
+import zmq
+
+from remoteenv import protocol
+from remoteenv.addresses import is_loopback
+from remoteenv.sim.base_env import BaseEnv
+from remoteenv.sim.scene_main import scene_argument_parser
+
+#: Frames a PUSH socket queues before the publisher waits for its reader.
+SEND_HWM = 8
+_POLL_MS = 250
+
+
+def load_env_class(scene_script: str, class_name: str | None = None) -> type[BaseEnv]:
+    """Import a scene script (without running its ``main``) and return its env class:
+    ``class_name`` if given, else the one :class:`BaseEnv` subclass it defines."""
+    path = os.path.abspath(scene_script)
+    name = "_remoteenv_scene_" + os.path.splitext(os.path.basename(path))[0]
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise ValueError(f"cannot import scene script {path!r}")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    if class_name is not None:
+        cls = getattr(module, class_name, None)
+        if not (isinstance(cls, type) and issubclass(cls, BaseEnv)):
+            raise ValueError(f"{path} has no BaseEnv subclass named {class_name!r}")
+        return cls
+    found = [
+        obj for obj in vars(module).values()
+        if isinstance(obj, type) and issubclass(obj, BaseEnv) and obj.__module__ == name
+    ]
+    if len(found) != 1:
+        raise ValueError(
+            f"{path} defines {len(found)} BaseEnv subclasses "
+            f"({', '.join(c.__name__ for c in found) or 'none'}); name one with --env-class"
+        )
+    return found[0]
+
+
+def default_labels(env: BaseEnv, obs: Any, info: dict[str, Any]) -> dict[str, Any]:
+    """Labels of a frame when the scene defines no ``stream_labels``."""
+    return {
+        "obs": obs,
+        "qpos": env.data.qpos.copy(),
+        "qvel": env.data.qvel.copy(),
+        "sim_time": float(env.data.time),
+    }
+
+
+class FramePublisher:
+    """Drives one world with random actions and pushes a frame per control tick.
+
+    Args:
+        env: the world; must support ``render_mode="rgb_array"``.
+        address: ZeroMQ endpoint to bind (ipc or loopback tcp; ``:*`` port allowed).
+        instance: this publisher's index, sent with every item.
+        seed: seeds the world's resets and the random actions.
+        items: frames to produce, or None for an endless stream.
+        episode_steps: control ticks per episode before a reset (episodes also
+            end when the scene terminates them).
+        parent_pid: stop when this process is no longer our parent.
+    """
+
+    def __init__(
+        self,
+        env: BaseEnv,
+        address: str,
+        *,
+        instance: int = 0,
+        seed: int | None = None,
+        items: int | None = None,
+        episode_steps: int = 100,
+        parent_pid: int | None = None,
+    ) -> None:
+        if env.render_mode != "rgb_array":
+            raise ValueError("a frame publisher renders offscreen: create the env with render_mode='rgb_array'")
+        if not is_loopback(address):
+            raise ValueError(f"refusing to bind {address!r}: frame publishers bind ipc:// or loopback only")
+        if episode_steps < 1:
+            raise ValueError(f"episode_steps must be >= 1, got {episode_steps}")
+        self.env = env
+        self.instance = instance
+        self.seed = seed
+        self.items = items
+        self.episode_steps = episode_steps
+        self.parent_pid = parent_pid
+        self._ctx = zmq.Context.instance()
+        self.socket = self._ctx.socket(zmq.PUSH)
+        self.socket.setsockopt(zmq.SNDHWM, SEND_HWM)
+        self.socket.setsockopt(zmq.LINGER, 0)
+        self.socket.bind(address)
+        self.endpoint: str = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
+        self._labels = getattr(env, "stream_labels", None)
+
+    def _parent_gone(self) -> bool:
+        return self.parent_pid is not None and os.getppid() != self.parent_pid
+
+    def _send(self, frame: bytes) -> bool:
+        """Send one item, waiting for room; False if the parent died meanwhile."""
+        while not self.socket.poll(_POLL_MS, zmq.POLLOUT):
+            if self._parent_gone():
+                return False
+        self.socket.send(frame, copy=False)
+        return True
+
+    def run(self) -> None:
+        """Produce ``items`` frames, then idle until stopped (see module docstring)."""
+        env = self.env
+        env.action_space.seed(self.seed)
+        obs, info = env.reset(seed=self.seed)
+        episode, step, index = 0, 0, 0
+        while self.items is None or index < self.items:
+            labels = self._labels(obs, info) if self._labels else default_labels(env, obs, info)
+            item = {
+                "instance": self.instance, "index": index, "episode": episode, "step": step,
+                "frame": env.render(), "labels": labels,
+            }
+            if not self._send(protocol.pack(item)):
+                return
+            index += 1
+            obs, _, terminated, info = env.step(env.action_space.sample())
+            step += 1
+            if terminated or step >= self.episode_steps:
+                obs, info = env.reset()
+                episode, step = episode + 1, 0
+        while not self._parent_gone():
+            time.sleep(_POLL_MS / 1000)
+
+    def close(self) -> None:
+        self.socket.close(linger=0)
+        self.env.close()
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = scene_argument_parser(__doc__.splitlines()[0])
+    parser.add_argument("--scene", required=True, help="path of the scene script whose world to publish")
+    parser.add_argument("--env-class", default=None, help="env class in the scene script (if it has several)")
+    parser.add_argument("--items", type=int, default=None, help="frames to publish (default: endless)")
+    parser.add_argument("--episode-steps", type=int, default=100, help="control ticks per episode")
+    args = parser.parse_args(argv)
+    if args.real_time or args.action_delay or args.worlds != 1:
+        parser.error("a publisher drives one world lock-step: --real-time, --action-delay, --worlds do not apply")
+    env_kwargs: dict[str, Any] = json.loads(args.env_kwargs)
+    env_kwargs["render_mode"] = "rgb_array"
+    env = load_env_class(args.scene, args.env_class)(**env_kwargs)
+
+    def _stop(signum: int, _frame: Any) -> None:
+        raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGTERM, _stop)
+    publisher = FramePublisher(
+        env, args.address, instance=args.instance, seed=args.seed, items=args.items,
+        episode_steps=args.episode_steps, parent_pid=args.parent_pid,
+    )
+    try:
+        if args.ready_file:
+            tmp = f"{args.ready_file}.tmp"
+            with open(tmp, "w") as f:
+                json.dump({"endpoint": publisher.endpoint, "pid": os.getpid(), "instance": args.instance}, f)
+            os.replace(tmp, args.ready_file)
+        publisher.run()
+    finally:
+        publisher.close()
+        if publisher.endpoint.startswith("ipc://"):
+            try:
+                os.unlink(publisher.endpoint[len("ipc://"):])
+            except OSError:
+                pass
+
+
+if __name__ == "__main__":
+    main()

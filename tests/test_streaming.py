@@ -1,0 +1,89 @@
+"""Frames streamed from publisher sim processes into a torch DataLoader."""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+from torch.utils.data import DataLoader  # noqa: E402
+
+from remoteenv import RemoteEnvError  # noqa: E402
+from remoteenv.torch import RemoteIterableDataset, launch_publishers  # noqa: E402
+
+W, H = 48, 32
+
+
+def test_two_publishers_two_workers_every_item_exactly_once():
+    items = 12
+    with launch_publishers("cartpole", num_instances=2, items_per_instance=items, seed=5,
+                           episode_steps=5, width=W, height=H) as pubs:
+        dataset = RemoteIterableDataset.from_publishers(pubs)
+        assert len(dataset) == 2 * items
+        loader = DataLoader(dataset, batch_size=4, num_workers=2)
+        seen = []
+        for batch in loader:
+            assert batch["frame"].dtype == torch.uint8
+            assert tuple(batch["frame"].shape[1:]) == (H, W, 3)
+            assert batch["labels"]["obs"].shape[1:] == (4,)
+            seen += list(zip(batch["instance"].tolist(), batch["index"].tolist(),
+                             batch["episode"].tolist(), batch["step"].tolist()))
+            assert batch["frame"].float().std() > 0  # a rendered picture, not a blank buffer
+    assert len(seen) == 2 * items
+    assert sorted((i, k) for i, k, _, _ in seen) == [(i, k) for i in range(2) for k in range(items)]
+    # Episodes of 5 ticks: item k is tick k % 5 of episode k // 5 (cartpole does not fall in 5 ticks).
+    assert all(step == k % 5 and ep == k // 5 for _, k, ep, step in seen)
+
+
+def test_labels_match_the_frame_state_and_seed_reproduces_the_stream():
+    def stream(seed):
+        with launch_publishers("cartpole", num_instances=1, items_per_instance=6, seed=seed,
+                               width=W, height=H) as pubs:
+            return list(RemoteIterableDataset.from_publishers(pubs))
+
+    a, b, c = stream(1), stream(1), stream(2)
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x["labels"]["obs"], y["labels"]["obs"])
+        np.testing.assert_array_equal(x["frame"], y["frame"])
+    assert not np.array_equal(a[0]["labels"]["obs"], c[0]["labels"]["obs"])
+    for item in a:
+        obs, qpos = item["labels"]["obs"], item["labels"]["qpos"]
+        assert obs[0] == pytest.approx(qpos[0], abs=1e-6) and obs[2] == pytest.approx(qpos[1], abs=1e-6)
+
+
+def test_more_workers_than_publishers_still_reads_each_item_once():
+    with launch_publishers("cartpole", num_instances=1, items_per_instance=5, seed=0,
+                           width=W, height=H) as pubs:
+        loader = DataLoader(RemoteIterableDataset.from_publishers(pubs), batch_size=None, num_workers=2)
+        indices = [item["index"] for item in loader]
+    assert sorted(indices) == list(range(5))
+
+
+def test_vanished_publisher_raises_clear_error():
+    with launch_publishers("cartpole", num_instances=1, seed=0, width=W, height=H) as pubs:
+        dataset = RemoteIterableDataset.from_publishers(pubs)
+        loader = DataLoader(dataset, batch_size=None, num_workers=1)
+        it = iter(loader)
+        first = next(it)
+        assert first["index"] == 0
+        os.kill(pubs.pids[0], signal.SIGKILL)
+        with pytest.raises(Exception) as err:
+            for _ in range(1000):  # endless stream: only the death can end this loop
+                next(it)
+        text = str(err.value)
+        assert "frame publisher 0" in text and "vanished" in text and str(pubs.pids[0]) in text
+        del it
+
+
+def test_in_process_vanished_publisher_raises_remote_env_error():
+    with launch_publishers("reacher", num_instances=1, seed=0, width=W, height=W) as pubs:
+        it = iter(RemoteIterableDataset.from_publishers(pubs))
+        assert next(it)["frame"].shape == (W, W, 3)
+        os.kill(pubs.pids[0], signal.SIGKILL)
+        with pytest.raises(RemoteEnvError, match="vanished") as err:
+            for _ in range(1000):
+                next(it)
+        assert err.value.kind == "died"

@@ -1,0 +1,67 @@
+"""Gymnasium's RecordVideo and RecordEpisodeStatistics on remote envs, and ``demo --record``."""
+
+from __future__ import annotations
+
+import os
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from remoteenv import controllers
+from remoteenv.cli import main as cli_main
+
+pytest.importorskip("moviepy")
+
+
+def _is_mp4(path: str) -> bool:
+    with open(path, "rb") as f:
+        head = f.read(12)
+    return len(head) == 12 and head[4:8] == b"ftyp"
+
+
+def test_record_episode_statistics_counts_remote_rewards():
+    env = gym.wrappers.RecordEpisodeStatistics(gym.make("remoteenv/CartPole-v0"))
+    try:
+        obs, _ = env.reset(seed=3)
+        total, steps, done = 0.0, 0, False
+        while not done:
+            obs, reward, terminated, truncated, info = env.step(controllers.cartpole_discrete(obs))
+            total += reward
+            steps += 1
+            done = terminated or truncated
+        assert truncated and steps == 500  # the controller balances the pole to the time limit
+        assert info["episode"]["r"] == pytest.approx(total)
+        assert info["episode"]["l"] == steps
+    finally:
+        env.close()
+
+
+def test_record_video_writes_one_mp4_per_episode(tmp_path):
+    env = gym.make("remoteenv/Reacher-v0", render_mode="rgb_array", width=64, height=64)
+    folder = tmp_path / "videos"
+    env = gym.wrappers.RecordVideo(env, str(folder), episode_trigger=lambda e: True,
+                                   name_prefix="reach")
+    try:
+        for episode in range(2):
+            env.reset(seed=episode)
+            done = False
+            while not done:
+                _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+                done = terminated or truncated
+        frame = env.render()
+        assert isinstance(frame, np.ndarray) and frame.shape == (64, 64, 3) and frame.dtype == np.uint8
+    finally:
+        env.close()
+    videos = sorted(os.listdir(folder))
+    assert videos == ["reach-episode-0.mp4", "reach-episode-1.mp4"]
+    assert all(_is_mp4(os.path.join(folder, v)) for v in videos)
+
+
+def test_demo_record_writes_mp4(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert cli_main(["demo", "reacher", "--episodes", "1", "--record", str(out)]) == 0
+    videos = os.listdir(out)
+    assert videos == ["reacher-episode-0.mp4"]
+    assert _is_mp4(os.path.join(out, videos[0]))
+    assert "episode 0" in capsys.readouterr().out
