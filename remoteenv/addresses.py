@@ -26,3 +26,15 @@ def tcp_loopback_address() -> str:
 def ipc_path(endpoint: str) -> str | None:
     """The socket file of an ipc endpoint, or None for other transports."""
     return endpoint[len("ipc://"):] if endpoint.startswith("ipc://") else None
+
+
+#: What an env's ``transport=`` may be: the local pipe (the sim still binds
+#: ipc for others to attach), or ZeroMQ over ipc or loopback tcp.
+TRANSPORTS = ("pipe", "ipc", "tcp")
+
+
+def zmq_transport(transport: str) -> str:
+    """The ZeroMQ transport a sim binds for an env's ``transport=`` choice."""
+    if transport not in TRANSPORTS:
+        raise ValueError(f"transport must be one of {TRANSPORTS}, got {transport!r}")
+    return "ipc" if transport == "pipe" else transport

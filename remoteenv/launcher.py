@@ -16,6 +16,7 @@ import json
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -45,6 +46,13 @@ class SimProcess:
     curve_server_key: bytes | None = None
     #: Where this process's stderr starts in the log (a restart appends to it).
     log_offset: int = 0
+    #: The launcher's end of the local pipe (see :mod:`remoteenv.protocol`), or None.
+    pipe: socket.socket | None = None
+
+    def close_pipe(self) -> None:
+        if self.pipe is not None:
+            self.pipe.close()
+            self.pipe = None
 
     @property
     def pid(self) -> int:
@@ -111,6 +119,7 @@ def _stop_all(state: _State, grace: float = 2.0) -> None:
             os.killpg(sim.proc.pid, signal.SIGKILL)
         except (ProcessLookupError, PermissionError):
             pass
+        sim.close_pipe()
     shutil.rmtree(state.workdir, ignore_errors=True)
 
 
@@ -124,7 +133,10 @@ class Launcher:
         worlds_per_instance: MuJoCo worlds hosted by each process.
         env_kwargs: keyword arguments for the scene's env class (JSON-able).
         render_mode: passed to the scene's env.
-        transport: ``"ipc"`` (default) or ``"tcp"`` (127.0.0.1, OS-assigned port).
+        transport: what each sim binds: ``"ipc"`` (default) or ``"tcp"``
+            (127.0.0.1, OS-assigned port).
+        pipe: also give each sim one end of a Unix socketpair (the local pipe,
+            :attr:`SimProcess.pipe`), the fastest way for this process to talk to it.
         startup_timeout: seconds to wait for a sim to report ready.
         real_time, real_time_factor, action_delay: stepping mode of the sims.
         extra_args: more command-line arguments for the scene script.
@@ -154,6 +166,7 @@ class Launcher:
         extra_args: Sequence[str] = (),
         bind_host: str | None = None,
         curve: bool | None = None,
+        pipe: bool = False,
     ) -> None:
         self.scene = os.path.abspath(os.fspath(scene))
         if not os.path.isfile(self.scene):
@@ -168,6 +181,7 @@ class Launcher:
         self.env_kwargs = dict(env_kwargs or {})
         self.render_mode = render_mode
         self.transport = transport
+        self.pipe = pipe
         self.startup_timeout = startup_timeout
         self.real_time = real_time
         self.real_time_factor = real_time_factor
@@ -233,6 +247,7 @@ class Launcher:
             except ProcessLookupError:
                 pass
         old.proc.wait()
+        old.close_pipe()
         new = self._spawn(instance)
         new.restarts = old.restarts + 1
         self._state.sims[instance] = new
@@ -305,13 +320,26 @@ class Launcher:
         env = dict(os.environ)
         if self.render_mode != "human":
             env.setdefault("MUJOCO_GL", "egl")
-        with open(log_path, "ab") as log:
-            log_offset = log.tell()
-            proc = subprocess.Popen(
-                cmd, stdin=subprocess.DEVNULL, stderr=log, env=env, start_new_session=True
-            )
+        ours = theirs = None
+        if self.pipe:
+            ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+            cmd += ["--pipe-fd", str(theirs.fileno())]
+        try:
+            with open(log_path, "ab") as log:
+                log_offset = log.tell()
+                proc = subprocess.Popen(
+                    cmd, stdin=subprocess.DEVNULL, stderr=log, env=env, start_new_session=True,
+                    pass_fds=() if theirs is None else (theirs.fileno(),),
+                )
+        except BaseException:
+            if ours is not None:
+                ours.close()
+            raise
+        finally:
+            if theirs is not None:
+                theirs.close()
         return SimProcess(instance=instance, proc=proc, log_path=log_path, ready_file=ready_file,
-                          curve_server_key=server_key, log_offset=log_offset)
+                          curve_server_key=server_key, log_offset=log_offset, pipe=ours)
 
     def _wait_ready(self, sim: SimProcess) -> None:
         deadline = time.monotonic() + self.startup_timeout

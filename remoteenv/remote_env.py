@@ -15,7 +15,8 @@ import gymnasium as gym
 import numpy as np
 
 from remoteenv import protocol
-from remoteenv.connection import Connection
+from remoteenv.addresses import zmq_transport
+from remoteenv.connection import Connection, connect_sim
 from remoteenv.errors import RemoteEnvError
 from remoteenv.latency import LatencyStats
 from remoteenv.launcher import Launcher, SimProcess
@@ -66,7 +67,10 @@ class OpenAIRemoteEnv(gym.Env):
         real_time_factor: simulated seconds per wall-clock second.
         action_delay: lock-step; an action takes effect this many ticks later.
         seed: seed of the sim's RNG until the first ``reset(seed=...)``.
-        transport: ``"ipc"`` or ``"tcp"`` (loopback, OS-assigned port).
+        transport: how this env talks to its sim: ``"pipe"`` (default: a Unix
+            socketpair the launcher hands the sim; the fastest), or ZeroMQ over
+            ``"ipc"`` or ``"tcp"`` (loopback, OS-assigned port). The sim binds
+            an ipc (or, with ``"tcp"``, tcp) ZeroMQ endpoint in every case.
         timeout: seconds to wait for any one reply before
             :class:`remoteenv.RemoteEnvTimeout` (a dead sim is reported within
             ~0.1 s regardless).
@@ -109,7 +113,7 @@ class OpenAIRemoteEnv(gym.Env):
         real_time_factor: float = 1.0,
         action_delay: int = 0,
         seed: int | None = None,
-        transport: str = "ipc",
+        transport: str = "pipe",
         timeout: float | None = 60.0,
         startup_timeout: float = 60.0,
         call_timeouts: Mapping[str, float | None] | None = None,
@@ -145,7 +149,8 @@ class OpenAIRemoteEnv(gym.Env):
             seed=seed,
             env_kwargs=scene_kwargs,
             render_mode=render_mode,
-            transport=transport,
+            transport=zmq_transport(transport),
+            pipe=transport == "pipe",
             startup_timeout=startup_timeout,
             real_time=real_time,
             real_time_factor=real_time_factor,
@@ -178,9 +183,8 @@ class OpenAIRemoteEnv(gym.Env):
     def _connect(self, sim: SimProcess) -> None:
         assert self._launcher is not None
         client = self._launcher.curve_client_keypair
-        self._conn = Connection(
-            sim.endpoint or "", instance=sim.instance, timeout=self.timeout, death_check=sim.death,
-            curve_server_key=sim.curve_server_key,
+        self._conn = connect_sim(
+            sim, timeout=self.timeout,
             curve_client_keypair=None if client is None else (client.public, client.secret),
         )
         self._handshake(self.call_timeouts.get("handshake", self.startup_timeout))

@@ -23,7 +23,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
 
 from remoteenv import protocol
-from remoteenv.connection import LIVENESS_CHECK_S, Connection
+from remoteenv.addresses import zmq_transport
+from remoteenv.connection import LIVENESS_CHECK_S, Connection, connect_sim
 from remoteenv.errors import RemoteEnvError, RemoteEnvTimeout
 from remoteenv.launcher import Launcher
 from remoteenv.remote_env import check_action
@@ -104,7 +105,7 @@ class RemoteVectorEnv(VectorEnv):
         real_time_factor: float = 1.0,
         action_delay: int = 0,
         seed: int | None = None,
-        transport: str = "ipc",
+        transport: str = "pipe",
         timeout: float | None = 60.0,
         startup_timeout: float = 60.0,
         bind_host: str | None = None,
@@ -166,7 +167,8 @@ class RemoteVectorEnv(VectorEnv):
             worlds_per_instance=k,
             env_kwargs=scene_kwargs,
             render_mode=render_mode,
-            transport=transport,
+            transport=zmq_transport(transport),
+            pipe=transport == "pipe",
             startup_timeout=startup_timeout,
             real_time=real_time,
             real_time_factor=real_time_factor,
@@ -177,9 +179,8 @@ class RemoteVectorEnv(VectorEnv):
         try:
             client = self._launcher.curve_client_keypair
             for sim in self._launcher.sims:
-                self._conns.append(Connection(
-                    sim.endpoint or "", instance=sim.instance, timeout=timeout,
-                    death_check=sim.death, curve_server_key=sim.curve_server_key,
+                self._conns.append(connect_sim(
+                    sim, timeout=timeout,
                     curve_client_keypair=None if client is None else (client.public, client.secret),
                 ))
             self._handshake(startup_timeout)
@@ -384,7 +385,7 @@ class RemoteVectorEnv(VectorEnv):
         for conn in [] if attached else conns:
             try:
                 seqs.append((conn, conn.send("close")))
-            except zmq.ZMQError:
+            except (zmq.ZMQError, RemoteEnvError):
                 pass
         for conn, seq in seqs:
             try:
@@ -457,8 +458,8 @@ class RemoteVectorEnv(VectorEnv):
         return replies
 
     def _poller_for(self, conns: list[Connection]) -> zmq.Poller:
-        socks = [c.socket for c in conns]
-        if self._poller is None or any(a is not b for a, b in zip(socks, self._poll_socks)):
+        socks = [c.pollable for c in conns]
+        if self._poller is None or socks != self._poll_socks:
             poller = zmq.Poller()
             for sock in socks:
                 poller.register(sock, zmq.POLLIN)
@@ -533,9 +534,8 @@ class RemoteVectorEnv(VectorEnv):
             try:
                 sim = self._launcher.restart(p)
                 client = self._launcher.curve_client_keypair
-                self._conns[p] = Connection(
-                    sim.endpoint or "", instance=sim.instance, timeout=self.timeout,
-                    death_check=sim.death, curve_server_key=sim.curve_server_key,
+                self._conns[p] = connect_sim(
+                    sim, timeout=self.timeout,
                     curve_client_keypair=None if client is None else (client.public, client.secret),
                 )
                 self._conns[p].request("handshake", timeout=self.startup_timeout,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import struct
+
 import msgpack
 import numpy as np
 import pytest
@@ -69,8 +71,17 @@ def test_unsendable_values_are_refused():
         protocol.pack({"x": np.array([object()], dtype=object)})
 
 
-def _ext(payload) -> bytes:
-    return msgpack.packb(msgpack.ExtType(1, msgpack.packb(payload, use_bin_type=True)))
+def _ext(dtype: str, shape, data: bytes, ndim: int | None = None) -> bytes:
+    """An array extension frame built by hand (see the spec in protocol.py)."""
+    name = dtype.encode()
+    ndim = len(shape) if ndim is None else ndim
+    head = bytes([len(name)]) + name + bytes([ndim]) + struct.pack(f"<{len(shape)}Q", *shape)
+    return msgpack.packb(msgpack.ExtType(1, head + data))
+
+
+def test_hand_built_array_frame_decodes():
+    out = protocol.unpack(_ext("<f8", [2], np.array([1.5, -2.0]).tobytes()))
+    np.testing.assert_array_equal(out, [1.5, -2.0])
 
 
 @pytest.mark.parametrize(
@@ -79,13 +90,14 @@ def _ext(payload) -> bytes:
         b"\xc1",  # never-used msgpack byte
         msgpack.packb([1, 2, 3])[:-1],  # truncated
         msgpack.packb(msgpack.ExtType(7, b"x")),  # unknown extension
-        _ext(["|O", [1], b"\x00" * 8]),  # object dtype
-        _ext(["<f8", [2], b"\x00" * 8]),  # size mismatch
-        _ext(["<f8", [-1], b""]),  # negative dim
-        _ext(["<f8", [2**40, 2**40], b""]),  # huge declared size
-        _ext(["<f8", "4", b"\x00" * 32]),  # shape not a list
-        _ext(["<f8", [1], "text"]),  # data not bin
-        _ext("not a list"),
+        _ext("|O", [1], b"\x00" * 8),  # object dtype
+        _ext(">f8", [1], b"\x00" * 8),  # big-endian is not a wire dtype
+        _ext("<f8", [2], b"\x00" * 8),  # size mismatch
+        _ext("<f8", [2**40, 2**40], b""),  # huge declared size
+        _ext("<f8", [1], b"\x00" * 8, ndim=40),  # too many dimensions
+        _ext("<f8", [4], b"", ndim=4)[:-3],  # truncated shape
+        msgpack.packb(msgpack.ExtType(1, b"")),  # empty payload
+        msgpack.packb(msgpack.ExtType(1, b"\xff\xfe")),  # dtype length beyond the payload
     ],
 )
 def test_malformed_frames_raise_protocol_error(frame):

@@ -113,7 +113,9 @@ def test_pickles_and_foreign_extensions_are_never_loaded(tmp_path):
     smuggled = msgpack.packb({"seq": 1, "cmd": "step", "action": msgpack.ExtType(2, pickle.dumps(Exploit()))})
     with pytest.raises(protocol.ProtocolError, match="extension type 2"):
         protocol.unpack(smuggled)
-    obj_array = msgpack.packb(["|O", [1], pickle.dumps(Exploit())], use_bin_type=True)
+    payload = pickle.dumps(Exploit())
+    # An array header (see protocol.py) claiming object dtype, with a pickle as its data.
+    obj_array = bytes([2]) + b"|O" + bytes([1]) + len(payload).to_bytes(8, "little") + payload
     with pytest.raises(protocol.ProtocolError, match="not allowed"):
         protocol.unpack(msgpack.packb(msgpack.ExtType(1, obj_array)))
     assert not marker.exists()

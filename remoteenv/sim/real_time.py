@@ -68,15 +68,16 @@ _PARENT_CHECK_S = 0.25
 #: Wall seconds before a deadline at which waiting turns from sleeping to spinning.
 _SPIN_S = 0.0003
 
-#: A reply waiting to be sent: (ROUTER routing id, reply map with "seq").
-Outgoing = tuple[bytes, dict[str, Any]]
+#: A reply waiting to be sent: (whom to answer, reply map with "seq"); whom to
+#: answer is opaque to the stepper (the server loop's channel and reply_to).
+Outgoing = tuple[Any, dict[str, Any]]
 
 _IDLE, _READY, _RUNNING, _FROZEN, _FAILED = "idle", "ready", "running", "frozen", "failed"
 
 
 @dataclass
 class _PendingStep:
-    identity: bytes
+    identity: Any
     seq: int
     action: Any
     arrived: float  # time.monotonic() when the request was read
@@ -184,7 +185,7 @@ class RealTimeStepper:
     def step(self, action: Any) -> dict[str, Any]:
         raise RuntimeError("real-time steps are answered by serve_real_time, not by a direct call")
 
-    def submit(self, identity: bytes, seq: int, action: Any, now: float) -> list[Outgoing]:
+    def submit(self, identity: Any, seq: int, action: Any, now: float) -> list[Outgoing]:
         """A validated ``step`` request arrived at ``now``. Returns replies due at once."""
         if self.state == _FAILED:
             return [(identity, protocol.error_reply(seq, "scene", self._failure))]
@@ -299,14 +300,15 @@ def serve_real_time(server: Any) -> None:
     for s in steppers:
         if not isinstance(s, RealTimeStepper):
             raise TypeError(f"serve_real_time needs RealTimeSteppers, got {type(s).__name__}")
-    sock: zmq.Socket = server.socket
-    fd = sock.getsockopt(zmq.FD)
+    channels = list(server.channels)
+    fds = [c.fd for c in channels]
 
     def send(out: list[Outgoing]) -> None:
-        for identity, reply in out:
-            sock.send_multipart([identity, server.pack_reply(reply)])
+        # An Outgoing's "identity" here is (channel, the channel's reply_to).
+        for (channel, reply_to), reply in out:
+            channel.send(reply_to, server.pack_reply(reply))
 
-    def handle_step(identity: bytes, msg: dict[str, Any], now: float) -> list[Outgoing]:
+    def handle_step(identity: Any, msg: dict[str, Any], now: float) -> list[Outgoing]:
         seq = msg["seq"]
         world = msg.get("world", 0)
         if not isinstance(world, int) or isinstance(world, bool) or not 0 <= world < len(steppers):
@@ -331,12 +333,18 @@ def serve_real_time(server: Any) -> None:
 
     def drain() -> None:
         """Read and handle every request that has arrived (non-blocking)."""
-        while server._running and sock.getsockopt(zmq.EVENTS) & zmq.POLLIN:
-            frames = sock.recv_multipart(zmq.NOBLOCK)
+        for channel in channels:
+            if server._running:
+                drain_channel(channel)
+            if channel.closed:  # the local pipe ended: the agent is gone
+                server.pipe_closed()
+
+    def drain_channel(channel: Any) -> None:
+        for reply_to, frame in channel.receive_nowait():
+            if not server._running:
+                return
             now = time.monotonic()
-            if len(frames) != 2:
-                continue  # not a DEALER-framed request: drop
-            identity, frame = frames
+            identity = (channel, reply_to)
             try:
                 msg = protocol.decode_request(frame)
             except protocol.ProtocolError as exc:
@@ -375,7 +383,7 @@ def serve_real_time(server: Any) -> None:
             if timeout > _SPIN_S:
                 # Wake a little early: the kernel's wake-up latency is then
                 # absorbed by the short spin below instead of making us late.
-                select.select([fd], [], [], timeout - _SPIN_S)
+                select.select(fds, [], [], timeout - _SPIN_S)
             # else: spin (the loop re-checks requests and the clock)
         now = time.monotonic()
         if now - last_check > _PARENT_CHECK_S:

@@ -37,6 +37,8 @@ def scene_argument_parser(description: str | None = None) -> argparse.ArgumentPa
     p.add_argument("--curve-client-keys-file", default=None,
                    help="file of Z85 CURVE public keys (one a line) of the clients allowed to "
                    "connect; without it any client knowing the server's public key may")
+    p.add_argument("--pipe-fd", type=int, default=None,
+                   help="inherited file descriptor of the launcher's socketpair (the local pipe)")
     p.add_argument("--private-dir", default=None,
                    help="the launcher's private dir: if the agent dies, remove this instance's "
                    "sim-<instance>.* files from it, and the dir once empty")
@@ -76,5 +78,6 @@ def run_scene(
         curve_secret_key=secret,
         curve_client_keys=client_keys,
         private_dir=args.private_dir,
+        pipe_fd=args.pipe_fd,
     )
     server.serve()

@@ -20,10 +20,14 @@ from gymnasium import spaces
 from remoteenv import protocol
 from remoteenv.addresses import is_loopback
 from remoteenv.sim.base_env import BaseEnv
+from remoteenv.hot_wait import HotWait
+from remoteenv.sim.channels import PipeChannel, ZmqChannel
 from remoteenv.sim.orphan import ParentWatch, parent_alive, remove_private_files
 from remoteenv.sim.stepping import LockStepper, make_stepper
 
 _PARENT_CHECK_S = 0.25
+#: Longest busy-wait (seconds) for the agent's next request on the local pipe.
+SIM_SPIN_S = 100e-6
 
 
 class RequestError(Exception):
@@ -56,6 +60,9 @@ class RemoteControlledAgent:
             client that knows the server's public key.
         private_dir: the launcher's private dir; if the agent dies, this sim
             removes its ``sim-<instance>.*`` files from it (and the dir, last).
+        pipe_fd: inherited end of the launcher's socketpair, served besides
+            the socket (see "The local pipe" in :mod:`remoteenv.protocol`);
+            its end of file stops the server.
     """
 
     def __init__(
@@ -73,6 +80,7 @@ class RemoteControlledAgent:
         curve_secret_key: bytes | None = None,
         curve_client_keys: list[bytes] | None = None,
         private_dir: str | None = None,
+        pipe_fd: int | None = None,
     ) -> None:
         if not envs:
             raise ValueError("RemoteControlledAgent needs at least one env")
@@ -106,6 +114,9 @@ class RemoteControlledAgent:
             raise ValueError(f"binding {address!r} beyond loopback requires CURVE keys")
         self.socket.bind(address)
         self.endpoint: str = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
+        self.channels: list[ZmqChannel | PipeChannel] = [ZmqChannel(self.socket)]
+        if pipe_fd is not None:
+            self.channels.append(PipeChannel(pipe_fd))
         self._handlers: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
             "handshake": self._handshake,
             "reset": self._reset,
@@ -146,29 +157,54 @@ class RemoteControlledAgent:
                 self._serve_lockstep()
         finally:
             self.shutdown()
-            if self.private_dir and self.parent_pid is not None and not parent_alive(self.parent_pid):
+            gone = self.orphaned or (self.parent_pid is not None and not parent_alive(self.parent_pid))
+            if self.private_dir and gone:
                 remove_private_files(self.private_dir, self.instance)
             if watch is not None:
                 watch.finished()
 
     def _serve_lockstep(self) -> None:
-        sock = self.socket
         poller = zmq.Poller()
-        poller.register(sock, zmq.POLLIN)
+        by_pollable = {}
+        for channel in self.channels:
+            poller.register(channel.pollable, zmq.POLLIN)
+            by_pollable[channel.pollable] = channel
+        pipe = next((c for c in self.channels if isinstance(c, PipeChannel)), None)
+        hot = HotWait(SIM_SPIN_S if pipe is not None else 0.0)
         last_check = time.monotonic()
         while self._running:
-            if not poller.poll(_PARENT_CHECK_S * 1000):
-                self.check_parent()
-                last_check = time.monotonic()
-                continue
-            frames = sock.recv_multipart(copy=True)
-            if len(frames) != 2:
-                continue  # not a DEALER-framed request: drop
-            sock.send_multipart([frames[0], self.pack_reply(self.handle_frame(frames[1]))])
+            if pipe is not None and hot.worth_it():
+                # The agent has been sending its next request quickly: wait hot.
+                frames = pipe.receive_spinning(hot.window_s)
+                if frames:
+                    hot.waited(time.perf_counter() - hot.since)
+                    self._answer(pipe, frames)
+                    hot.since = time.perf_counter()
+                    continue
+            events = poller.poll(_PARENT_CHECK_S * 1000)
+            for pollable, _ in events:
+                channel = by_pollable[pollable]
+                frames = channel.receive_nowait()
+                if channel is pipe and frames:
+                    hot.waited(time.perf_counter() - hot.since)
+                self._answer(channel, frames)
+                if channel is pipe:
+                    hot.since = time.perf_counter()
+                if channel.closed:
+                    self.pipe_closed()
             now = time.monotonic()
-            if now - last_check > _PARENT_CHECK_S:
+            if not events or now - last_check > _PARENT_CHECK_S:
                 self.check_parent()
                 last_check = now
+
+    def _answer(self, channel: ZmqChannel | PipeChannel, frames: list[tuple[Any, bytes]]) -> None:
+        for reply_to, frame in frames:
+            channel.send(reply_to, self.pack_reply(self.handle_frame(frame)))
+
+    def pipe_closed(self) -> None:
+        """The local pipe ended: the agent died or closed it. Stop, and leave no files."""
+        self.orphaned = True
+        self._running = False
 
     def check_parent(self) -> None:
         """Stop serving if the agent that launched us is gone."""
@@ -225,6 +261,9 @@ class RemoteControlledAgent:
             except Exception:
                 traceback.print_exc()
         self.socket.close(linger=0)
+        for channel in self.channels:
+            if isinstance(channel, PipeChannel):
+                channel.close()
         if self._authenticator is not None:
             self._authenticator.stop()
         if self.endpoint.startswith("ipc://"):

@@ -1,0 +1,99 @@
+"""Where a sim process's requests come from: its ZeroMQ ROUTER and its local pipe.
+
+Runs in the sim process. Both channels carry the frames of
+:mod:`remoteenv.protocol`; the serving loops treat them alike through
+``receive_nowait`` (the frames that have arrived, each with whom to answer)
+and ``send``.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from typing import Any
+
+import zmq
+
+from remoteenv import protocol
+
+_PIPE_READ_BYTES = 1 << 20
+
+
+class ZmqChannel:
+    """The bound ROUTER socket; ``reply_to`` is the peer's routing id."""
+
+    def __init__(self, sock: zmq.Socket) -> None:
+        self.socket = sock
+        self.closed = False
+        #: What to register in a ``zmq.Poller``.
+        self.pollable: Any = sock
+        #: A file descriptor that becomes readable when requests may be waiting
+        #: (edge-triggered: always drain with :meth:`receive_nowait`).
+        self.fd: int = sock.getsockopt(zmq.FD)
+
+    def receive_nowait(self) -> list[tuple[Any, bytes]]:
+        out = []
+        sock = self.socket
+        while sock.getsockopt(zmq.EVENTS) & zmq.POLLIN:
+            frames = sock.recv_multipart(zmq.NOBLOCK)
+            if len(frames) == 2:  # anything else is not a DEALER-framed request: drop
+                out.append((frames[0], frames[1]))
+        return out
+
+    def send(self, reply_to: Any, payload: bytes) -> None:
+        self.socket.send_multipart([reply_to, payload])
+
+
+class PipeChannel:
+    """The inherited end of the launcher's socketpair; one peer, no routing id.
+
+    ``closed`` becomes True at end of file (the agent closed its end or died)
+    or when the stream breaks the framing rules.
+    """
+
+    def __init__(self, fd: int) -> None:
+        self.sock = socket.socket(fileno=fd)
+        self.sock.setblocking(True)
+        self._decoder = protocol.StreamDecoder()
+        self.closed = False
+        self.pollable: Any = self.sock.fileno()
+        self.fd: int = self.sock.fileno()
+
+    def receive_nowait(self) -> list[tuple[Any, bytes]]:
+        if self.closed:
+            return []
+        try:
+            data = self.sock.recv(_PIPE_READ_BYTES, socket.MSG_DONTWAIT)
+        except (BlockingIOError, InterruptedError):
+            return []
+        except OSError:
+            data = b""
+        if not data:
+            self.closed = True
+            return []
+        try:
+            return [(None, frame) for frame in self._decoder.feed(data)]
+        except protocol.ProtocolError:
+            self.closed = True
+            return []
+
+    def receive_spinning(self, max_s: float) -> list[tuple[Any, bytes]]:
+        """Like :meth:`receive_nowait`, but busy-wait up to ``max_s`` seconds for a frame.
+
+        Waiting hot avoids the sleep/wake-up of a blocking wait, which on a
+        virtual machine costs tens of microseconds per message.
+        """
+        end = time.perf_counter() + max_s
+        while True:
+            frames = self.receive_nowait()
+            if frames or self.closed or time.perf_counter() > end:
+                return frames
+
+    def send(self, reply_to: Any, payload: bytes) -> None:
+        try:
+            self.sock.sendall(protocol.stream_frame(payload))
+        except OSError:  # the agent is gone; the loop notices the closed pipe
+            self.closed = True
+
+    def close(self) -> None:
+        self.sock.close()
