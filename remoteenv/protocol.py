@@ -43,10 +43,12 @@ version mismatch), ``"invalid_action"``, ``"scene"`` (the env code raised),
 Commands (version 1)
 --------------------
 ``handshake`` ``{"protocol": int}`` -> ``{"protocol", "env_id", "instance",
-"num_worlds", "observation_space", "action_space", "metadata",
-"reward_range", "options"}``. The server refuses a protocol version it does not
-speak, naming both versions. ``metadata`` holds ``render_modes``,
-``render_fps`` and ``dt`` (seconds of simulated time per env step).
+"pid", "num_worlds", "observation_space", "action_space", "metadata",
+"stepping"}``. The server refuses a protocol version it does not speak,
+naming both versions. ``metadata`` holds ``render_modes``, ``render_fps``,
+``dt`` (seconds of simulated time per env step), ``timestep`` (seconds per
+physics substep) and ``frame_skip``; ``stepping`` holds ``mode``
+(``"lock_step"`` or ``"real_time"``) and that mode's parameters.
 
 ``reset`` ``{"world": int, "seed": int | nil, "options": map | nil}`` ->
 ``{"obs", "info"}``.
@@ -70,7 +72,7 @@ control tick (see :mod:`remoteenv.sim.real_time`).
 resets the listed worlds in order, world ``worlds[j]`` with ``seeds[j]``.
 
 ``step_batch`` ``{"ops": [int, ...], "actions"}`` -> ``{"obs", "reward":
-float64 array, "terminated": bool array, "truncated": bool array, "info":
+[float, ...], "terminated": [bool, ...], "truncated": [bool, ...], "info":
 infos, "final": [[world, obs, info], ...]}`` (lock-step sims only): one
 request for worlds ``0 .. n-1`` with ``n = len(ops)``; ``actions`` holds their
 ``n`` actions, stacked in one array (Box: shape ``(n, *shape)``; Discrete:
@@ -84,8 +86,8 @@ and its ``obs``/``info`` entries are the reset's.
 In both, ``obs`` is one array of shape ``(n, *obs_shape)`` when every world's
 obs is an array of one shape and dtype, else a list of ``n`` obs. ``infos`` is
 ``{"columns": {key: [values, present]}}`` when every info value is a bool,
-int or float with one type per key (``values``: array of ``n``, bool, int64
-or float64, 0 where absent; ``present``: bool array of ``n``), else
+int or float with one type per key (``values``: list of ``n`` such values, 0
+where absent; ``present``: list of ``n`` bools), else
 ``{"maps": [map, ...]}``, one info map per world.
 
 ``world`` defaults to 0 and addresses one of the ``num_worlds`` MuJoCo worlds

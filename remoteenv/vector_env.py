@@ -33,18 +33,20 @@ from remoteenv.sim.batch import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RE
 
 
 def default_envs_per_process(num_envs: int) -> int:
-    """K when ``envs_per_process`` is not given: ``ceil(N / P)`` with ``P = cpu_count - 1``
-    sim processes (at least 1), leaving one core to the agent.
+    """K when ``envs_per_process`` is not given: at least 8 worlds per process,
+    and no more processes than CPUs: ``max(8, ceil(N / cpu_count))``, capped at N.
 
-    On the 2-core reference machine that is one process for all N worlds:
-    measured side by side (Reacher, N = 4, 8, 16; K = 1, 2, N/4, N/2, N) one
-    process stepped fastest or tied with N/2, and K = 1 slowest by 3-5x,
-    because every extra process adds a round trip and a zmq I/O thread that
-    compete with the physics for the same two cores. More cores give more
-    processes, so the physics of large N runs in parallel.
+    Every extra process costs a round trip per vector step (on a virtual
+    machine, mostly the wake-up of a sleeping process, 20-40 us each) and its
+    share of the agent's decoding; a second process pays off once it takes
+    enough physics off the first. Measured side by side on the 2-core
+    reference machine (Reacher, lock-step, one run): N = 4 and 8 stepped
+    fastest in one process (K = N beat K = N/2 by 1.3x and 1.1x); N = 16
+    fastest in two (K = 8 beat K = 16 by 1.15x); K = 1 was slowest at every
+    N > 1.
     """
-    processes = max(1, (os.cpu_count() or 2) - 1)
-    return -(-num_envs // processes)
+    per_cpu = -(-num_envs // max(1, os.cpu_count() or 1))
+    return min(num_envs, max(8, per_cpu))
 
 
 class RemoteVectorEnv(VectorEnv):
@@ -59,9 +61,9 @@ class RemoteVectorEnv(VectorEnv):
         num_envs: N, the number of worlds.
         envs_per_process: K, worlds hosted (and stepped from one request) by
             each sim process; ``ceil(N / K)`` processes are launched. Default
-            ``ceil(N / (cpu_count - 1))``; on a 2-core machine one process
-            hosts all N worlds, the fastest split measured there (see
-            :func:`default_envs_per_process`).
+            ``max(8, ceil(N / cpu_count))`` capped at N: on a 2-core machine
+            one process up to N = 8, then two up to N = 16; the fastest splits measured
+            there (see :func:`default_envs_per_process`).
             Must be 1 with ``real_time``.
         autoreset_mode: Gymnasium's :class:`~gymnasium.vector.AutoresetMode`
             (or its string): ``NEXT_STEP`` (default; the step after an episode
@@ -340,7 +342,8 @@ class RemoteVectorEnv(VectorEnv):
                     "them with reset(options={'reset_mask': mask}) before stepping again"
                 )
             ops = np.full(n, OP_STEP)
-        if self.real_time:
+        if self.real_time or self.envs_per_process == 1:
+            # One world per process: plain requests carry less than step_batch.
             results = self._step_single_worlds(ops, acts)
         else:
             ops_list = ops.tolist()
@@ -632,6 +635,7 @@ class RemoteVectorEnv(VectorEnv):
             return
         n = self.num_envs
         for key, (values, present) in columns.items():
+            values, present = np.asarray(values), np.asarray(present, dtype=np.bool_)
             arr = infos.get(key)
             if arr is None:
                 arr = infos[key] = np.zeros(n, dtype=values.dtype)

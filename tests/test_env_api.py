@@ -104,6 +104,16 @@ def test_same_seed_same_trajectory_in_separate_processes(make, env_id):
     assert not np.array_equal(t1[0], t3[0])
 
 
+def test_pipe_and_zeromq_transports_give_the_same_trajectory(make):
+    pipe = make("remoteenv/Reacher-v0", transport="pipe")
+    zmq_env = make("remoteenv/Reacher-v0", transport="ipc")
+    assert type(pipe.unwrapped._conn).__name__ == "PipeConnection"
+    assert type(zmq_env.unwrapped._conn).__name__ == "Connection"
+    pipe.action_space.seed(3)
+    actions = [pipe.action_space.sample() for _ in range(60)]
+    _assert_same(_rollout(pipe, 9, actions), _rollout(zmq_env, 9, actions))
+
+
 def test_reset_seed_semantics(make):
     env = make("remoteenv/Reacher-v0")
     a, _ = env.reset(seed=7)
@@ -213,7 +223,7 @@ def test_step_before_reset_is_a_state_error(make):
     assert info.value.kind == "state"
 
 
-@pytest.mark.parametrize("transport", ["ipc", "tcp"])
+@pytest.mark.parametrize("transport", ["pipe", "ipc", "tcp"])
 def test_close_leaves_no_process_and_no_socket_file(make, transport, pid_alive, wait_gone):
     env = gym.make("remoteenv/CartPole-v0", transport=transport)
     env.reset(seed=0)
@@ -221,8 +231,8 @@ def test_close_leaves_no_process_and_no_socket_file(make, transport, pid_alive, 
     pid = env.unwrapped.pid
     workdir = env.unwrapped.launcher.workdir
     endpoint = env.unwrapped.launcher.endpoints[0]
-    assert endpoint.startswith("ipc://" if transport == "ipc" else "tcp://127.0.0.1:")
-    if transport == "ipc":
+    assert endpoint.startswith("tcp://127.0.0.1:" if transport == "tcp" else "ipc://")
+    if transport != "tcp":
         assert os.path.exists(endpoint[len("ipc://"):])
     assert pid_alive(pid)
     env.close()

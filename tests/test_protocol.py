@@ -105,6 +105,22 @@ def test_malformed_frames_raise_protocol_error(frame):
         protocol.unpack(frame)
 
 
+def test_stream_framing_splits_frames_at_any_chunking():
+    frames = [protocol.pack({"seq": i, "a": np.arange(i)}) for i in range(5)] + [b""]
+    stream = b"".join(protocol.stream_frame(f) for f in frames)
+    for chunk in (1, 3, 7, len(stream)):
+        decoder = protocol.StreamDecoder()
+        out = []
+        for i in range(0, len(stream), chunk):
+            out += decoder.feed(stream[i:i + chunk])
+        assert out == frames
+
+
+def test_stream_framing_refuses_oversized_frames():
+    with pytest.raises(protocol.ProtocolError):
+        protocol.StreamDecoder().feed((protocol.MAX_MESSAGE_BYTES + 1).to_bytes(4, "little"))
+
+
 def test_decode_request_checks_seq_and_cmd():
     assert protocol.decode_request(protocol.pack({"seq": 1, "cmd": "reset"}))["cmd"] == "reset"
     for bad in ({"cmd": "reset"}, {"seq": "1", "cmd": "reset"}, {"seq": True, "cmd": "x"},

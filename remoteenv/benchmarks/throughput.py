@@ -42,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--duration", type=float, default=1.0,
                    help="seconds each contender is timed (default 1.0; the default run takes ~3 min)")
     g.add_argument("--envs-per-process", type=int, default=None,
-                   help="K of the batched RemoteVectorEnv rows (default: RemoteVectorEnv's own, ceil(N / (cpus - 1)))")
+                   help="K of the batched RemoteVectorEnv rows (default: RemoteVectorEnv's own, max(8, ceil(N / cpus)) capped at N)")
     g.add_argument("--json", default=None, metavar="PATH",
                    help="also write the results as JSON to PATH ('-' for stdout, replacing the table)")
 

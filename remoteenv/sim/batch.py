@@ -42,7 +42,7 @@ def columnar_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
     key has one type across the worlds: ``{"columns": {key: [values, mask]}}``
     with ``values`` an array of ``n`` (bool, int64 or float64; zero where the
     world lacks the key) and ``mask`` a bool array saying which worlds have
-    it. Otherwise ``{"maps": infos}``. Columns cost one array per key instead
+    it, both sent as msgpack lists. Otherwise ``{"maps": infos}``. Columns cost one array per key instead
     of ``n`` maps to encode and to merge on the agent side.
     """
     n = len(infos)
@@ -68,7 +68,7 @@ def columnar_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
             if key in info:
                 values[w] = info[key]
                 mask[w] = True
-        columns[key] = [values, mask]
+        columns[key] = [values.tolist(), mask.tolist()]
     return {"columns": columns}
 
 
@@ -170,11 +170,12 @@ class BatchCommands:
                 obs[w], infos[w] = stepper.reset(seed=None, options=None)
             else:
                 obs[w], infos[w] = r["obs"], r["info"]
+        # Short vectors go as msgpack lists: cheaper than arrays to encode and decode.
         return {
             "obs": _stack(obs),
-            "reward": reward,
-            "terminated": terminated,
-            "truncated": truncated,
+            "reward": reward.tolist(),
+            "terminated": terminated.tolist(),
+            "truncated": truncated.tolist(),
             "info": columnar_infos(infos),
             "final": final,
         }

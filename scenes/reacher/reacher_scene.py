@@ -11,6 +11,7 @@ Run by the launcher as ``python reacher_scene.py --address ... --seed ...``.
 
 from __future__ import annotations
 
+import math
 import os
 from typing import Any
 
@@ -68,18 +69,24 @@ class ReacherEnv(BaseEnv):
     def post_step(self, action: np.ndarray | None) -> tuple[np.ndarray, float, bool, dict[str, Any]]:
         # Like Gymnasium, distance uses body positions as left by mj_step.
         vec = self.data.xpos[self._fingertip] - self.data.xpos[self._target]
-        reward_dist = -float(np.linalg.norm(vec)) * self.reward_dist_weight
+        reward_dist = -math.sqrt(vec[0] * vec[0] + vec[1] * vec[1] + vec[2] * vec[2]) * self.reward_dist_weight
+        # float32 sum of squares, as Gymnasium computes it for a float32 action.
         ctrl = 0.0 if action is None else float(np.square(action).sum())
         reward_ctrl = -ctrl * self.reward_control_weight
         info = {"reward_dist": reward_dist, "reward_ctrl": reward_ctrl}
-        return self._obs(), reward_dist + reward_ctrl, False, info
+        return self._obs(vec), reward_dist + reward_ctrl, False, info
 
-    def _obs(self) -> np.ndarray:
+    def _obs(self, tip_minus_target: np.ndarray | None = None) -> np.ndarray:
         qpos, qvel = self.data.qpos, self.data.qvel
-        tip_minus_target = self.data.xpos[self._fingertip] - self.data.xpos[self._target]
-        return np.concatenate(
-            [np.cos(qpos[:2]), np.sin(qpos[:2]), qpos[2:], qvel[:2], tip_minus_target[:2]]
-        )
+        if tip_minus_target is None:
+            tip_minus_target = self.data.xpos[self._fingertip] - self.data.xpos[self._target]
+        obs = np.empty(10)
+        np.cos(qpos[:2], out=obs[0:2])
+        np.sin(qpos[:2], out=obs[2:4])
+        obs[4:6] = qpos[2:]
+        obs[6:8] = qvel[:2]
+        obs[8:10] = tip_minus_target[:2]
+        return obs
 
 
 def main(argv: list[str] | None = None) -> None:
