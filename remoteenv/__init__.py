@@ -12,6 +12,9 @@ from remoteenv.protocol import PROTOCOL_VERSION
 from remoteenv.remote_env import OpenAIRemoteEnv
 from remoteenv.vector_env import RemoteVectorEnv
 
+from remoteenv._source_scenes import ensure_scenes_package
+
+ensure_scenes_package()
 import remoteenv.scenes.cartpole  # noqa: E402,F401  (registers the id)
 import remoteenv.scenes.reacher  # noqa: E402,F401
 

@@ -153,6 +153,48 @@ def zmq_floor(duration: float) -> float:
         os.rmdir(workdir)
 
 
+def _pipe_echo_server(fd: int) -> None:
+    """Child process of :func:`pipe_floor`: the same echo over a socketpair, blocking reads."""
+    import socket
+
+    sock = socket.socket(fileno=fd)
+    reply_body = {"obs": b"\0" * 80, "reward": 0.5, "terminated": False, "truncated": False,
+                  "info": {"reward_dist": 0.1, "reward_ctrl": 0.2}}
+    while True:
+        frame = sock.recv(65536)
+        if not frame:
+            break
+        msg = msgpack.unpackb(frame)
+        sock.sendall(msgpack.packb({"seq": msg["seq"], "ok": True, **reply_body}))
+    sock.close()
+
+
+def pipe_floor(duration: float) -> float:
+    """Round trips per second of a bare Unix socketpair + msgpack with Reacher-sized
+    messages and plain blocking reads (no busy-waiting): the floor of the local pipe."""
+    import socket
+
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+    proc = subprocess.Popen(
+        [sys.executable, "-c",
+         f"from remoteenv.benchmarks.throughput import _pipe_echo_server; _pipe_echo_server({theirs.fileno()})"],
+        pass_fds=(theirs.fileno(),))
+    theirs.close()
+    try:
+        def step(i: int) -> None:
+            ours.sendall(msgpack.packb({"seq": i, "cmd": "step", "action": b"\0" * 8}))
+            msgpack.unpackb(ours.recv(65536))
+
+        return _timed(step, duration)
+    finally:
+        ours.close()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
 # ---------------------------------------------------------------- run
 
 
@@ -183,12 +225,16 @@ def measure(scenes: list[str], num_envs: list[int], duration: float,
     log(f"measuring, {duration:g} s per contender ...")
     floor = zmq_floor(duration)
     log(f"  raw pyzmq+msgpack round trip: {1e6 / floor:.0f} us ({floor:.0f}/s)")
+    pfloor = pipe_floor(duration)
+    log(f"  raw socketpair+msgpack round trip: {1e6 / pfloor:.0f} us ({pfloor:.0f}/s)")
     for scene in scenes:
         remote_id, gym_id = SCENES[scene]
         record(scene, "gymnasium in-process", 1,
                _measure(lambda: gym.make(gym_id), _single_rate, duration))
         record(scene, "remoteenv single", 1,
                _measure(lambda: gym.make(remote_id), _single_rate, duration))
+        record(scene, "remoteenv single, zmq ipc", 1,
+               _measure(lambda: gym.make(remote_id, transport="ipc"), _single_rate, duration))
         for n in num_envs:
             record(scene, "gymnasium SyncVectorEnv", n, _measure(
                 lambda: gym.make_vec(gym_id, num_envs=n, vectorization_mode="sync"), _vector_rate, duration))
@@ -207,6 +253,7 @@ def measure(scenes: list[str], num_envs: list[int], duration: float,
                     "python": platform.python_version(), "load_avg_at_end": list(os.getloadavg())},
         "duration_s": duration,
         "floor_round_trips_per_s": floor,
+        "pipe_floor_round_trips_per_s": pfloor,
         "rows": rows,
         "ratios": ratios(rows),
     }
@@ -231,6 +278,8 @@ def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             rate(scene, "remoteenv single", 1), rate(scene, "gymnasium AsyncVectorEnv", 1), 2.0)
         add(scene, "remoteenv single / in-process",
             rate(scene, "remoteenv single", 1), rate(scene, "gymnasium in-process", 1), None)
+        add(scene, "remoteenv single / the same over zmq ipc",
+            rate(scene, "remoteenv single", 1), rate(scene, "remoteenv single, zmq ipc", 1), None)
         for n in sorted({r["num_envs"] for r in rows if r["scene"] == scene}):
             add(scene, f"RemoteVectorEnv K=1 / AsyncVectorEnv, N={n}",
                 rate(scene, "RemoteVectorEnv K=1", n), rate(scene, "gymnasium AsyncVectorEnv", n), 1.3)
@@ -244,7 +293,10 @@ def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def format_table(result: dict[str, Any]) -> str:
     lines = [f"raw pyzmq + msgpack round trip (ipc): {1e6 / result['floor_round_trips_per_s']:.0f} us "
-             f"= {result['floor_round_trips_per_s']:.0f} round trips/s", ""]
+             f"= {result['floor_round_trips_per_s']:.0f} round trips/s",
+             f"raw socketpair + msgpack round trip (blocking reads): "
+             f"{1e6 / result['pipe_floor_round_trips_per_s']:.0f} us "
+             f"= {result['pipe_floor_round_trips_per_s']:.0f} round trips/s", ""]
     lines.append(f"{'scene':9s} {'contender':26s} {'N':>3s} {'K':>3s} {'steps/s':>10s}")
     for r in result["rows"]:
         k = "" if r["envs_per_process"] is None else str(r["envs_per_process"])

@@ -8,6 +8,7 @@ and ``send``.
 
 from __future__ import annotations
 
+import os
 import socket
 import time
 from typing import Any
@@ -88,6 +89,7 @@ class PipeChannel:
             frames = self.receive_nowait()
             if frames or self.closed or time.perf_counter() > end:
                 return frames
+            os.sched_yield()  # let a peer that shares this CPU run
 
     def send(self, reply_to: Any, payload: bytes) -> None:
         try:
