@@ -26,10 +26,16 @@ from remoteenv import protocol
 from remoteenv.addresses import zmq_transport
 from remoteenv.connection import LIVENESS_CHECK_S, Connection, connect_sim
 from remoteenv.errors import RemoteEnvError, RemoteEnvTimeout
+from remoteenv.hot_wait import HotWait
 from remoteenv.launcher import Launcher
 from remoteenv.remote_env import check_action
 from remoteenv.restart import RestartBudget, restarted_info
 from remoteenv.sim.batch import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET
+
+
+#: Longest busy-wait (seconds) of a vector call for its replies before sleeping;
+#: calls whose replies took longer sleep at once (the sims need the CPUs).
+GATHER_SPIN_S = 250e-6
 
 
 def default_envs_per_process(num_envs: int) -> int:
@@ -196,6 +202,7 @@ class RemoteVectorEnv(VectorEnv):
         self._obs: Any = None
         self._poller: zmq.Poller | None = None
         self._poll_socks: list[Any] = []
+        self._gather_hot = HotWait(GATHER_SPIN_S)
 
     # ------------------------------------------------------------ setup
 
@@ -427,8 +434,18 @@ class RemoteVectorEnv(VectorEnv):
         poller = self._poller_for(conns)
         socket_index = self._socket_index
         deadline = None if self.timeout is None else time.monotonic() + self.timeout
+        hot = self._gather_hot
+        started = time.perf_counter()
+        hot_until = started + hot.window_s if hot.worth_it() else started
         while pending:
-            events = poller.poll(LIVENESS_CHECK_S * 1000)
+            # While replies have been quick, poll without sleeping first (see
+            # remoteenv.hot_wait), yielding the CPU to any process that shares it.
+            events = poller.poll(0)
+            while not events and time.perf_counter() < hot_until:
+                os.sched_yield()
+                events = poller.poll(0)
+            if not events:
+                events = poller.poll(LIVENESS_CHECK_S * 1000)
             for sock, _ in events:
                 p = socket_index[sock]
                 seq = pending.get(p)
@@ -458,6 +475,7 @@ class RemoteVectorEnv(VectorEnv):
                         kind="timeout",
                         instance=p,
                     )
+        hot.waited(time.perf_counter() - started)
         return replies
 
     def _poller_for(self, conns: list[Connection]) -> zmq.Poller:

@@ -27,7 +27,7 @@ from remoteenv.sim.stepping import LockStepper, make_stepper
 
 _PARENT_CHECK_S = 0.25
 #: Longest busy-wait (seconds) for the agent's next request on the local pipe.
-SIM_SPIN_S = 100e-6
+SIM_SPIN_S = 1e-3
 
 
 class RequestError(Exception):
