@@ -29,8 +29,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="steps before the baseline RSS is taken (default 10,000)")
     g.add_argument("--soak-scene", choices=sorted(SCENES), default="cartpole",
                    help="which shipped scene (default cartpole)")
-    g.add_argument("--soak-transport", choices=["ipc", "tcp"], default="ipc",
-                   help="socket transport (default ipc)")
+    g.add_argument("--soak-transport", choices=["pipe", "ipc", "tcp"], default="pipe",
+                   help="how the env talks to its sim (default pipe, the env's default)")
     g.add_argument("--soak-seed", type=int, default=0, help="seed of actions and resets")
 
 

@@ -26,7 +26,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--continuous", action="store_true",
                    help="cartpole: Box(-1, 1) action instead of Discrete(2)")
     p.add_argument("--random", action="store_true", help="random actions instead of the controller")
-    p.add_argument("--transport", choices=["ipc", "tcp"], default="ipc", help="socket transport")
+    p.add_argument("--transport", choices=["pipe", "ipc", "tcp"], default="pipe",
+                   help="how the env talks to its sim: the local pipe (default) or ZeroMQ over ipc or tcp")
     p.add_argument("--record", metavar="DIR", default=None,
                    help="render offscreen and write one mp4 per episode into DIR "
                    "(gymnasium.wrappers.RecordVideo; needs moviepy, the [video] extra)")
