@@ -32,6 +32,23 @@ from remoteenv.keys import KeyPair, generate_keypair, write_public_keys, write_s
 _STDERR_TAIL_LINES = 20
 
 
+def pid_alive(pid: int) -> bool:
+    """True while process ``pid`` exists and is not a zombie (Linux /proc; elsewhere signal 0)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+    except OSError:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            return True
+        return True
+
+
 @dataclass
 class SimProcess:
     """One launched sim process."""

@@ -139,6 +139,18 @@ ARRAY_DTYPES = frozenset(
 _MAX_NDIM = 32
 
 
+#: ``step_batch`` operations, one per world (see the spec above).
+#: Step the world with its action.
+OP_STEP = 0
+#: Reset the world (no seed, no options); its action is ignored; reward 0, not done.
+OP_RESET = 1
+#: Step; if the step terminated or truncated, reset and report the final obs/info.
+OP_STEP_AUTORESET = 2
+#: Step, then reset regardless (the agent's time limit truncates this step).
+OP_STEP_RESET = 3
+OPS = (OP_STEP, OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET)
+
+
 class ProtocolError(ValueError):
     """A frame does not follow this module's spec."""
 

@@ -40,28 +40,11 @@ import zmq
 
 from remoteenv import protocol
 from remoteenv.errors import RemoteEnvError, RemoteEnvTimeout
-from remoteenv.launcher import Launcher
+from remoteenv.launcher import Launcher, pid_alive
 
 #: Frames a reader's PULL socket buffers per publisher.
 RECV_HWM = 8
 _POLL_MS = 100
-
-
-def _pid_alive(pid: int) -> bool:
-    """True while ``pid`` exists and is not a zombie (Linux /proc; elsewhere: signal 0)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
-    except OSError:
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return False
-        except PermissionError:
-            return True
-        return True
 
 
 class Publishers:
@@ -258,7 +241,7 @@ class RemoteIterableDataset(torch.utils.data.IterableDataset):
         for i, count in received.items():
             if i in skip:
                 continue
-            if (self.items_per_publisher is None or count < self.items_per_publisher) and not _pid_alive(
+            if (self.items_per_publisher is None or count < self.items_per_publisher) and not pid_alive(
                 self.pids[i]
             ):
                 due = "" if self.items_per_publisher is None else f" of {self.items_per_publisher}"

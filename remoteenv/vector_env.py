@@ -23,6 +23,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
 
 from remoteenv import protocol
+from remoteenv.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET
 from remoteenv.addresses import zmq_transport
 from remoteenv.connection import LIVENESS_CHECK_S, Connection, connect_sim
 from remoteenv.errors import RemoteEnvError, RemoteEnvTimeout
@@ -30,7 +31,6 @@ from remoteenv.hot_wait import HotWait
 from remoteenv.launcher import Launcher
 from remoteenv.remote_env import check_action
 from remoteenv.restart import RestartBudget, restarted_info
-from remoteenv.sim.batch import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET
 
 
 #: Longest busy-wait (seconds) of a vector call for its replies before sleeping;
@@ -644,7 +644,7 @@ class RemoteVectorEnv(VectorEnv):
         return obs, rewards, terminated, truncated, infos
 
     def _merge_info(self, infos: dict[str, Any], packed: dict[str, Any], idx: np.ndarray) -> None:
-        """Add the infos of worlds ``idx`` (wire form of :func:`remoteenv.sim.batch.columnar_infos`)
+        """Add the infos of worlds ``idx`` (wire form of ``columnar_infos`` in :mod:`remoteenv.sim.batch`)
         to ``infos`` with Gymnasium's ``key``/``_key`` layout."""
         columns = packed.get("columns")
         if columns is None:

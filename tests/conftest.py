@@ -11,16 +11,7 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import remoteenv  # noqa: E402  (registers the scene ids)
-
-
-def pid_alive(pid: int) -> bool:
-    """True while ``pid`` exists and is not a zombie."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            state = f.read().rsplit(")", 1)[1].split()[0]
-    except (FileNotFoundError, ProcessLookupError):
-        return False
-    return state != "Z"
+from remoteenv.launcher import pid_alive  # noqa: E402
 
 
 def wait_gone(pid: int, timeout: float = 5.0) -> bool:

@@ -16,16 +16,8 @@ import numpy as np
 import pytest
 
 from remoteenv import OpenAIRemoteEnv, RemoteEnvError, RemoteEnvTimeout, scene_path
+from remoteenv.launcher import pid_alive
 from remoteenv.restart import INFO_RESTARTED, INFO_RESTARTS
-
-
-def pid_alive(pid: int) -> bool:
-    """True while ``pid`` exists and is not a zombie."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
 
 
 def wait_gone(pid: int, timeout: float = 5.0) -> bool:

@@ -10,6 +10,8 @@ import sys
 import textwrap
 import time
 
+from remoteenv.launcher import pid_alive
+
 AGENTS = 4
 ENVS_PER_AGENT = 8
 
@@ -32,14 +34,6 @@ AGENT = textwrap.dedent(
     print(json.dumps(out), flush=True)
     """
 )
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
 
 
 def test_four_agents_with_eight_envs_each_at_once():
@@ -75,4 +69,4 @@ def test_four_agents_with_eight_envs_each_at_once():
     # Closed envs leave nothing behind.
     time.sleep(0.2)
     for e in envs:
-        assert not _alive(e["pid"]) and not os.path.exists(e["workdir"])
+        assert not pid_alive(e["pid"]) and not os.path.exists(e["workdir"])

@@ -16,18 +16,10 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 from gymnasium import spaces
 
+from remoteenv.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET, OPS
+
 if TYPE_CHECKING:
     from remoteenv.sim.server import RemoteControlledAgent
-
-#: Step the world with its action.
-OP_STEP = 0
-#: Reset the world (no seed, no options); its action is ignored; reward 0, not done.
-OP_RESET = 1
-#: Step; if the step terminated or truncated, reset and report the final obs/info.
-OP_STEP_AUTORESET = 2
-#: Step, then reset regardless (the agent's time limit truncates this step).
-OP_STEP_RESET = 3
-OPS = (OP_STEP, OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET)
 
 _SCALAR_TYPES: dict[type, tuple[type, str]] = {
     bool: (bool, "|b1"), np.bool_: (bool, "|b1"),
