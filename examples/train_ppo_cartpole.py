@@ -1,8 +1,9 @@
 """Train PPO on remoteenv/CartPole-v0 with 8 remote envs, then test it in real time.
 
 A compact PPO (clipped surrogate, GAE, separate actor and critic MLPs) in
-plain torch on the CPU. The 8 CartPole worlds each run in a sim process of
-their own (RemoteVectorEnv); the agent sees a Gymnasium vector env.
+plain torch on the CPU. The 8 CartPole worlds run in sim processes
+(RemoteVectorEnv; by default one process hosts all 8 and steps them from one
+request); the agent sees a Gymnasium vector env.
 
 1. Train until the mean return of the last 20 episodes is >= 475 (of at most
    500), or until the step budget is spent (then it says so and exits 1).
