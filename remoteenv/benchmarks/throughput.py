@@ -22,7 +22,6 @@ from typing import Any, Callable
 
 import gymnasium as gym
 import msgpack
-import numpy as np
 import zmq
 
 #: remoteenv scene -> (remoteenv id, Gymnasium id to compare with)

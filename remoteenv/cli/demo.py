@@ -7,7 +7,6 @@ import time
 from typing import Any, Callable
 
 import gymnasium as gym
-import numpy as np
 
 SCENES = {"cartpole": "remoteenv/CartPole-v0", "reacher": "remoteenv/Reacher-v0"}
 

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 from gymnasium import spaces
 
-from remoteenv.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET, OPS
+from remoteenv.protocol import OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET, OPS
 
 if TYPE_CHECKING:
     from remoteenv.sim.server import RemoteControlledAgent

@@ -58,7 +58,6 @@ import traceback
 from dataclasses import dataclass
 from typing import Any
 
-import zmq
 
 from remoteenv import protocol
 from remoteenv.latency import RunningStats
