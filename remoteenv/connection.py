@@ -17,7 +17,6 @@ are dropped. Two transports carry the same frames:
 
 from __future__ import annotations
 
-import os
 import select
 import socket
 import time
@@ -28,7 +27,7 @@ import zmq
 
 from remoteenv import protocol
 from remoteenv.errors import RemoteEnvError, RemoteEnvTimeout
-from remoteenv.hot_wait import HotWait
+from remoteenv.hot_wait import HotWait, yield_cpu
 
 #: How often (seconds) a waiting call checks that the sim process still lives.
 LIVENESS_CHECK_S = 0.1
@@ -313,7 +312,7 @@ class PipeConnection(Connection):
             while not self._frames and time.perf_counter() < end:
                 self._read(0.0)
                 if not self._frames:
-                    os.sched_yield()  # let a peer that shares this CPU run
+                    yield_cpu()  # let a peer that shares this CPU run
             if self._frames:
                 self._hot.waited(time.perf_counter() - start)
                 return self._frames.popleft()

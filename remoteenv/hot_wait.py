@@ -17,6 +17,9 @@ import time
 #: Re-try waiting hot once every this many cold waits.
 _PROBE_EVERY = 32
 
+#: Give the CPU to another runnable process, if any, while busy-waiting.
+yield_cpu = getattr(os, "sched_yield", lambda: None)
+
 
 class HotWait:
     """Adaptive busy-wait policy for one channel.

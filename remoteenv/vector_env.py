@@ -27,7 +27,7 @@ from remoteenv.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RES
 from remoteenv.addresses import zmq_transport
 from remoteenv.connection import LIVENESS_CHECK_S, Connection, connect_sim
 from remoteenv.errors import RemoteEnvError, RemoteEnvTimeout
-from remoteenv.hot_wait import HotWait
+from remoteenv.hot_wait import HotWait, yield_cpu
 from remoteenv.launcher import Launcher
 from remoteenv.remote_env import check_action
 from remoteenv.restart import RestartBudget, restarted_info
@@ -442,7 +442,7 @@ class RemoteVectorEnv(VectorEnv):
             # remoteenv.hot_wait), yielding the CPU to any process that shares it.
             events = poller.poll(0)
             while not events and time.perf_counter() < hot_until:
-                os.sched_yield()
+                yield_cpu()
                 events = poller.poll(0)
             if not events:
                 events = poller.poll(LIVENESS_CHECK_S * 1000)

@@ -8,7 +8,6 @@ and ``send``.
 
 from __future__ import annotations
 
-import os
 import socket
 import time
 from typing import Any
@@ -16,6 +15,7 @@ from typing import Any
 import zmq
 
 from remoteenv import protocol
+from remoteenv.hot_wait import yield_cpu
 
 _PIPE_READ_BYTES = 1 << 20
 
@@ -89,7 +89,7 @@ class PipeChannel:
             frames = self.receive_nowait()
             if frames or self.closed or time.perf_counter() > end:
                 return frames
-            os.sched_yield()  # let a peer that shares this CPU run
+            yield_cpu()  # let a peer that shares this CPU run
 
     def send(self, reply_to: Any, payload: bytes) -> None:
         try:
