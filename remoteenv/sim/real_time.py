@@ -5,7 +5,7 @@ action handling of one world; :func:`serve_real_time` is the server loop that
 answers requests between physics substeps and fires each world's substeps on
 their deadlines.
 
-Semantics (DESIGN.md, "Lock-step and real time"):
+Semantics:
 
 - Physics substep ``n`` of an episode (``model.opt.timestep`` simulated
   seconds) runs at the wall-clock deadline ``t0 + n * timestep / factor``,
