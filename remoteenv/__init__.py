@@ -20,6 +20,12 @@ import remoteenv.scenes.reacher  # noqa: E402,F401
 
 __version__ = "0.1.0"
 
+#: Gymnasium id of each shipped scene, by scene name.
+SHIPPED_SCENES = {
+    "cartpole": remoteenv.scenes.cartpole.ENV_ID,
+    "reacher": remoteenv.scenes.reacher.ENV_ID,
+}
+
 __all__ = [
     "Launcher",
     "OpenAIRemoteEnv",
@@ -27,6 +33,7 @@ __all__ = [
     "RemoteEnvError",
     "RemoteEnvTimeout",
     "RemoteVectorEnv",
+    "SHIPPED_SCENES",
     "scene_path",
 ]
 

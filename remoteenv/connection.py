@@ -361,10 +361,12 @@ def connect_sim(
     sim: Any,
     *,
     timeout: float | None = 60.0,
-    curve_client_keypair: tuple[bytes, bytes] | None = None,
+    curve_client_keypair: Any = None,
 ) -> Connection:
     """A connection to ``sim`` (a :class:`remoteenv.launcher.SimProcess` or an
-    attached sim): over its local pipe if it has one, else over ZeroMQ."""
+    attached sim): over its local pipe if it has one, else over ZeroMQ.
+    ``curve_client_keypair`` is a :class:`remoteenv.keys.KeyPair` (the
+    launcher's :attr:`~remoteenv.launcher.Launcher.curve_client_keypair`) or None."""
     death_check = getattr(sim, "death", None)
     pipe = getattr(sim, "pipe", None)
     if pipe is not None:
@@ -373,5 +375,6 @@ def connect_sim(
     return Connection(
         sim.endpoint or "", instance=sim.instance, timeout=timeout, death_check=death_check,
         curve_server_key=getattr(sim, "curve_server_key", None),
-        curve_client_keypair=curve_client_keypair,
+        curve_client_keypair=None if curve_client_keypair is None
+        else (curve_client_keypair.public, curve_client_keypair.secret),
     )

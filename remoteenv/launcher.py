@@ -25,7 +25,7 @@ import weakref
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
-from remoteenv.addresses import ipc_address, ipc_path, is_loopback, tcp_loopback_address
+from remoteenv.addresses import ipc_address, ipc_path, is_loopback, tcp_loopback_address, zmq_transport
 from remoteenv.errors import RemoteEnvError
 from remoteenv.keys import KeyPair, generate_keypair, write_public_keys, write_secret_key
 
@@ -150,10 +150,11 @@ class Launcher:
         worlds_per_instance: MuJoCo worlds hosted by each process.
         env_kwargs: keyword arguments for the scene's env class (JSON-able).
         render_mode: passed to the scene's env.
-        transport: what each sim binds: ``"ipc"`` (default) or ``"tcp"``
-            (127.0.0.1, OS-assigned port).
-        pipe: also give each sim one end of a Unix socketpair (the local pipe,
-            :attr:`SimProcess.pipe`), the fastest way for this process to talk to it.
+        transport: ``"ipc"`` (default): each sim binds an ipc endpoint in the
+            private dir; ``"tcp"``: 127.0.0.1 with an OS-assigned port;
+            ``"pipe"``: ipc, and each sim also gets one end of a Unix socketpair
+            (the local pipe, :attr:`SimProcess.pipe`), the fastest way for this
+            process to talk to it.
         startup_timeout: seconds to wait for a sim to report ready.
         real_time, real_time_factor, action_delay: stepping mode of the sims.
         extra_args: more command-line arguments for the scene script.
@@ -183,13 +184,10 @@ class Launcher:
         extra_args: Sequence[str] = (),
         bind_host: str | None = None,
         curve: bool | None = None,
-        pipe: bool = False,
     ) -> None:
         self.scene = os.path.abspath(os.fspath(scene))
         if not os.path.isfile(self.scene):
             raise FileNotFoundError(f"scene script {self.scene!r} does not exist")
-        if transport not in ("ipc", "tcp"):
-            raise ValueError(f"transport must be 'ipc' or 'tcp', got {transport!r}")
         if num_instances < 1 or worlds_per_instance < 1:
             raise ValueError("num_instances and worlds_per_instance must be >= 1")
         self.num_instances = num_instances
@@ -197,8 +195,8 @@ class Launcher:
         self.worlds_per_instance = worlds_per_instance
         self.env_kwargs = dict(env_kwargs or {})
         self.render_mode = render_mode
-        self.transport = transport
-        self.pipe = pipe
+        self.transport = zmq_transport(transport)  # raises for an unknown transport
+        self.pipe = transport == "pipe"
         self.startup_timeout = startup_timeout
         self.real_time = real_time
         self.real_time_factor = real_time_factor

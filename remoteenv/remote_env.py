@@ -15,7 +15,6 @@ import gymnasium as gym
 import numpy as np
 
 from remoteenv import protocol
-from remoteenv.addresses import zmq_transport
 from remoteenv.connection import Connection, connect_sim
 from remoteenv.errors import RemoteEnvError
 from remoteenv.latency import LatencyStats
@@ -149,8 +148,7 @@ class OpenAIRemoteEnv(gym.Env):
             seed=seed,
             env_kwargs=scene_kwargs,
             render_mode=render_mode,
-            transport=zmq_transport(transport),
-            pipe=transport == "pipe",
+            transport=transport,
             startup_timeout=startup_timeout,
             real_time=real_time,
             real_time_factor=real_time_factor,
@@ -182,10 +180,8 @@ class OpenAIRemoteEnv(gym.Env):
 
     def _connect(self, sim: SimProcess) -> None:
         assert self._launcher is not None
-        client = self._launcher.curve_client_keypair
         self._conn = connect_sim(
-            sim, timeout=self.timeout,
-            curve_client_keypair=None if client is None else (client.public, client.secret),
+            sim, timeout=self.timeout, curve_client_keypair=self._launcher.curve_client_keypair
         )
         self._handshake(self.call_timeouts.get("handshake", self.startup_timeout))
 

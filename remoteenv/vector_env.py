@@ -24,7 +24,6 @@ from gymnasium.vector.utils import batch_space, concatenate, create_empty_array,
 
 from remoteenv import protocol
 from remoteenv.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET
-from remoteenv.addresses import zmq_transport
 from remoteenv.connection import LIVENESS_CHECK_S, Connection, connect_sim
 from remoteenv.errors import RemoteEnvError, RemoteEnvTimeout
 from remoteenv.hot_wait import HotWait, yield_cpu
@@ -175,8 +174,7 @@ class RemoteVectorEnv(VectorEnv):
             worlds_per_instance=k,
             env_kwargs=scene_kwargs,
             render_mode=render_mode,
-            transport=zmq_transport(transport),
-            pipe=transport == "pipe",
+            transport=transport,
             startup_timeout=startup_timeout,
             real_time=real_time,
             real_time_factor=real_time_factor,
@@ -187,10 +185,7 @@ class RemoteVectorEnv(VectorEnv):
         try:
             client = self._launcher.curve_client_keypair
             for sim in self._launcher.sims:
-                self._conns.append(connect_sim(
-                    sim, timeout=timeout,
-                    curve_client_keypair=None if client is None else (client.public, client.secret),
-                ))
+                self._conns.append(connect_sim(sim, timeout=timeout, curve_client_keypair=client))
             self._handshake(startup_timeout)
         except BaseException:
             self.close()
@@ -554,10 +549,8 @@ class RemoteVectorEnv(VectorEnv):
             self._poller = None
             try:
                 sim = self._launcher.restart(p)
-                client = self._launcher.curve_client_keypair
                 self._conns[p] = connect_sim(
-                    sim, timeout=self.timeout,
-                    curve_client_keypair=None if client is None else (client.public, client.secret),
+                    sim, timeout=self.timeout, curve_client_keypair=self._launcher.curve_client_keypair
                 )
                 self._conns[p].request("handshake", timeout=self.startup_timeout,
                                        protocol=protocol.PROTOCOL_VERSION)

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-SCENES = {"cartpole": "remoteenv/CartPole-v0", "reacher": "remoteenv/Reacher-v0"}
+from remoteenv import SHIPPED_SCENES as SCENES
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -58,8 +58,6 @@ def _growth(start: int | None, end: int | None) -> str:
 
 def run(args: argparse.Namespace) -> int:
     import gymnasium as gym
-
-    import remoteenv  # noqa: F401  (registers the ids)
 
     steps, warmup = int(args.soak_steps), max(0, int(args.soak_warmup))
     env = gym.make(SCENES[args.soak_scene], transport=args.soak_transport, disable_env_checker=True)

@@ -24,10 +24,12 @@ import gymnasium as gym
 import msgpack
 import zmq
 
+from remoteenv import SHIPPED_SCENES
+
 #: remoteenv scene -> (remoteenv id, Gymnasium id to compare with)
 SCENES = {
-    "reacher": ("remoteenv/Reacher-v0", "Reacher-v5"),
-    "cartpole": ("remoteenv/CartPole-v0", "CartPole-v1"),
+    "reacher": (SHIPPED_SCENES["reacher"], "Reacher-v5"),
+    "cartpole": (SHIPPED_SCENES["cartpole"], "CartPole-v1"),
 }
 DEFAULT_NUM_ENVS = (1, 2, 4, 8, 16)
 

@@ -8,7 +8,7 @@ from typing import Any, Callable
 
 import gymnasium as gym
 
-SCENES = {"cartpole": "remoteenv/CartPole-v0", "reacher": "remoteenv/Reacher-v0"}
+from remoteenv import SHIPPED_SCENES as SCENES
 
 
 def add_parser(sub: Any) -> None:
@@ -55,8 +55,6 @@ def make_policy(scene: str, env: gym.Env, random: bool) -> Callable[[Any], Any]:
 
 
 def make_env(args: argparse.Namespace) -> gym.Env:
-    import remoteenv  # noqa: F401  (registers the ids)
-
     kwargs: dict[str, Any] = {"transport": args.transport}
     if args.scene == "cartpole":
         kwargs["continuous"] = args.continuous

@@ -74,7 +74,7 @@ def _advertised(endpoint: str, args: argparse.Namespace) -> str:
 def run(args: argparse.Namespace) -> int:
     from remoteenv import protocol
     from remoteenv.attach import AttachedSim, LaunchInfo, write_launch_info
-    from remoteenv.connection import Connection
+    from remoteenv.connection import connect_sim
     from remoteenv.errors import RemoteEnvError
     from remoteenv.keys import write_secret_key
     from remoteenv.launcher import Launcher
@@ -102,10 +102,7 @@ def run(args: argparse.Namespace) -> int:
         return 1
     try:
         keys = launcher.curve_client_keypair
-        first = launcher.sims[0]
-        conn = Connection(first.endpoint or "", instance=0, death_check=first.death,
-                          curve_server_key=first.curve_server_key,
-                          curve_client_keypair=None if keys is None else (keys.public, keys.secret))
+        conn = connect_sim(launcher.sims[0], curve_client_keypair=keys)
         try:
             env_id = conn.request("handshake", protocol=protocol.PROTOCOL_VERSION)["env_id"]
         finally:

@@ -18,7 +18,7 @@ import zmq
 from gymnasium import spaces
 
 from remoteenv import protocol
-from remoteenv.addresses import is_loopback
+from remoteenv.addresses import ipc_path, is_loopback
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.hot_wait import HotWait
 from remoteenv.sim.channels import PipeChannel, ZmqChannel
@@ -266,13 +266,12 @@ class RemoteControlledAgent:
                 channel.close()
         if self._authenticator is not None:
             self._authenticator.stop()
-        if self.endpoint.startswith("ipc://"):
-            path = self.endpoint[len("ipc://"):]
-            for p in (path,):
-                try:
-                    os.unlink(p)
-                except OSError:
-                    pass
+        path = ipc_path(self.endpoint)
+        if path is not None:
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
 
     # ------------------------------------------------------------ commands
 
