@@ -37,3 +37,4 @@ def ensure_scenes_package() -> None:
     module = importlib.util.module_from_spec(spec)
     sys.modules["remoteenv.scenes"] = module
     spec.loader.exec_module(module)
+    sys.modules["remoteenv"].scenes = module  # as a normal import would bind it

@@ -287,3 +287,25 @@ def test_bad_scene_kwargs_fail_at_launch_with_stderr():
         gym.make("remoteenv/CartPole-v0", no_such_option=1)
     assert info.value.kind == "launch"
     assert "no_such_option" in str(info.value)
+
+
+def test_package_imported_from_the_checkout_finds_its_scenes():
+    """``python -m remoteenv`` in the repository root imports the checkout, whose
+    scenes live in the top-level scenes/ folder rather than under remoteenv/."""
+    import subprocess
+    import sys
+
+    root = os.path.dirname(HERE)
+    code = (
+        "import gymnasium, remoteenv, remoteenv.scenes; "
+        "print(remoteenv.__file__); print(remoteenv.scenes.__file__); "
+        "print(sorted(remoteenv.SHIPPED_SCENES.values())); "
+        "print(all(i in gymnasium.registry for i in remoteenv.SHIPPED_SCENES.values()))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    module_file, scenes_file, ids, registered = out.stdout.split("\n")[:4]
+    assert module_file == os.path.join(root, "remoteenv", "__init__.py")
+    assert scenes_file == os.path.join(root, "scenes", "__init__.py")
+    assert ids == "['remoteenv/CartPole-v0', 'remoteenv/Reacher-v0']" and registered == "True"
