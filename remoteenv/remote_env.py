@@ -14,42 +14,16 @@ from typing import Any, Mapping, SupportsFloat
 import gymnasium as gym
 import numpy as np
 
-from remoteenv import protocol
-from remoteenv.connection import Connection, connect_sim
-from remoteenv.errors import RemoteEnvError
-from remoteenv.latency import LatencyStats
-from remoteenv.launcher import Launcher, SimProcess
-from remoteenv.restart import RestartBudget, restarted_info
+from remoteenv.wire import protocol
+from remoteenv.wire import spaces as spaces_codec
+from remoteenv.agent.connection import Connection, connect_sim
+from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.agent.latency import LatencyStats
+from remoteenv.agent.launcher import Launcher, SimProcess
+from remoteenv.agent.restart import RestartBudget, restarted_info
+from remoteenv.wire.actions import check_action
 
-
-def check_action(space: gym.Space, action: Any, where: str = "") -> Any:
-    """Return ``action`` in the wire form for ``space``, or raise ``ValueError``
-    naming the space and the value if it does not belong to the space."""
-    if isinstance(space, gym.spaces.Box):
-        arr = np.asarray(action)
-        if arr.dtype.kind not in "biuf":
-            raise ValueError(f"{where}action {action!r:.200} of dtype {arr.dtype} does not fit {space}")
-        arr = arr.astype(space.dtype, copy=False)
-        if arr.shape != space.shape:
-            raise ValueError(f"{where}action of shape {arr.shape} does not fit {space}: {action!r:.200}")
-        # Box.contains without its generic checks; NaN fails both comparisons.
-        if not ((arr >= space.low).all() and (arr <= space.high).all()):
-            if arr.dtype.kind == "f" and np.isnan(arr).any():
-                raise ValueError(f"{where}action {action!r:.200} contains NaN; space {space}")
-            raise ValueError(f"{where}action {action!r:.200} is outside {space}")
-        return arr
-    if isinstance(space, gym.spaces.Discrete):
-        if isinstance(action, np.ndarray) and action.shape == ():
-            action = action.item()
-        if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)):
-            raise ValueError(f"{where}action {action!r:.200} is not an int of {space}")
-        action = int(action)
-        if not space.contains(action):
-            raise ValueError(f"{where}action {action} is outside {space}")
-        return action
-    if not space.contains(action):
-        raise ValueError(f"{where}action {action!r:.200} is not in {space}")
-    return action
+__all__ = ["OpenAIRemoteEnv", "check_action"]
 
 
 class OpenAIRemoteEnv(gym.Env):
@@ -88,12 +62,12 @@ class OpenAIRemoteEnv(gym.Env):
             this turns on CURVE (see :class:`remoteenv.Launcher`).
         curve: encrypt and authenticate with ZMQ CURVE even on loopback.
         attach: instead of launching a sim, drive instance 0 of the sims named
-            by this launch-info file (see :mod:`remoteenv.attach`, and
+            by this launch-info file (see :mod:`remoteenv.agent.attach`, and
             :meth:`attach` for other instances). The launch options above are
             then ignored, and ``close`` leaves the sim running.
 
     Attributes:
-        latency_stats: :class:`remoteenv.latency.LatencyStats` of every step so
+        latency_stats: :class:`remoteenv.agent.latency.LatencyStats` of every step so
             far: action latency (mean/p50/p99/max, seconds and ticks), wall
             round trip, late actions, pacing overruns. With ``real_time`` or
             ``action_delay`` each step's info also carries the timing keys
@@ -135,7 +109,7 @@ class OpenAIRemoteEnv(gym.Env):
         self._launcher: Launcher | None = None
         self._conn: Connection | None = None
         if attach is not None:
-            from remoteenv.attach import AttachedSims
+            from remoteenv.agent.attach import AttachedSims
 
             if restart_on_failure:
                 raise ValueError("restart_on_failure needs sims this env launched; attached sims "
@@ -172,7 +146,7 @@ class OpenAIRemoteEnv(gym.Env):
         ``timeout``, ``call_timeouts``, ``startup_timeout`` (the handshake's).
         No time limit is applied; wrap in ``gymnasium.wrappers.TimeLimit`` or use
         ``gymnasium.make(env_id, attach=path)``. Closing the env leaves the sim running."""
-        from remoteenv.attach import AttachedSims
+        from remoteenv.agent.attach import AttachedSims
 
         sims = AttachedSims(launch_info, [instance])
         kwargs.setdefault("render_mode", sims.info.render_mode)
@@ -191,8 +165,8 @@ class OpenAIRemoteEnv(gym.Env):
         assert self._conn is not None
         hs = self._conn.request("handshake", timeout=timeout, protocol=protocol.PROTOCOL_VERSION)
         self.handshake: dict[str, Any] = hs
-        self.observation_space = protocol.space_from_wire(hs["observation_space"])
-        self.action_space = protocol.space_from_wire(hs["action_space"])
+        self.observation_space = spaces_codec.space_from_wire(hs["observation_space"])
+        self.action_space = spaces_codec.space_from_wire(hs["action_space"])
         meta = hs["metadata"]
         self.metadata = {
             "render_modes": list(meta["render_modes"]),

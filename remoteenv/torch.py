@@ -38,9 +38,9 @@ import torch
 import torch.utils.data
 import zmq
 
-from remoteenv import protocol
-from remoteenv.errors import RemoteEnvError, RemoteEnvTimeout
-from remoteenv.launcher import Launcher, pid_alive
+from remoteenv.wire import protocol
+from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout
+from remoteenv.agent.launcher import Launcher, pid_alive
 
 #: Frames a reader's PULL socket buffers per publisher.
 RECV_HWM = 8

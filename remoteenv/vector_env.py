@@ -22,14 +22,16 @@ import zmq
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
 
-from remoteenv import protocol
-from remoteenv.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET
-from remoteenv.connection import LIVENESS_CHECK_S, Connection, connect_sim
-from remoteenv.errors import RemoteEnvError, RemoteEnvTimeout
-from remoteenv.hot_wait import HotWait, yield_cpu
-from remoteenv.launcher import Launcher
-from remoteenv.remote_env import check_action
-from remoteenv.restart import RestartBudget, restarted_info
+from remoteenv.wire import protocol
+from remoteenv.wire import spaces as spaces_codec
+from remoteenv.wire.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET
+from remoteenv.agent.connection import LIVENESS_CHECK_S, Connection, connect_sim
+from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout
+from remoteenv.wire.hot_wait import HotWait, yield_cpu
+from remoteenv.agent.launcher import Launcher
+from remoteenv.wire.actions import check_actions
+from remoteenv.wire.batch import merge_infos
+from remoteenv.agent.restart import RestartBudget, restarted_info
 
 
 #: Longest busy-wait (seconds) of a vector call for its replies before sleeping;
@@ -127,7 +129,7 @@ class RemoteVectorEnv(VectorEnv):
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         if attach is not None:  # drive the sims of a launch-info file, see :meth:`attach`
-            from remoteenv.attach import AttachedSims
+            from remoteenv.agent.attach import AttachedSims
 
             if restart_on_failure:
                 raise ValueError("restart_on_failure needs sims this env launched; attached sims "
@@ -206,8 +208,8 @@ class RemoteVectorEnv(VectorEnv):
         replies = [c.receive(s, timeout, what="'handshake'") for c, s in zip(self._conns, seqs)]
         hs = replies[0]
         self.handshake: dict[str, Any] = hs
-        self.single_observation_space = protocol.space_from_wire(hs["observation_space"])
-        self.single_action_space = protocol.space_from_wire(hs["action_space"])
+        self.single_observation_space = spaces_codec.space_from_wire(hs["observation_space"])
+        self.single_action_space = spaces_codec.space_from_wire(hs["action_space"])
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         meta = hs["metadata"]
@@ -232,7 +234,7 @@ class RemoteVectorEnv(VectorEnv):
         ``w`` is world ``p * K + w``. ``kwargs``: ``autoreset_mode``,
         ``max_episode_steps`` (no limit unless given), ``render_mode`` (default:
         the sims'), ``timeout``, ``startup_timeout``. Closing leaves the sims running."""
-        from remoteenv.attach import AttachedSims
+        from remoteenv.agent.attach import AttachedSims
 
         sims = AttachedSims(launch_info)
         kwargs.setdefault("render_mode", sims.info.render_mode)
@@ -434,7 +436,7 @@ class RemoteVectorEnv(VectorEnv):
         hot_until = started + hot.window_s if hot.worth_it() else started
         while pending:
             # While replies have been quick, poll without sleeping first (see
-            # remoteenv.hot_wait), yielding the CPU to any process that shares it.
+            # remoteenv.wire.hot_wait), yielding the CPU to any process that shares it.
             events = poller.poll(0)
             while not events and time.perf_counter() < hot_until:
                 yield_cpu()
@@ -587,21 +589,8 @@ class RemoteVectorEnv(VectorEnv):
         n = self.num_envs
         space = self.single_action_space
         if self._box_act:
-            arr = np.asarray(actions)
-            if arr.dtype.kind not in "biuf" or arr.shape != (n, *space.shape):
-                raise ValueError(
-                    f"actions of shape {arr.shape} and dtype {arr.dtype} do not fit {self.action_space}"
-                )
-            arr = arr.astype(space.dtype, copy=False)
-            inside = (arr >= self._act_low) & (arr <= self._act_high)
-            if not inside.all():
-                bad = int(np.flatnonzero(~inside.reshape(n, -1).all(axis=1))[0])
-                raise ValueError(f"action {arr[bad]!r:.200} of world {bad} is outside {space}")
-            return arr
-        items = list(iterate(self.action_space, actions))
-        if len(items) != n:
-            raise ValueError(f"got {len(items)} actions for {n} worlds")
-        checked = [check_action(space, a, where=f"world {i}: ") for i, a in enumerate(items)]
+            return check_actions(space, np.asarray(actions), n)
+        checked = check_actions(space, list(iterate(self.action_space, actions)), n)
         if isinstance(space, gym.spaces.Discrete):
             return np.asarray(checked, dtype=np.int64)
         return checked
@@ -637,27 +626,7 @@ class RemoteVectorEnv(VectorEnv):
         return obs, rewards, terminated, truncated, infos
 
     def _merge_info(self, infos: dict[str, Any], packed: dict[str, Any], idx: np.ndarray) -> None:
-        """Add the infos of worlds ``idx`` (wire form of ``columnar_infos`` in :mod:`remoteenv.sim.batch`)
-        to ``infos`` with Gymnasium's ``key``/``_key`` layout."""
-        columns = packed.get("columns")
-        if columns is None:
-            for j, info in enumerate(packed["maps"]):
-                self._add_info(infos, info, int(idx[j]))
-            return
-        n = self.num_envs
-        for key, (values, present) in columns.items():
-            values, present = np.asarray(values), np.asarray(present, dtype=np.bool_)
-            arr = infos.get(key)
-            if arr is None:
-                arr = infos[key] = np.zeros(n, dtype=values.dtype)
-                infos[f"_{key}"] = np.zeros(n, dtype=np.bool_)
-            elif not (isinstance(arr, np.ndarray) and arr.shape == (n,) and arr.dtype != object):
-                for j in np.flatnonzero(present):
-                    self._add_info(infos, {key: values[j].item()}, int(idx[j]))
-                continue
-            where = idx[present]
-            arr[where] = values[present]
-            infos[f"_{key}"][where] = True
+        merge_infos(infos, packed, idx, self.num_envs, self._add_info)
 
     def _new_obs_like_last(self, full: bool) -> Any:
         """A fresh obs batch: empty if every world will be written, else a copy of the last one."""

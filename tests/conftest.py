@@ -11,7 +11,7 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import remoteenv  # noqa: E402  (registers the scene ids)
-from remoteenv.launcher import pid_alive  # noqa: E402
+from remoteenv.agent.launcher import pid_alive  # noqa: E402
 
 
 def wait_gone(pid: int, timeout: float = 5.0) -> bool:

@@ -8,8 +8,8 @@ import importlib
 import sys
 from typing import Sequence
 
-#: Command modules, in the order ``--help`` lists them.
-COMMANDS = ["demo", "bench", "keys", "launch"]
+#: Command name -> module in remoteenv.cli, in the order ``--help`` lists them.
+COMMANDS = {"demo": "demo", "bench": "bench", "keys": "keys_command", "launch": "launch"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -18,8 +18,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         description="remoteenv: MuJoCo simulations in their own processes, driven as Gymnasium envs.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in COMMANDS:
-        module = importlib.import_module(f"remoteenv.cli.{name}")
+    for module_name in COMMANDS.values():
+        module = importlib.import_module(f"remoteenv.cli.{module_name}")
         module.add_parser(sub)
     args = parser.parse_args(argv)
     return int(args.run(args) or 0)

@@ -7,7 +7,7 @@ import importlib
 from typing import Any
 
 #: Benchmark modules in remoteenv.benchmarks; the default one first.
-BENCHMARKS = {"throughput": None, "real_time": "--real-time", "soak": "--soak"}
+BENCHMARKS = {"throughput": None, "pacing": "--real-time", "soak": "--soak"}
 
 
 def add_parser(sub: Any) -> None:
@@ -23,7 +23,7 @@ def add_parser(sub: Any) -> None:
     for name, flag in BENCHMARKS.items():
         if flag:
             mode.add_argument(flag, dest="mode", action="store_const", const=name,
-                              help=f"run the {name.replace('_', '-')} benchmark")
+                              help=f"run the {name} benchmark")
     p.set_defaults(mode="throughput", run=run)
     for name in BENCHMARKS:
         try:

@@ -1,7 +1,7 @@
 """``python -m remoteenv launch <scene>``: start sims for other processes to attach to.
 
 The command starts the sims, writes a launch-info file (see
-:mod:`remoteenv.attach`) and stays in the foreground. The sims live exactly as
+:mod:`remoteenv.agent.attach`) and stays in the foreground. The sims live exactly as
 long as the command: on Ctrl-C or SIGTERM it stops them and removes the
 launch-info file (and the client key file); if the command is killed outright,
 the sims notice their parent is gone and exit by themselves. If a sim dies,
@@ -72,12 +72,12 @@ def _advertised(endpoint: str, args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from remoteenv import protocol
-    from remoteenv.attach import AttachedSim, LaunchInfo, write_launch_info
-    from remoteenv.connection import connect_sim
-    from remoteenv.errors import RemoteEnvError
-    from remoteenv.keys import write_secret_key
-    from remoteenv.launcher import Launcher
+    from remoteenv.wire import protocol
+    from remoteenv.agent.attach import AttachedSim, LaunchInfo, write_launch_info
+    from remoteenv.agent.connection import connect_sim
+    from remoteenv.agent.errors import RemoteEnvError
+    from remoteenv.wire.keys import write_secret_key
+    from remoteenv.agent.launcher import Launcher
 
     env_kwargs = json.loads(args.env_kwargs)
     if not isinstance(env_kwargs, dict):

@@ -16,63 +16,14 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 from gymnasium import spaces
 
-from remoteenv.protocol import OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET, OPS
+from remoteenv.wire.actions import check_actions
+from remoteenv.wire.batch import columnar_infos
+from remoteenv.wire.errors import InvalidAction
+from remoteenv.wire.batch import stack as _stack
+from remoteenv.wire.protocol import OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET, OPS
 
 if TYPE_CHECKING:
     from remoteenv.sim.server import RemoteControlledAgent
-
-_SCALAR_TYPES: dict[type, tuple[type, str]] = {
-    bool: (bool, "|b1"), np.bool_: (bool, "|b1"),
-    int: (int, "<i8"), float: (float, "<f8"),
-}
-
-
-def columnar_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
-    """Encode the info maps of ``n`` worlds for the wire.
-
-    If every value is a bool, int or float (numpy scalars included) and each
-    key has one type across the worlds: ``{"columns": {key: [values, mask]}}``
-    with ``values`` an array of ``n`` (bool, int64 or float64; zero where the
-    world lacks the key) and ``mask`` a bool array saying which worlds have
-    it, both sent as msgpack lists. Otherwise ``{"maps": infos}``. Columns cost one array per key instead
-    of ``n`` maps to encode and to merge on the agent side.
-    """
-    n = len(infos)
-    kinds: dict[str, type] = {}
-    for info in infos:
-        for key, value in info.items():
-            t = type(value)
-            if t not in _SCALAR_TYPES:
-                if isinstance(value, np.integer):
-                    t = int
-                elif isinstance(value, np.floating):
-                    t = float
-                else:
-                    return {"maps": infos}
-            base = _SCALAR_TYPES[t][0]
-            if kinds.setdefault(key, base) is not base:
-                return {"maps": infos}
-    columns: dict[str, Any] = {}
-    for key, base in kinds.items():
-        values = np.zeros(n, dtype=np.dtype(_SCALAR_TYPES[base][1]))
-        mask = np.zeros(n, dtype=np.bool_)
-        for w, info in enumerate(infos):
-            if key in info:
-                values[w] = info[key]
-                mask[w] = True
-        columns[key] = [values.tolist(), mask.tolist()]
-    return {"columns": columns}
-
-
-def _stack(items: list[Any]) -> Any:
-    """One array of shape (n, ...) if every item is an array of one shape and dtype, else the list."""
-    first = items[0]
-    if isinstance(first, np.ndarray) and all(
-        isinstance(x, np.ndarray) and x.shape == first.shape and x.dtype == first.dtype for x in items
-    ):
-        return np.stack(items)
-    return items
-
 
 class BatchCommands:
     """The ``reset_batch`` and ``step_batch`` commands of one server.
@@ -176,35 +127,12 @@ class BatchCommands:
 
     def _actions(self, actions: Any, n: int) -> Any:
         """The ``n`` actions, checked; indexable by world."""
-        from remoteenv.sim.server import RequestError, validate_action
+        from remoteenv.sim.server import RequestError
 
-        space = self._space
-        if self._box and isinstance(actions, np.ndarray):
-            if actions.shape != (n, *space.shape):
-                raise RequestError(
-                    "invalid_action",
-                    f"actions of shape {actions.shape} do not fit {n} worlds of {space}",
-                )
-            if actions.dtype != space.dtype:
-                if not np.can_cast(actions.dtype, space.dtype, casting="same_kind"):
-                    raise RequestError("invalid_action", f"actions of dtype {actions.dtype} do not fit {space}")
-                actions = actions.astype(space.dtype)
-            inside = (actions >= space.low) & (actions <= space.high)  # NaN compares False
-            if not inside.all():
-                bad = int(np.flatnonzero(~inside.reshape(n, -1).all(axis=1))[0])
-                raise RequestError("invalid_action", f"action {actions[bad]!r:.200} of world {bad} is not in {space}")
-            return actions
-        if self._discrete and isinstance(actions, np.ndarray) and actions.dtype.kind in "iu":
-            if actions.shape != (n,):
-                raise RequestError("invalid_action", f"actions of shape {actions.shape} do not fit {n} worlds of {space}")
-            start = int(space.start)
-            inside = (actions >= start) & (actions < start + int(space.n))
-            if not inside.all():
-                bad = int(np.flatnonzero(~inside)[0])
-                raise RequestError("invalid_action", f"action {actions[bad]} of world {bad} is not in {space}")
-            return actions.tolist()
-        if not isinstance(actions, list) or len(actions) != n:
-            raise RequestError(
-                "invalid_action", f"actions must be an array or list with one action per world ({n})"
-            )
-        return [validate_action(self.server.envs[w], a) for w, a in enumerate(actions)]
+        try:
+            checked = check_actions(self._space, actions, n)
+        except InvalidAction as exc:
+            raise RequestError("invalid_action", str(exc)) from None
+        if isinstance(checked, np.ndarray) and self._discrete:
+            return checked.tolist()
+        return checked

@@ -14,8 +14,8 @@ from typing import Any
 
 import zmq
 
-from remoteenv import protocol
-from remoteenv.hot_wait import yield_cpu
+from remoteenv.wire import protocol
+from remoteenv.wire.hot_wait import yield_cpu
 
 _PIPE_READ_BYTES = 1 << 20
 

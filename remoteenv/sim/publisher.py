@@ -51,8 +51,8 @@ if __name__ == "__main__" and sys.path and os.path.abspath(sys.path[0]) == os.pa
 
 import zmq
 
-from remoteenv import protocol
-from remoteenv.addresses import is_loopback
+from remoteenv.wire import protocol
+from remoteenv.wire.addresses import is_loopback
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.scene_main import scene_argument_parser
 

@@ -59,8 +59,8 @@ from dataclasses import dataclass
 from typing import Any
 
 
-from remoteenv import protocol
-from remoteenv.latency import RunningStats
+from remoteenv.wire import protocol
+from remoteenv.wire.stats import RunningStats
 from remoteenv.sim.base_env import BaseEnv
 
 _PARENT_CHECK_S = 0.25

@@ -7,7 +7,7 @@ import json
 import sys
 from typing import Any, Callable, Sequence
 
-from remoteenv.keys import read_key, read_keys
+from remoteenv.wire.keys import read_key, read_keys
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.server import RemoteControlledAgent
 

@@ -13,14 +13,15 @@ import time
 import traceback
 from typing import Any, Callable
 
-import numpy as np
 import zmq
-from gymnasium import spaces
 
-from remoteenv import protocol
-from remoteenv.addresses import ipc_path, is_loopback
+from remoteenv.wire import protocol
+from remoteenv.wire import spaces as spaces_codec
+from remoteenv.wire.actions import check_action
+from remoteenv.wire.errors import InvalidAction
+from remoteenv.wire.addresses import ipc_path, is_loopback
 from remoteenv.sim.base_env import BaseEnv
-from remoteenv.hot_wait import HotWait
+from remoteenv.wire.hot_wait import HotWait
 from remoteenv.sim.channels import PipeChannel, ZmqChannel
 from remoteenv.sim.orphan import ParentWatch, parent_alive, remove_private_files
 from remoteenv.sim.stepping import LockStepper, make_stepper
@@ -298,8 +299,8 @@ class RemoteControlledAgent:
             "instance": self.instance,
             "pid": os.getpid(),
             "num_worlds": len(self.envs),
-            "observation_space": protocol.space_to_wire(env.observation_space),
-            "action_space": protocol.space_to_wire(env.action_space),
+            "observation_space": spaces_codec.space_to_wire(env.observation_space),
+            "action_space": spaces_codec.space_to_wire(env.action_space),
             "metadata": {
                 "render_modes": list(env.metadata.get("render_modes", [])),
                 "render_fps": int(round(1.0 / env.dt)),
@@ -355,27 +356,11 @@ def _start_client_key_check(ctx: zmq.Context, client_keys: list[bytes]) -> Any:
 
 
 def validate_action(env: BaseEnv, action: Any) -> Any:
-    """Convert a decoded action to the space's type and check it is inside the space."""
-    space = env.action_space
+    """``action`` checked against the env's action space (:mod:`remoteenv.wire.actions`)."""
     try:
-        if isinstance(action, np.ndarray) and hasattr(space, "dtype") and space.dtype is not None:
-            if action.dtype != space.dtype:
-                if not np.can_cast(action.dtype, space.dtype, casting="same_kind"):
-                    raise ValueError(f"dtype {action.dtype} does not fit {space.dtype}")
-                action = action.astype(space.dtype)
-        if (
-            type(space) is spaces.Box and isinstance(action, np.ndarray)
-            and action.shape == space.shape and action.dtype == space.dtype
-        ):
-            # Box.contains, without its generic checks (NaN compares False).
-            ok = bool((action >= space.low).all()) and bool((action <= space.high).all())
-        else:
-            ok = space.contains(action)
-    except Exception as exc:
-        raise RequestError("invalid_action", f"action {action!r:.200} does not fit {space}: {exc}") from None
-    if not ok:
-        raise RequestError("invalid_action", f"action {action!r:.200} is not in {space}")
-    return action
+        return check_action(env.action_space, action)
+    except InvalidAction as exc:
+        raise RequestError("invalid_action", str(exc)) from None
 
 
 __all__ = ["RemoteControlledAgent", "RequestError", "validate_action", "LockStepper"]

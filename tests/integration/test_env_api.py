@@ -295,7 +295,7 @@ def test_package_imported_from_the_checkout_finds_its_scenes():
     import subprocess
     import sys
 
-    root = os.path.dirname(HERE)
+    root = os.path.dirname(os.path.dirname(HERE))
     code = (
         "import gymnasium, remoteenv, remoteenv.scenes; "
         "print(remoteenv.__file__); print(remoteenv.scenes.__file__); "

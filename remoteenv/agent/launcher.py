@@ -25,9 +25,9 @@ import weakref
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
-from remoteenv.addresses import ipc_address, ipc_path, is_loopback, tcp_loopback_address, zmq_transport
-from remoteenv.errors import RemoteEnvError
-from remoteenv.keys import KeyPair, generate_keypair, write_public_keys, write_secret_key
+from remoteenv.wire.addresses import ipc_address, ipc_path, is_loopback, tcp_loopback_address, zmq_transport
+from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.wire.keys import KeyPair, generate_keypair, write_public_keys, write_secret_key
 
 _STDERR_TAIL_LINES = 20
 

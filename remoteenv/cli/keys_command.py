@@ -6,7 +6,7 @@ import argparse
 import os
 from typing import Any
 
-from remoteenv import keys
+from remoteenv.wire import keys
 
 
 def add_parser(sub: Any) -> None:

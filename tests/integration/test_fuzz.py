@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 import zmq
 
+from remoteenv.wire import protocol as wire_protocol
 from remoteenv import Launcher, protocol, scene_path
-from remoteenv.connection import Connection
+from remoteenv.agent.connection import Connection
 
 N_FRAMES = 12_000
 BATCH = 100
@@ -127,7 +128,7 @@ def _garbage(rng: random.Random, valid: list[bytes]) -> bytes:
         value = rng.choice([None, -1, 2**63, 1.5, "x", b"x", [1, 2], {"a": [1]}, {"low": 1e308},
                             {"low": "x"}, float("nan"), float("inf"), True, np.zeros(3, np.float32),
                             np.full(1, np.nan, np.float32), np.zeros((1, 1), np.int8)])
-        return _request(rng, cmd=cmd, **{field: protocol._default(value) if isinstance(value, np.ndarray) else value})
+        return _request(rng, cmd=cmd, **{field: wire_protocol._default(value) if isinstance(value, np.ndarray) else value})
     if kind == 10:  # bit flips in a valid frame
         frame = bytearray(rng.choice(valid))
         for _ in range(rng.randrange(1, 4)):

@@ -25,9 +25,9 @@ from typing import Any, Callable
 
 import zmq
 
-from remoteenv import protocol
-from remoteenv.errors import RemoteEnvError, RemoteEnvTimeout
-from remoteenv.hot_wait import HotWait, yield_cpu
+from remoteenv.wire import protocol
+from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout
+from remoteenv.wire.hot_wait import HotWait, yield_cpu
 
 #: How often (seconds) a waiting call checks that the sim process still lives.
 LIVENESS_CHECK_S = 0.1
@@ -35,7 +35,7 @@ LIVENESS_CHECK_S = 0.1
 #: that its exit code or signal can be reported.
 _EXIT_REPORT_S = 2.0
 _PIPE_READ_BYTES = 1 << 20
-#: Longest busy-wait (seconds) for a reply on the local pipe (see :mod:`remoteenv.hot_wait`).
+#: Longest busy-wait (seconds) for a reply on the local pipe (see :mod:`remoteenv.wire.hot_wait`).
 AGENT_SPIN_S = 200e-6
 
 
@@ -363,10 +363,10 @@ def connect_sim(
     timeout: float | None = 60.0,
     curve_client_keypair: Any = None,
 ) -> Connection:
-    """A connection to ``sim`` (a :class:`remoteenv.launcher.SimProcess` or an
+    """A connection to ``sim`` (a :class:`remoteenv.agent.launcher.SimProcess` or an
     attached sim): over its local pipe if it has one, else over ZeroMQ.
-    ``curve_client_keypair`` is a :class:`remoteenv.keys.KeyPair` (the
-    launcher's :attr:`~remoteenv.launcher.Launcher.curve_client_keypair`) or None."""
+    ``curve_client_keypair`` is a :class:`remoteenv.wire.keys.KeyPair` (the
+    launcher's :attr:`~remoteenv.agent.launcher.Launcher.curve_client_keypair`) or None."""
     death_check = getattr(sim, "death", None)
     pipe = getattr(sim, "pipe", None)
     if pipe is not None:

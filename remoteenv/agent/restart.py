@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from remoteenv.errors import RemoteEnvError
+from remoteenv.agent.errors import RemoteEnvError
 
 #: Error kinds a fresh sim process can cure: the process died, or it is alive
 #: but stopped answering. A scene exception or a bad action would only repeat.

@@ -34,8 +34,8 @@ import socket
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
-from remoteenv.errors import RemoteEnvError
-from remoteenv.keys import KeyPair, load_keypair
+from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.wire.keys import KeyPair, load_keypair
 
 FORMAT = "remoteenv-launch/1"
 

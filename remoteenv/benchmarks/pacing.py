@@ -26,10 +26,11 @@ from typing import Any
 
 import numpy as np
 
-from remoteenv import controllers, protocol
-from remoteenv.connection import Connection
-from remoteenv.latency import LatencyStats
-from remoteenv.launcher import Launcher
+from remoteenv import controllers
+from remoteenv.wire import protocol
+from remoteenv.agent.connection import Connection
+from remoteenv.agent.latency import LatencyStats
+from remoteenv.agent.launcher import Launcher
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 import zmq
 
-from remoteenv import Launcher, OpenAIRemoteEnv, keys, protocol, scene_path
+from remoteenv import Launcher, OpenAIRemoteEnv, protocol, scene_path
+from remoteenv.wire import keys
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
 from remoteenv.sim.server import RemoteControlledAgent
 

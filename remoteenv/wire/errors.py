@@ -1,0 +1,64 @@
+"""Error kinds of the wire and the exceptions the shared checks raise.
+
+An error reply carries one of :data:`ERROR_KINDS` (see the spec in
+:mod:`remoteenv.wire.protocol`); the agent side turns each kind into its own
+exception class (:mod:`remoteenv.agent.errors`).
+"""
+
+from __future__ import annotations
+
+import reprlib
+
+#: A malformed request, unknown command or version mismatch.
+PROTOCOL = "protocol"
+#: An action outside the action space.
+INVALID_ACTION = "invalid_action"
+#: The scene's env code raised.
+SCENE = "scene"
+#: A request that does not fit the world's state (e.g. step before reset).
+STATE = "state"
+#: The kinds an error reply may carry.
+ERROR_KINDS = frozenset({PROTOCOL, INVALID_ACTION, SCENE, STATE})
+
+#: Longest text of an error message built from a request's content (characters).
+MAX_ECHO_CHARS = 200
+
+
+class ProtocolError(ValueError):
+    """A frame or field does not follow the spec of :mod:`remoteenv.wire.protocol`."""
+
+
+class InvalidAction(ValueError):
+    """An action is not in the action space; the message names the space and the value."""
+
+
+class _BoundedRepr(reprlib.Repr):
+    """A ``repr`` whose cost is bounded by its output, whatever the input's size."""
+
+    def repr_bytes(self, value: bytes, level: int) -> str:
+        head = repr(value[: self.maxstring])
+        return head if len(value) <= self.maxstring else f"{head}...({len(value)} bytes)"
+
+    repr_bytearray = repr_bytes
+
+    def repr_instance(self, value: object, level: int) -> str:
+        # numpy arrays summarise themselves; other objects are named, not printed.
+        import numpy as np
+
+        if isinstance(value, np.ndarray):
+            with np.printoptions(threshold=16, edgeitems=3):
+                return repr(value)
+        return f"<{type(value).__name__}>"
+
+
+_bounded = _BoundedRepr()
+_bounded.maxstring = MAX_ECHO_CHARS
+_bounded.maxother = MAX_ECHO_CHARS
+_bounded.maxlong = 60
+
+
+def short_repr(value: object, limit: int = MAX_ECHO_CHARS) -> str:
+    """A ``repr`` of ``value`` of at most ``limit`` characters, built without
+    rendering all of a large input first (for messages that echo input)."""
+    text = _bounded.repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -1,0 +1,305 @@
+"""The remoteenv wire format. Both processes import this module; it is the spec.
+
+Transport
+---------
+ZeroMQ. The sim process binds one ROUTER socket; an agent connects one DEALER
+socket. Each message is a single ZeroMQ frame holding one msgpack document
+(the ROUTER additionally sees the peer's routing id as a first frame, which it
+echoes back unchanged). Nothing on the wire is ever unpickled or evaluated.
+
+Default addresses are ``ipc://<private temp dir>/sim-<instance>.sock`` or
+``tcp://127.0.0.1:<port chosen by the OS>``. Binding any other interface is an
+explicit choice of the user.
+
+The local pipe. A sim process started by an agent's launcher also gets one end
+of a Unix stream socketpair as an inherited file descriptor (``--pipe-fd``);
+the launching agent keeps the other end and sends its own requests there,
+which skips ZeroMQ's I/O threads (the fastest path on one machine). On the
+pipe each message is a 4-byte little-endian unsigned length followed by that
+many bytes: the same msgpack frame as on ZeroMQ. It has exactly one peer, so
+there is no routing id. End of file on the pipe means the agent is gone; the
+sim then stops. A length above :data:`MAX_MESSAGE_BYTES` ends the pipe.
+
+Messages
+--------
+A request is a msgpack map::
+
+    {"seq": int, "cmd": str, ...command arguments}
+
+``seq`` is chosen by the client and strictly increases per connection. Every
+reply echoes it::
+
+    {"seq": int, "ok": true,  ...results}
+    {"seq": int, "ok": false, "error": {"kind": str, "message": str,
+                                         "traceback": str}}
+
+A client drops any reply whose ``seq`` is not the one it is waiting for (a
+stale reply from a request that timed out is never taken for the current one).
+A frame that cannot be decoded as a request gets an error reply with
+``seq = -1``. Error kinds: ``"protocol"`` (malformed request, unknown command,
+version mismatch), ``"invalid_action"``, ``"scene"`` (the env code raised),
+``"state"`` (e.g. step before reset).
+
+Commands (version 1)
+--------------------
+``handshake`` ``{"protocol": int}`` -> ``{"protocol", "env_id", "instance",
+"pid", "num_worlds", "observation_space", "action_space", "metadata",
+"stepping"}``. The server refuses a protocol version it does not speak,
+naming both versions. ``metadata`` holds ``render_modes``, ``render_fps``,
+``dt`` (seconds of simulated time per env step), ``timestep`` (seconds per
+physics substep) and ``frame_skip``; ``stepping`` holds ``mode``
+(``"lock_step"`` or ``"real_time"``) and that mode's parameters.
+
+``reset`` ``{"world": int, "seed": int | nil, "options": map | nil}`` ->
+``{"obs", "info"}``.
+
+``step`` ``{"world": int, "action"}`` -> ``{"obs", "reward": float,
+"terminated": bool, "truncated": bool, "info": map}``.
+
+``render`` ``{"world": int}`` -> ``{"frame": uint8 array H x W x 3 | nil}``.
+
+``close`` ``{}`` -> ``{}``; the server then exits.
+
+``timing`` ``{"clear": bool}`` -> ``{"worlds": [map, ...]}`` (real-time sims
+only): per world, ``pacing_error_s`` and ``apply_delay_s`` summaries
+(``count``, ``mean``, ``p50``, ``p99``, ``max``, wall seconds), ``overruns``,
+``substeps``, ``period_s``; ``clear`` resets them after replying. In real
+time a ``step`` reply is sent when its action has been in force for one
+control tick (see :mod:`remoteenv.sim.real_time`).
+
+``reset_batch`` ``{"worlds": [int, ...], "seeds": [int | nil, ...] | nil,
+"options": map | nil}`` -> ``{"obs", "info": infos}`` (lock-step sims only):
+resets the listed worlds in order, world ``worlds[j]`` with ``seeds[j]``.
+
+``step_batch`` ``{"ops": [int, ...], "actions"}`` -> ``{"obs", "reward":
+[float, ...], "terminated": [bool, ...], "truncated": [bool, ...], "info":
+infos, "final": [[world, obs, info], ...]}`` (lock-step sims only): one
+request for worlds ``0 .. n-1`` with ``n = len(ops)``; ``actions`` holds their
+``n`` actions, stacked in one array (Box: shape ``(n, *shape)``; Discrete:
+ints of shape ``(n,)``) or as a list. ``ops[w]`` says what world ``w`` does:
+0 step; 1 reset (action ignored; reward 0, not terminated, not truncated,
+info = the reset's info); 2 step, then reset if the step terminated or
+truncated; 3 step, then reset (the agent's time limit ends the episode). A
+world reset after a step is listed in ``final`` with the step's obs and info,
+and its ``obs``/``info`` entries are the reset's.
+
+In both, ``obs`` is one array of shape ``(n, *obs_shape)`` when every world's
+obs is an array of one shape and dtype, else a list of ``n`` obs. ``infos`` is
+``{"columns": {key: [values, present]}}`` when every info value is a bool,
+int or float with one type per key (``values``: list of ``n`` such values, 0
+where absent; ``present``: list of ``n`` bools), else
+``{"maps": [map, ...]}``, one info map per world.
+
+``world`` defaults to 0 and addresses one of the ``num_worlds`` MuJoCo worlds
+a sim process hosts.
+
+Values
+------
+Plain msgpack types (nil, bool, int, float, str, bin, array, map with str
+keys). numpy arrays travel as msgpack extension type 1 whose payload is::
+
+    uint8 L | dtype: L ASCII bytes | uint8 ndim | shape: ndim x uint64 LE | data
+
+with ``dtype`` an explicit little-endian numpy type string from
+:data:`ARRAY_DTYPES` (``"<f4"``, ``"|u1"``, ...), ``ndim`` at most 32 and
+``data`` the C-ordered raw bytes. Decoders check that ``len(data) ==
+prod(shape) * itemsize`` and return a fresh, writable array that shares
+memory with nothing. numpy scalars are sent as plain ints, floats and
+bools.
+
+Spaces (Box, Discrete, MultiDiscrete, MultiBinary, Dict, Tuple) travel as maps,
+see :mod:`remoteenv.wire.spaces`.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from typing import Any
+
+import msgpack
+import numpy as np
+
+from remoteenv.wire.errors import ProtocolError
+
+PROTOCOL_VERSION = 1
+
+#: Largest frame a peer accepts (bytes). Larger frames are dropped by ZeroMQ.
+MAX_MESSAGE_BYTES = 256 * 1024 * 1024
+
+_EXT_NDARRAY = 1
+
+#: The only dtypes that may appear on the wire.
+ARRAY_DTYPES = frozenset(
+    np.dtype(t).newbyteorder("<").str if np.dtype(t).itemsize > 1 else np.dtype(t).str
+    for t in (
+        np.bool_, np.int8, np.int16, np.int32, np.int64,
+        np.uint8, np.uint16, np.uint32, np.uint64,
+        np.float16, np.float32, np.float64,
+    )
+)
+_MAX_NDIM = 32
+
+
+#: ``step_batch`` operations, one per world (see the spec above).
+#: Step the world with its action.
+OP_STEP = 0
+#: Reset the world (no seed, no options); its action is ignored; reward 0, not done.
+OP_RESET = 1
+#: Step; if the step terminated or truncated, reset and report the final obs/info.
+OP_STEP_AUTORESET = 2
+#: Step, then reset regardless (the agent's time limit truncates this step).
+OP_STEP_RESET = 3
+OPS = (OP_STEP, OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET)
+
+
+def wire_dtype(dtype: np.dtype) -> str:
+    d = dtype.newbyteorder("<") if dtype.itemsize > 1 else dtype
+    s = d.str
+    if s not in ARRAY_DTYPES:
+        raise TypeError(f"numpy dtype {dtype} cannot be sent; allowed: {sorted(ARRAY_DTYPES)}")
+    return s
+
+
+#: numpy dtype for each allowed wire dtype string (native byte order on decode).
+_DTYPES = {t: np.dtype(t) for t in ARRAY_DTYPES}
+_SHAPE_FORMATS = [struct.Struct(f"<{n}Q") for n in range(_MAX_NDIM + 1)]
+#: Encoded array headers by (dtype string, shape); arrays of one shape recur every step.
+_HEADERS: dict[tuple[str, tuple[int, ...]], bytes] = {}
+
+
+def _array_header(dtype: str, shape: tuple[int, ...]) -> bytes:
+    key = (dtype, shape)
+    head = _HEADERS.get(key)
+    if head is None:
+        if len(shape) > _MAX_NDIM:
+            raise TypeError(f"arrays of more than {_MAX_NDIM} dimensions cannot be sent")
+        name = dtype.encode("ascii")
+        head = bytes([len(name)]) + name + bytes([len(shape)]) + _SHAPE_FORMATS[len(shape)].pack(*shape)
+        if len(_HEADERS) < 4096:
+            _HEADERS[key] = head
+    return head
+
+
+def _default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        dtype = obj.dtype.str
+        if dtype not in _DTYPES or not obj.flags.c_contiguous:
+            dtype = wire_dtype(obj.dtype)
+            obj = np.asarray(obj, dtype=_DTYPES[dtype], order="C")  # keeps 0-d arrays 0-d
+        return msgpack.ExtType(_EXT_NDARRAY, _array_header(dtype, obj.shape) + obj.tobytes())
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating):
+        return float(obj)
+    if isinstance(obj, (tuple, set, frozenset)):
+        return list(obj)
+    raise TypeError(f"cannot send a {type(obj).__name__} on the wire: {obj!r:.200}")
+
+
+def _ext_hook(code: int, data: bytes) -> Any:
+    if code != _EXT_NDARRAY:
+        raise ProtocolError(f"unknown msgpack extension type {code}")
+    try:
+        n = data[0]
+        dtype = data[1:1 + n].decode("ascii")
+        ndim = data[1 + n]
+        offset = 2 + n
+        shape = _SHAPE_FORMATS[ndim].unpack_from(data, offset)
+    except (IndexError, UnicodeDecodeError, struct.error) as exc:
+        raise ProtocolError(f"malformed array header: {exc}") from None
+    dt = _DTYPES.get(dtype)
+    if dt is None:
+        raise ProtocolError(f"array dtype {dtype!r} is not allowed")
+    offset += 8 * ndim
+    count = math.prod(shape)
+    if count * dt.itemsize != len(data) - offset:
+        raise ProtocolError(
+            f"array of dtype {dtype} and shape {list(shape)} needs {count * dt.itemsize} "
+            f"bytes, got {len(data) - offset}"
+        )
+    # frombuffer aliases the frame and is read-only: copy into a fresh array.
+    return np.frombuffer(data, dt, count, offset).reshape(shape).copy()
+
+
+def pack(obj: Any) -> bytes:
+    """Encode one message (a map) as msgpack bytes."""
+    return msgpack.packb(obj, default=_default, use_bin_type=True)
+
+
+def unpack(frame: bytes) -> Any:
+    """Decode one frame. Raises :class:`ProtocolError` for anything off-spec."""
+    if len(frame) > MAX_MESSAGE_BYTES:
+        raise ProtocolError(f"frame of {len(frame)} bytes exceeds {MAX_MESSAGE_BYTES}")
+    try:
+        return msgpack.unpackb(
+            frame, raw=False, ext_hook=_ext_hook, strict_map_key=True, use_list=True
+        )
+    except ProtocolError:
+        raise
+    except Exception as exc:  # msgpack raises several types for bad input
+        raise ProtocolError(f"undecodable frame ({type(exc).__name__}: {exc})") from None
+
+
+def decode_request(frame: bytes) -> dict[str, Any]:
+    """Decode and shape-check a request frame."""
+    msg = unpack(frame)
+    if not isinstance(msg, dict):
+        raise ProtocolError(f"a request must be a map, got {type(msg).__name__}")
+    seq = msg.get("seq")
+    if not isinstance(seq, int) or isinstance(seq, bool):
+        raise ProtocolError("a request needs an integer 'seq'")
+    if not isinstance(msg.get("cmd"), str):
+        raise ProtocolError("a request needs a string 'cmd'")
+    return msg
+
+
+_LENGTH = struct.Struct("<I")
+
+
+def stream_frame(payload: bytes) -> bytes:
+    """``payload`` with its length prefix, for the local pipe."""
+    return _LENGTH.pack(len(payload)) + payload
+
+
+class StreamDecoder:
+    """Splits the byte stream of a local pipe into frames."""
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+
+    def feed(self, data: bytes) -> list[bytes]:
+        """Add received bytes; return the frames now complete, in order.
+
+        Raises :class:`ProtocolError` for a declared length above
+        :data:`MAX_MESSAGE_BYTES` (the stream cannot be trusted after that).
+        """
+        buf = self._buf
+        buf += data
+        frames = []
+        start = 0
+        while len(buf) - start >= 4:
+            (length,) = _LENGTH.unpack_from(buf, start)
+            if length > MAX_MESSAGE_BYTES:
+                raise ProtocolError(f"pipe frame of {length} bytes exceeds {MAX_MESSAGE_BYTES}")
+            end = start + 4 + length
+            if len(buf) < end:
+                break
+            frames.append(bytes(buf[start + 4:end]))
+            start = end
+        if start:
+            del buf[:start]
+        return frames
+
+
+def error_reply(seq: int, kind: str, message: str, traceback: str = "") -> dict[str, Any]:
+    return {"seq": seq, "ok": False, "error": {"kind": kind, "message": message, "traceback": traceback}}
+
+__all__ = [
+    "ARRAY_DTYPES", "MAX_MESSAGE_BYTES", "OPS", "OP_RESET", "OP_STEP", "OP_STEP_AUTORESET",
+    "OP_STEP_RESET", "PROTOCOL_VERSION", "ProtocolError", "StreamDecoder", "decode_request",
+    "error_reply", "pack", "stream_frame", "unpack",
+    "wire_dtype",
+]
