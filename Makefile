@@ -6,13 +6,13 @@ PIP := $(PY) -m pip
 PYTHON3 ?= python3
 export MUJOCO_GL ?= egl
 
-.PHONY: demo test bench install deps clean
+.PHONY: demo test lint bench install deps clean
 
 $(VENV)/.deps: pyproject.toml
 	$(PYTHON3) -m venv $(VENV)
 	# torch first and pinned: a looser requirement pulls GBs of CUDA packages.
 	$(PIP) install --quiet torch==2.13.0
-	$(PIP) install --quiet ".[test,torch,sb3,video]"
+	$(PIP) install --quiet ".[test,lint,torch,sb3,video]"
 	touch $@
 
 deps: $(VENV)/.deps
@@ -24,8 +24,16 @@ demo: install
 	$(PY) -m remoteenv demo cartpole --continuous --episodes 3
 	$(PY) -m remoteenv demo reacher --episodes 3
 
-test: install
-	$(VENV)/bin/pytest
+test: install lint
+	$(VENV)/bin/pytest tests/unit
+	$(VENV)/bin/pytest tests/integration
+
+# Lint, format, types and the layer contracts of the source tree (no processes started).
+lint: deps
+	$(VENV)/bin/ruff check remoteenv scenes tests examples
+	$(VENV)/bin/ruff format --check remoteenv scenes tests examples
+	$(VENV)/bin/mypy
+	PYTHONPATH=$(CURDIR) $(VENV)/bin/lint-imports
 
 bench: install
 	$(PY) -m remoteenv bench
