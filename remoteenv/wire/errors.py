@@ -45,6 +45,9 @@ class _BoundedRepr(reprlib.Repr):
         # numpy arrays summarise themselves; other objects are named, not printed.
         import numpy as np
 
+        if value is None or isinstance(value, (bool, float, complex, np.generic)):
+            return repr(value)
+
         if isinstance(value, np.ndarray):
             with np.printoptions(threshold=16, edgeitems=3):
                 return repr(value)
