@@ -7,7 +7,9 @@ not from the engine's code, and must agree with it exactly.
 
 from __future__ import annotations
 
+import copy
 import json
+import pickle
 
 import numpy as np
 import pytest
@@ -338,6 +340,8 @@ def test_specs_are_immutable_values():
     with pytest.raises(AttributeError, match="immutable"):
         Constant(1).value = 2  # type: ignore[misc]
     assert "Trace([0, 0, 0, 0, 0, 0, 0, 0, ...] (500 values)" in repr(Trace([0] * 500))
+    for spec in SPECS:  # specs travel inside env kwargs: copies and pickles (e.g. to Ray) keep them
+        assert pickle.loads(pickle.dumps(spec)) == spec and copy.deepcopy(spec) == spec
 
 
 def test_as_delay_turns_a_number_into_a_constant():
