@@ -21,7 +21,20 @@ from remoteenv.wire.delays import (
 )
 
 __all__ = [
-    "Categorical", "Constant", "DelayLine", "DelaySpec", "DelayStream", "LockStepDelays", "MAX_DELAY_S",
-    "MAX_DELAY_TICKS", "SECONDS", "StepDelays", "TICKS", "Trace", "Uniform", "as_delay", "delay_from_wire",
+    "Categorical",
+    "Constant",
+    "DelayLine",
+    "DelaySpec",
+    "DelayStream",
+    "LockStepDelays",
+    "MAX_DELAY_S",
+    "MAX_DELAY_TICKS",
+    "SECONDS",
+    "StepDelays",
+    "TICKS",
+    "Trace",
+    "Uniform",
+    "as_delay",
+    "delay_from_wire",
     "delay_rng",
 ]

@@ -77,8 +77,9 @@ class _ActionEncoder:
         return out
 
 
-def _augmented_space(obs_space: spaces.Space, encoder: _ActionEncoder, k: int, include_latency: bool,
-                     dtype: np.dtype) -> spaces.Box:
+def _augmented_space(
+    obs_space: spaces.Space, encoder: _ActionEncoder, k: int, include_latency: bool, dtype: np.dtype
+) -> spaces.Box:
     assert isinstance(obs_space, spaces.Box)
     low = [obs_space.low.reshape(-1).astype(dtype), np.tile(encoder.low, k)]
     high = [obs_space.high.reshape(-1).astype(dtype), np.tile(encoder.high, k)]
@@ -92,8 +93,10 @@ def _check_spaces(obs_space: spaces.Space, k: int, owner: str) -> np.dtype:
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 0:
         raise ValueError(f"{owner} needs k >= 0 actions to keep, got {k!r:.60}")
     if not isinstance(obs_space, spaces.Box):
-        raise TypeError(f"{owner} supports Box observation spaces, got {obs_space}; "
-                        "flatten it first (gymnasium.wrappers.FlattenObservation)")
+        raise TypeError(
+            f"{owner} supports Box observation spaces, got {obs_space}; "
+            "flatten it first (gymnasium.wrappers.FlattenObservation)"
+        )
     return np.result_type(obs_space.dtype, np.float32)
 
 
@@ -124,12 +127,13 @@ class ActionHistory(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.k = int(k)
         self.include_latency = include_latency
         self._encoder = _ActionEncoder(env.action_space, dtype, "ActionHistory")
-        self.observation_space = _augmented_space(env.observation_space, self._encoder, self.k,
-                                                  include_latency, dtype)
+        self.observation_space = _augmented_space(env.observation_space, self._encoder, self.k, include_latency, dtype)
         self._history = np.zeros((self.k, self._encoder.size), dtype=dtype)
         self._latency = 0.0
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
         self._history[:] = 0
         self._latency = _latency(info.get("latency_ticks"))
@@ -197,7 +201,9 @@ class ActionHistoryVector(VectorWrapper, gym.utils.RecordConstructorArgs):
         self._latency = np.zeros(n, dtype=dtype)
         self._restarting = np.zeros(n, dtype=bool)
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         mask = None if options is None else options.get("reset_mask")  # read before the env pops it
         obs, infos = self.env.reset(seed=seed, options=options)
         worlds = np.ones(self.num_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)

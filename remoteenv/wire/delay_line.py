@@ -256,6 +256,12 @@ class LockStepDelays:
 
 
 __all__ = [
-    "ACTION_STREAM", "DelayLine", "DelayStream", "LINK_STREAM", "LockStepDelays", "OBS_STREAM", "StepDelays",
+    "ACTION_STREAM",
+    "DelayLine",
+    "DelayStream",
+    "LINK_STREAM",
+    "LockStepDelays",
+    "OBS_STREAM",
+    "StepDelays",
     "delay_rng",
 ]

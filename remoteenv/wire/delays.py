@@ -72,8 +72,7 @@ def _delay_value(value: Any, unit: str, what: str) -> Delay:
     if unit == TICKS:
         if not isinstance(value, (int, np.integer)):
             raise ValueError(
-                f"{what} must be a whole number of ticks, got {_show(value)}; "
-                "for a delay in seconds pass unit='s'"
+                f"{what} must be a whole number of ticks, got {_show(value)}; for a delay in seconds pass unit='s'"
             )
         ticks = int(value)
         if not 0 <= ticks <= MAX_DELAY_TICKS:
@@ -138,8 +137,7 @@ class DelaySpec:
         return type(other) is type(self) and self.to_wire() == other.to_wire()
 
     def __hash__(self) -> int:
-        return hash((self.kind, self.unit, *(tuple(v) if isinstance(v, list) else v
-                                              for v in self._fields().values())))
+        return hash((self.kind, self.unit, *(tuple(v) if isinstance(v, list) else v for v in self._fields().values())))
 
     def __setattr__(self, name: str, value: Any) -> None:
         raise AttributeError(f"{type(self).__name__} is immutable")
@@ -223,8 +221,7 @@ class Categorical(DelaySpec):
             if isinstance(probs, (str, bytes)) or not isinstance(probs, (Sequence, np.ndarray)):
                 raise ValueError(f"Categorical probs must be a sequence of numbers, got {short_repr(probs)}")
             if len(probs) != len(vals):
-                raise ValueError(f"Categorical needs one probability per value: {len(vals)} values, "
-                                 f"{len(probs)} probs")
+                raise ValueError(f"Categorical needs one probability per value: {len(vals)} values, {len(probs)} probs")
             weights = []
             for i, p in enumerate(probs):
                 if isinstance(p, (bool, np.bool_)) or not isinstance(p, (int, float, np.integer, np.floating)):
@@ -320,8 +317,10 @@ def _read_trace_file(path: str, unit: str) -> tuple[Delay, ...]:
         raise ValueError(f"cannot read {what}: {exc}") from None
     if isinstance(data, np.ndarray):
         if data.ndim != 1 or not 1 <= data.size <= MAX_VALUES or data.dtype.kind not in "iuf":
-            raise ValueError(f"{what} must hold a one-dimensional numeric array of 1..{MAX_VALUES} "
-                             f"delays, got shape {data.shape} and dtype {data.dtype}")
+            raise ValueError(
+                f"{what} must hold a one-dimensional numeric array of 1..{MAX_VALUES} "
+                f"delays, got shape {data.shape} and dtype {data.dtype}"
+            )
         data = np.array(data)
         if unit == TICKS and data.dtype.kind == "f":
             if not np.all(np.isfinite(data) & (data == np.round(data))):
@@ -368,7 +367,9 @@ def delay_from_wire(desc: Any) -> DelaySpec:
     cls, fields = entry
     expected = fields | {"kind", "unit"}
     if set(desc) != expected:
-        raise ProtocolError(f"a {kind} delay spec has keys {sorted(expected)}, got {short_repr(sorted(map(str, list(desc)[:20])))}")
+        raise ProtocolError(
+            f"a {kind} delay spec has keys {sorted(expected)}, got {short_repr(sorted(map(str, list(desc)[:20])))}"
+        )
     for name in fields:
         value = desc[name]
         if name in ("values", "probs") and not isinstance(value, list):
@@ -399,6 +400,19 @@ def as_delay(value: DelaySpec | int | float, unit: str = TICKS) -> DelaySpec:
 
 
 __all__ = [
-    "Categorical", "Constant", "Delay", "DelaySpec", "MAX_DELAY_S", "MAX_DELAY_TICKS", "MAX_VALUES",
-    "PROB_TOLERANCE", "SECONDS", "TICKS", "Trace", "UNITS", "Uniform", "as_delay", "delay_from_wire",
+    "Categorical",
+    "Constant",
+    "Delay",
+    "DelaySpec",
+    "MAX_DELAY_S",
+    "MAX_DELAY_TICKS",
+    "MAX_VALUES",
+    "PROB_TOLERANCE",
+    "SECONDS",
+    "TICKS",
+    "Trace",
+    "UNITS",
+    "Uniform",
+    "as_delay",
+    "delay_from_wire",
 ]

@@ -286,8 +286,11 @@ def test_the_two_directions_draw_from_separate_streams():
 # --- specs: sampling, validation, wire ---------------------------------------------------------
 
 
-@pytest.mark.parametrize("spec", [*SPECS, Uniform(0.01, 0.05, unit="s"), Constant(0.1, unit="s"),
-                                  Categorical([0.0, 0.5], [0.75, 0.25], unit="s")], ids=repr)
+@pytest.mark.parametrize(
+    "spec",
+    [*SPECS, Uniform(0.01, 0.05, unit="s"), Constant(0.1, unit="s"), Categorical([0.0, 0.5], [0.75, 0.25], unit="s")],
+    ids=repr,
+)
 def test_sampling_follows_the_documented_rule(spec):
     stream = DelayStream(spec, 1)
     stream.seed(123)
@@ -307,27 +310,31 @@ def test_ticks_are_ints_and_seconds_are_floats():
     assert type(Uniform(0, 1, unit="s").sample(rng, 0)) is float
 
 
-@pytest.mark.parametrize("build, message", [
-    (lambda: Constant(-1), "within 0"),
-    (lambda: Constant(MAX_DELAY_TICKS + 1), "within 0"),
-    (lambda: Constant(True), "must be a number"),
-    (lambda: Constant(2.5), "whole number of ticks.*unit='s'"),
-    (lambda: Constant("3"), "whole number of ticks"),
-    (lambda: Constant(float("nan"), unit="s"), "within 0"),
-    (lambda: Constant(1, unit="ms"), "unit must be one of"),
-    (lambda: Uniform(3, 1), "low <= high"),
-    (lambda: Categorical([], []), "1..100000"),
-    (lambda: Categorical([1, 2], [1.0]), "one probability per value"),
-    (lambda: Categorical([1, 2], [1.5, -0.5]), r"probs\[0\] must be within 0..1"),
-    (lambda: Categorical([1, 2], [0.5, float("nan")]), r"probs\[1\]"),
-    (lambda: Categorical([1, 2], [0.5, 0.4]), "sum to 1"),
-    (lambda: Categorical([1, 2], "ab"), "sequence of numbers"),
-    (lambda: Trace([]), "1..100000"),
-    (lambda: Trace(np.zeros((2, 2), dtype=int)), "one-dimensional"),
-    (lambda: Trace([1, -2]), r"Trace values\[1\] must be within"),
-    (lambda: Trace([0] * (MAX_VALUES + 1)), "1..100000"),
-    (lambda: Trace.from_seconds([0.1], dt=0), "dt must be a positive"),
-], ids=lambda x: x if isinstance(x, str) else "")
+@pytest.mark.parametrize(
+    "build, message",
+    [
+        (lambda: Constant(-1), "within 0"),
+        (lambda: Constant(MAX_DELAY_TICKS + 1), "within 0"),
+        (lambda: Constant(True), "must be a number"),
+        (lambda: Constant(2.5), "whole number of ticks.*unit='s'"),
+        (lambda: Constant("3"), "whole number of ticks"),
+        (lambda: Constant(float("nan"), unit="s"), "within 0"),
+        (lambda: Constant(1, unit="ms"), "unit must be one of"),
+        (lambda: Uniform(3, 1), "low <= high"),
+        (lambda: Categorical([], []), "1..100000"),
+        (lambda: Categorical([1, 2], [1.0]), "one probability per value"),
+        (lambda: Categorical([1, 2], [1.5, -0.5]), r"probs\[0\] must be within 0..1"),
+        (lambda: Categorical([1, 2], [0.5, float("nan")]), r"probs\[1\]"),
+        (lambda: Categorical([1, 2], [0.5, 0.4]), "sum to 1"),
+        (lambda: Categorical([1, 2], "ab"), "sequence of numbers"),
+        (lambda: Trace([]), "1..100000"),
+        (lambda: Trace(np.zeros((2, 2), dtype=int)), "one-dimensional"),
+        (lambda: Trace([1, -2]), r"Trace values\[1\] must be within"),
+        (lambda: Trace([0] * (MAX_VALUES + 1)), "1..100000"),
+        (lambda: Trace.from_seconds([0.1], dt=0), "dt must be a positive"),
+    ],
+    ids=lambda x: x if isinstance(x, str) else "",
+)
 def test_invalid_specs_are_refused_with_a_clear_message(build, message):
     with pytest.raises(ValueError, match=message):
         build()
@@ -373,24 +380,28 @@ def test_wire_form_round_trips_through_msgpack(spec):
     assert [a.draw() for _ in range(20)] == [b.draw() for _ in range(20)]
 
 
-@pytest.mark.parametrize("desc, message", [
-    ([1, 2], "must be a map"),
-    ({"kind": "normal", "unit": "ticks", "value": 1}, "unknown delay kind"),
-    ({"kind": 3, "unit": "ticks"}, "unknown delay kind"),
-    ({"kind": "constant", "unit": "ticks"}, "has keys"),
-    ({"kind": "constant", "unit": "ticks", "value": 1, "extra": 0}, "has keys"),
-    ({"kind": "constant", "unit": "minutes", "value": 1}, "unit must be one of"),
-    ({"kind": "constant", "unit": "ticks", "value": True}, "must be a number"),
-    ({"kind": "constant", "unit": "ticks", "value": "1"}, "whole number"),
-    ({"kind": "constant", "unit": "ticks", "value": 1.0}, "whole number"),
-    ({"kind": "constant", "unit": "ticks", "value": 2**70}, "within 0"),
-    ({"kind": "uniform", "unit": "s", "low": 1.0, "high": 0.5}, "low <= high"),
-    ({"kind": "categorical", "unit": "ticks", "values": [1], "probs": 1.0}, "must be a list"),
-    ({"kind": "categorical", "unit": "ticks", "values": [1, 2], "probs": [0.9, 0.9]}, "sum to 1"),
-    ({"kind": "trace", "unit": "ticks", "values": {"a": 1}}, "must be a list"),
-    ({"kind": "trace", "unit": "ticks", "values": [[1]]}, "whole number"),
-    ({"kind": "trace", "unit": "ticks", "values": [0] * (MAX_VALUES + 1)}, "more than"),
-], ids=lambda x: x if isinstance(x, str) else "")
+@pytest.mark.parametrize(
+    "desc, message",
+    [
+        ([1, 2], "must be a map"),
+        ({"kind": "normal", "unit": "ticks", "value": 1}, "unknown delay kind"),
+        ({"kind": 3, "unit": "ticks"}, "unknown delay kind"),
+        ({"kind": "constant", "unit": "ticks"}, "has keys"),
+        ({"kind": "constant", "unit": "ticks", "value": 1, "extra": 0}, "has keys"),
+        ({"kind": "constant", "unit": "minutes", "value": 1}, "unit must be one of"),
+        ({"kind": "constant", "unit": "ticks", "value": True}, "must be a number"),
+        ({"kind": "constant", "unit": "ticks", "value": "1"}, "whole number"),
+        ({"kind": "constant", "unit": "ticks", "value": 1.0}, "whole number"),
+        ({"kind": "constant", "unit": "ticks", "value": 2**70}, "within 0"),
+        ({"kind": "uniform", "unit": "s", "low": 1.0, "high": 0.5}, "low <= high"),
+        ({"kind": "categorical", "unit": "ticks", "values": [1], "probs": 1.0}, "must be a list"),
+        ({"kind": "categorical", "unit": "ticks", "values": [1, 2], "probs": [0.9, 0.9]}, "sum to 1"),
+        ({"kind": "trace", "unit": "ticks", "values": {"a": 1}}, "must be a list"),
+        ({"kind": "trace", "unit": "ticks", "values": [[1]]}, "whole number"),
+        ({"kind": "trace", "unit": "ticks", "values": [0] * (MAX_VALUES + 1)}, "more than"),
+    ],
+    ids=lambda x: x if isinstance(x, str) else "",
+)
 def test_from_wire_refuses_anything_off_spec(desc, message):
     with pytest.raises(ProtocolError, match=message) as info:
         delay_from_wire(desc)
@@ -423,16 +434,19 @@ def test_trace_reads_text_json_and_npy_files(tmp_path):
     assert Trace(npy).values == (4, 0, 2)
 
 
-@pytest.mark.parametrize("name, content, message", [
-    ("a.txt", "1 2 x3", "line 1: 'x3' is not a number"),
-    ("a.txt", "1 2.5", "whole number of ticks"),
-    ("a.json", '{"delays": [1]}', "must hold a list"),
-    ("a.json", "[1, ", "cannot read"),
-    ("a.npy", np.array([1.5]), "fractional"),
-    ("a.npy", np.array([[1, 2]]), "one-dimensional"),
-    ("a.npy", np.array([None, 1], dtype=object), "cannot read"),
-    ("missing.txt", None, "cannot read"),
-])
+@pytest.mark.parametrize(
+    "name, content, message",
+    [
+        ("a.txt", "1 2 x3", "line 1: 'x3' is not a number"),
+        ("a.txt", "1 2.5", "whole number of ticks"),
+        ("a.json", '{"delays": [1]}', "must hold a list"),
+        ("a.json", "[1, ", "cannot read"),
+        ("a.npy", np.array([1.5]), "fractional"),
+        ("a.npy", np.array([[1, 2]]), "one-dimensional"),
+        ("a.npy", np.array([None, 1], dtype=object), "cannot read"),
+        ("missing.txt", None, "cannot read"),
+    ],
+)
 def test_bad_trace_files_are_refused_naming_the_file(tmp_path, name, content, message):
     path = tmp_path / name
     if isinstance(content, str):
