@@ -47,7 +47,7 @@ _LAZY = {
 #: Submodules reachable as attributes (``remoteenv.protocol``, ...), loaded on first access.
 _SUBMODULES = frozenset({
     "protocol", "remote_env", "vector_env", "controllers", "sim", "wire", "agent", "cli",
-    "benchmarks", "compliance",
+    "benchmarks", "compliance", "delays", "wrappers",
 })
 
 if TYPE_CHECKING:

@@ -1,0 +1,40 @@
+"""Delay specs for latency experiments: ``remoteenv.delays.Uniform(0, 3)`` and friends.
+
+The public path of :mod:`remoteenv.wire.delays` (the specs, in ticks or
+seconds) and :mod:`remoteenv.wire.delay_line` (the lock-step semantics).
+``docs/latency.md`` states what a delay of ``k`` ticks means.
+"""
+
+from remoteenv.wire.delay_line import DelayLine, DelayStream, LockStepDelays, StepDelays, delay_rng
+from remoteenv.wire.delays import (
+    MAX_DELAY_S,
+    MAX_DELAY_TICKS,
+    SECONDS,
+    TICKS,
+    Categorical,
+    Constant,
+    DelaySpec,
+    Trace,
+    Uniform,
+    as_delay,
+    delay_from_wire,
+)
+
+__all__ = [
+    "Categorical",
+    "Constant",
+    "DelayLine",
+    "DelaySpec",
+    "DelayStream",
+    "LockStepDelays",
+    "MAX_DELAY_S",
+    "MAX_DELAY_TICKS",
+    "SECONDS",
+    "StepDelays",
+    "TICKS",
+    "Trace",
+    "Uniform",
+    "as_delay",
+    "delay_from_wire",
+    "delay_rng",
+]

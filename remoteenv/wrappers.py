@@ -1,0 +1,263 @@
+"""Delay-aware observations: the env's observation followed by the last ``k`` actions.
+
+Under action delay a policy that sees only the (delayed) state cannot tell
+which of its own actions are still on their way; adding them to the
+observation restores the Markov property (the state augmentation of
+Ramstedt & Pal 2019 and the action buffer of Bouteiller et al. 2021; rtgym's
+``act_in_obs``). Works on any Gymnasium env, remote or in-process.
+
+Layout of the new observation (one flat :class:`~gymnasium.spaces.Box`)::
+
+    [ env obs (flattened) | a_{t-k+1} ... a_t (oldest first) | latency ]
+
+- Observation spaces: a :class:`~gymnasium.spaces.Box` of any shape
+  (flattened in C order). Anything else raises ``TypeError``; flatten it
+  first (``gymnasium.wrappers.FlattenObservation``).
+- Action spaces: :class:`~gymnasium.spaces.Box` (each action flattened, as
+  passed to ``step``: put ``ClipAction`` outside this wrapper to record
+  clipped actions) and :class:`~gymnasium.spaces.Discrete` (one-hot of
+  length ``n``). Anything else raises ``TypeError``.
+- After a reset the history is all zeros (for Discrete: no action yet); the
+  space's bounds for an action slot are the action bounds widened to include 0.
+- ``include_latency=True`` adds one feature: the ``info["latency_ticks"]``
+  of the step (or reset) that returned this observation, 0 when it is absent
+  or None (remoteenv reports it in real time and in delayed lock-step).
+- dtype: the observation's dtype promoted with float32 (float32 for float32 observations).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
+from gymnasium.vector.utils import batch_space
+
+__all__ = ["ActionHistory", "ActionHistoryVector"]
+
+
+class _ActionEncoder:
+    """Flat float features of an action: a Box flattened, a Discrete one-hot."""
+
+    def __init__(self, space: spaces.Space, dtype: np.dtype, owner: str) -> None:
+        self.space = space
+        self.dtype = dtype
+        if isinstance(space, spaces.Box):
+            self.size = int(np.prod(space.shape, dtype=np.int64))
+            self.low = np.minimum(space.low.reshape(-1), 0).astype(dtype)
+            self.high = np.maximum(space.high.reshape(-1), 0).astype(dtype)
+        elif isinstance(space, spaces.Discrete):
+            self.size = int(space.n)
+            self.low = np.zeros(self.size, dtype=dtype)
+            self.high = np.ones(self.size, dtype=dtype)
+        else:
+            raise TypeError(f"{owner} supports Box and Discrete action spaces, got {space}")
+
+    def encode(self, actions: Any, n: int) -> np.ndarray:
+        """``(n, size)`` features of ``n`` actions (a batch as a vector env takes it)."""
+        out = np.zeros((n, self.size), dtype=self.dtype)
+        if isinstance(self.space, spaces.Box):
+            arr = np.asarray(actions, dtype=self.dtype)
+            if arr.size != n * self.size:
+                raise ValueError(f"actions of shape {arr.shape} do not fit {n} x {self.space}")
+            out[:] = arr.reshape(n, self.size)
+            return out
+        assert isinstance(self.space, spaces.Discrete)
+        idx = np.asarray(actions).reshape(-1)
+        if idx.shape != (n,) or idx.dtype.kind not in "iu":
+            raise ValueError(f"actions {np.asarray(actions)!r:.100} do not fit {n} x {self.space}")
+        idx = idx.astype(np.int64) - int(self.space.start)
+        bad = (idx < 0) | (idx >= self.size)
+        if bad.any():
+            raise ValueError(f"action {int(idx[bad][0]) + int(self.space.start)} is outside {self.space}")
+        out[np.arange(n), idx] = 1
+        return out
+
+
+def _augmented_space(
+    obs_space: spaces.Space, encoder: _ActionEncoder, k: int, include_latency: bool, dtype: np.dtype
+) -> spaces.Box:
+    assert isinstance(obs_space, spaces.Box)
+    low = [obs_space.low.reshape(-1).astype(dtype), np.tile(encoder.low, k)]
+    high = [obs_space.high.reshape(-1).astype(dtype), np.tile(encoder.high, k)]
+    if include_latency:
+        low.append(np.zeros(1, dtype=dtype))
+        high.append(np.full(1, np.inf, dtype=dtype))
+    return spaces.Box(np.concatenate(low), np.concatenate(high), dtype=dtype)
+
+
+def _check_spaces(obs_space: spaces.Space, k: int, owner: str) -> np.dtype:
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 0:
+        raise ValueError(f"{owner} needs k >= 0 actions to keep, got {k!r:.60}")
+    if not isinstance(obs_space, spaces.Box):
+        raise TypeError(
+            f"{owner} supports Box observation spaces, got {obs_space}; "
+            "flatten it first (gymnasium.wrappers.FlattenObservation)"
+        )
+    return np.result_type(obs_space.dtype, np.float32)
+
+
+def _latency(value: Any) -> float:
+    """A latency feature from an info value: 0 when absent, None or not finite."""
+    if value is None:
+        return 0.0
+    try:
+        ticks = float(value)
+    except (TypeError, ValueError):
+        return 0.0
+    return ticks if math.isfinite(ticks) else 0.0
+
+
+class ActionHistory(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """The env's observation followed by its last ``k`` actions (see the module docs).
+
+    Args:
+        env: an env with a Box observation space and a Box or Discrete action space.
+        k: how many past actions to append (0 appends none).
+        include_latency: append ``info["latency_ticks"]`` as one more feature.
+    """
+
+    def __init__(self, env: gym.Env, k: int, include_latency: bool = False) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, k=k, include_latency=include_latency)
+        gym.Wrapper.__init__(self, env)
+        dtype = _check_spaces(env.observation_space, k, "ActionHistory")
+        self.k = int(k)
+        self.include_latency = include_latency
+        self._encoder = _ActionEncoder(env.action_space, dtype, "ActionHistory")
+        self.observation_space = _augmented_space(env.observation_space, self._encoder, self.k, include_latency, dtype)
+        self._history = np.zeros((self.k, self._encoder.size), dtype=dtype)
+        self._latency = 0.0
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._history[:] = 0
+        self._latency = _latency(info.get("latency_ticks"))
+        return self._augment(obs), info
+
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        features = self._encoder.encode(action, 1)  # before stepping: a bad action changes nothing
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if self.k:
+            self._history[:-1] = self._history[1:]
+            self._history[-1] = features[0]
+        self._latency = _latency(info.get("latency_ticks"))
+        return self._augment(obs), reward, terminated, truncated, info
+
+    @property
+    def history(self) -> np.ndarray:
+        """A copy of the action features, ``(k, features per action)``, oldest first."""
+        return self._history.copy()
+
+    def _augment(self, obs: Any) -> np.ndarray:
+        parts = [np.asarray(obs, dtype=self._history.dtype).reshape(-1), self._history.reshape(-1)]
+        if self.include_latency:
+            parts.append(np.array([self._latency], dtype=self._history.dtype))
+        return np.concatenate(parts)
+
+
+def _masked(infos: dict[str, Any], key: str, n: int) -> list[Any]:
+    """Per world, ``infos[key]`` where present (Gymnasium's ``_key`` mask), else None."""
+    values = infos.get(key)
+    if values is None:
+        return [None] * n
+    mask = infos.get(f"_{key}", np.ones(n, dtype=bool))
+    return [values[w] if mask[w] else None for w in range(n)]
+
+
+class ActionHistoryVector(VectorWrapper, gym.utils.RecordConstructorArgs):
+    """:class:`ActionHistory` for a Gymnasium :class:`~gymnasium.vector.VectorEnv`
+    (e.g. :class:`remoteenv.RemoteVectorEnv`), one history per world.
+
+    A world's history is zeroed whenever its episode restarts, in every
+    autoreset mode (``env.metadata["autoreset_mode"]``, NEXT_STEP if absent):
+
+    - NEXT_STEP: the step after an episode ends resets that world and ignores
+      its action, so the action is not recorded and the history starts at zeros.
+    - SAME_STEP: the step that ends an episode returns the next episode's first
+      observation, with a zero history; ``infos["final_obs"]`` holds the
+      ended episode's last observation augmented with its history (including
+      the final action) and the latency in ``infos["final_info"]``.
+    - DISABLED: ``reset(options={"reset_mask": mask})`` zeroes the masked worlds.
+    """
+
+    def __init__(self, env: VectorEnv, k: int, include_latency: bool = False) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, k=k, include_latency=include_latency)
+        VectorWrapper.__init__(self, env)
+        dtype = _check_spaces(env.single_observation_space, k, "ActionHistoryVector")
+        self.k = int(k)
+        self.include_latency = include_latency
+        self._encoder = _ActionEncoder(env.single_action_space, dtype, "ActionHistoryVector")
+        single = _augmented_space(env.single_observation_space, self._encoder, self.k, include_latency, dtype)
+        self.single_observation_space = single
+        self.observation_space = batch_space(single, self.num_envs)
+        self.autoreset_mode = AutoresetMode(env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP))
+        n = self.num_envs
+        self._history = np.zeros((n, self.k, self._encoder.size), dtype=dtype)
+        self._latency = np.zeros(n, dtype=dtype)
+        self._restarting = np.zeros(n, dtype=bool)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        mask = None if options is None else options.get("reset_mask")  # read before the env pops it
+        obs, infos = self.env.reset(seed=seed, options=options)
+        worlds = np.ones(self.num_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        self._history[worlds] = 0
+        self._restarting[worlds] = False
+        for w, value in enumerate(_masked(infos, "latency_ticks", self.num_envs)):
+            if worlds[w]:
+                self._latency[w] = _latency(value)
+        return self._augment(obs), infos
+
+    def step(self, actions: Any) -> tuple[np.ndarray, Any, Any, Any, dict[str, Any]]:
+        n = self.num_envs
+        features = self._encoder.encode(actions, n)  # before stepping: a bad action changes nothing
+        obs, rewards, terminated, truncated, infos = self.env.step(actions)
+        recorded = ~self._restarting if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.ones(n, dtype=bool)
+        self._history[~recorded] = 0
+        if self.k:
+            self._history[recorded, :-1] = self._history[recorded, 1:]
+            self._history[recorded, -1] = features[recorded]
+        self._latency[:] = [_latency(v) for v in _masked(infos, "latency_ticks", n)]
+        ended = np.logical_or(terminated, truncated)
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and ended.any():
+            infos = self._augment_final(infos, ended)
+            self._history[ended] = 0
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self._restarting = ended.copy()
+        return self._augment(obs), rewards, terminated, truncated, infos
+
+    @property
+    def history(self) -> np.ndarray:
+        """A copy of the action features, ``(num_envs, k, features per action)``, oldest first."""
+        return self._history.copy()
+
+    def _augment(self, obs: Any) -> np.ndarray:
+        n = self.num_envs
+        parts = [np.asarray(obs, dtype=self._history.dtype).reshape(n, -1), self._history.reshape(n, -1)]
+        if self.include_latency:
+            parts.append(self._latency.reshape(n, 1))
+        return np.concatenate(parts, axis=1)
+
+    def _augment_final(self, infos: dict[str, Any], ended: np.ndarray) -> dict[str, Any]:
+        """``infos`` with each ended world's ``final_obs`` augmented (a new dict and array)."""
+        final = infos.get("final_obs")
+        if final is None:
+            return infos
+        final = np.array(final, dtype=object, copy=True)
+        final_infos = infos.get("final_info") or {}
+        latencies = _masked(final_infos, "latency_ticks", self.num_envs)
+        dtype = self._history.dtype
+        for w in np.flatnonzero(ended):
+            if final[w] is None:
+                continue
+            parts = [np.asarray(final[w], dtype=dtype).reshape(-1), self._history[w].reshape(-1)]
+            if self.include_latency:
+                parts.append(np.array([_latency(latencies[w])], dtype=dtype))
+            final[w] = np.concatenate(parts)
+        return {**infos, "final_obs": final}

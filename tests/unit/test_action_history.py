@@ -1,0 +1,205 @@
+"""ActionHistory and ActionHistoryVector over Gymnasium's in-process envs
+(CartPole-v1: Discrete actions; Pendulum-v1: Box actions)."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+
+from remoteenv.wrappers import ActionHistory, ActionHistoryVector
+
+
+class LatencyInfo(gym.Wrapper):
+    """Puts a made-up ``latency_ticks`` in each info: 0.5 at reset, then the step count, None every 4th step."""
+
+    def reset(self, **kwargs):
+        self.t = 0
+        obs, info = self.env.reset(**kwargs)
+        return obs, {**info, "latency_ticks": 0.5}
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.t += 1
+        info = {**info, "latency_ticks": None if self.t % 4 == 0 else float(self.t)}
+        return obs, reward, terminated, truncated, info
+
+
+def one_hot(a: int, n: int = 2) -> list[float]:
+    return [1.0 if i == a else 0.0 for i in range(n)]
+
+
+# --- single env ---------------------------------------------------------------------------------
+
+
+def test_discrete_actions_are_one_hot_oldest_first_after_the_env_obs():
+    env = ActionHistory(gym.make("CartPole-v1"), k=3)
+    plain = gym.make("CartPole-v1")
+    assert env.observation_space.shape == (4 + 3 * 2,) and env.observation_space.dtype == np.float32
+    np.testing.assert_array_equal(env.observation_space.low[4:], 0)
+    np.testing.assert_array_equal(env.observation_space.high[4:], 1)
+    obs, _ = env.reset(seed=3)
+    np.testing.assert_array_equal(obs[:4], plain.reset(seed=3)[0])
+    np.testing.assert_array_equal(obs[4:], 0)
+    sent: deque[list[float]] = deque([[0.0, 0.0]] * 3, maxlen=3)
+    for a in [1, 0, 0, 1, 1]:
+        obs, reward, terminated, truncated, _ = env.step(a)
+        sent.append(one_hot(a))
+        np.testing.assert_array_equal(obs[:4], plain.step(a)[0])
+        np.testing.assert_array_equal(obs[4:], np.concatenate(list(sent)))
+        assert env.observation_space.contains(obs)
+    assert env.history.shape == (3, 2)
+    obs, _ = env.reset(seed=4)
+    np.testing.assert_array_equal(obs[4:], 0)
+
+
+def test_box_actions_are_flattened_and_bounds_come_from_the_action_space():
+    env = ActionHistory(gym.make("Pendulum-v1"), k=2)
+    assert env.observation_space.shape == (3 + 2,)
+    np.testing.assert_array_equal(env.observation_space.low[3:], [-2, -2])
+    np.testing.assert_array_equal(env.observation_space.high[3:], [2, 2])
+    env.reset(seed=0)
+    actions = [np.array([0.5], np.float32), np.array([-1.5], np.float32), np.array([2.0], np.float32)]
+    tails = [env.step(a)[0][3:] for a in actions]
+    np.testing.assert_array_equal(tails, [[0, 0.5], [0.5, -1.5], [-1.5, 2.0]])
+
+
+def test_action_bounds_are_widened_to_hold_the_zeros_of_a_fresh_history():
+    env = ActionHistory(gym.wrappers.RescaleAction(gym.make("Pendulum-v1"), np.float32(1), np.float32(2)), k=2)
+    np.testing.assert_array_equal(env.observation_space.low[3:], [0, 0])
+    np.testing.assert_array_equal(env.observation_space.high[3:], [2, 2])
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")  # the checker warns about any wrapper and infinite bounds
+def test_the_wrapped_env_passes_gymnasiums_checker():
+    check_env(ActionHistory(gym.make("Pendulum-v1").unwrapped, k=2, include_latency=True), skip_render_check=True)
+    check_env(ActionHistory(gym.make("CartPole-v1").unwrapped, k=4), skip_render_check=True)
+
+
+def test_latency_feature_is_the_steps_latency_ticks_or_zero():
+    env = ActionHistory(LatencyInfo(gym.make("CartPole-v1")), k=1, include_latency=True)
+    assert env.observation_space.shape == (4 + 2 + 1,)
+    assert env.observation_space.low[-1] == 0 and env.observation_space.high[-1] == np.inf
+    obs, _ = env.reset(seed=0)
+    assert obs[-1] == 0.5
+    latencies = [env.step(i % 2)[0][-1] for i in range(5)]
+    assert latencies == [1.0, 2.0, 3.0, 0.0, 5.0]
+
+
+def test_k_zero_keeps_only_the_observation():
+    env = ActionHistory(gym.make("CartPole-v1"), k=0)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (4,) and env.step(1)[0].shape == (4,)
+
+
+def test_a_refused_action_leaves_the_history_unchanged():
+    env = ActionHistory(gym.make("CartPole-v1"), k=2)
+    env.reset(seed=0)
+    env.step(1)
+    before = env.history
+    with pytest.raises(ValueError, match="outside Discrete"):
+        env.step(5)
+    np.testing.assert_array_equal(env.history, before)
+
+
+class MultiDiscreteActions(gym.Env):
+    observation_space = gym.spaces.Box(-1, 1, (2,))
+    action_space = gym.spaces.MultiDiscrete([2, 2])
+
+
+def test_unsupported_spaces_and_k_are_refused_clearly():
+    with pytest.raises(TypeError, match="Box observation spaces.*FlattenObservation"):
+        ActionHistory(gym.make("Blackjack-v1"), k=1)
+    with pytest.raises(TypeError, match="Box and Discrete action spaces, got MultiDiscrete"):
+        ActionHistory(MultiDiscreteActions(), k=1)
+    with pytest.raises(ValueError, match="k >= 0"):
+        ActionHistory(gym.make("CartPole-v1"), k=-1)
+
+
+# --- vector env ---------------------------------------------------------------------------------
+
+
+def cartpole_vector(n: int, mode: AutoresetMode, latency: bool = False) -> SyncVectorEnv:
+    make = (lambda: LatencyInfo(gym.make("CartPole-v1"))) if latency else (lambda: gym.make("CartPole-v1"))
+    return SyncVectorEnv([make for _ in range(n)], autoreset_mode=mode)
+
+
+def run_vector(mode: AutoresetMode, steps: int = 80, n: int = 3, k: int = 3):
+    """Step the wrapped and a plain vector env side by side with the same random actions;
+    check each step against a plain per-world model of the history."""
+    env = ActionHistoryVector(cartpole_vector(n, mode), k=k)
+    plain = cartpole_vector(n, mode)
+    assert env.single_observation_space.shape == (4 + 2 * k,)
+    assert env.observation_space.shape == (n, 4 + 2 * k)
+    obs, _ = env.reset(seed=1)
+    np.testing.assert_array_equal(obs[:, :4], plain.reset(seed=1)[0])
+    np.testing.assert_array_equal(obs[:, 4:], 0)
+    model = [deque([[0.0, 0.0]] * k, maxlen=k) for _ in range(n)]
+    restarting = [False] * n
+    rng = np.random.default_rng(0)
+    endings = 0
+    for _ in range(steps):
+        actions = rng.integers(0, 2, size=n)
+        obs, _, term, trunc, infos = env.step(actions)
+        pobs, _, pterm, ptrunc, pinfos = plain.step(actions)
+        np.testing.assert_array_equal(obs[:, :4], pobs)
+        assert env.observation_space.contains(obs)
+        for w in range(n):
+            ended = bool(term[w] or trunc[w])
+            if mode == AutoresetMode.NEXT_STEP and restarting[w]:
+                model[w] = deque([[0.0, 0.0]] * k, maxlen=k)  # the action was ignored
+            else:
+                model[w].append(one_hot(int(actions[w])))
+            if mode == AutoresetMode.SAME_STEP and ended:
+                final = infos["final_obs"][w]
+                np.testing.assert_array_equal(final[:4], pinfos["final_obs"][w])
+                np.testing.assert_array_equal(final[4:], np.concatenate(list(model[w])))
+                model[w] = deque([[0.0, 0.0]] * k, maxlen=k)
+            np.testing.assert_array_equal(obs[w, 4:], np.concatenate(list(model[w])), err_msg=f"world {w}")
+            restarting[w] = ended
+            endings += ended
+    assert endings >= 3  # the autoreset paths did run
+    return env
+
+
+def test_vector_next_step_autoreset_zeros_the_history_of_a_restarted_world():
+    run_vector(AutoresetMode.NEXT_STEP)
+
+
+def test_vector_same_step_autoreset_zeros_the_history_and_augments_final_obs():
+    run_vector(AutoresetMode.SAME_STEP)
+
+
+def test_vector_disabled_autoreset_zeros_only_the_worlds_reset_by_mask():
+    env = ActionHistoryVector(cartpole_vector(3, AutoresetMode.DISABLED), k=2)
+    env.reset(seed=0)
+    ended = np.zeros(3, dtype=bool)
+    while not ended.any():
+        _, _, term, trunc, _ = env.step(np.array([1, 1, 0]))
+        ended = term | trunc
+    before = env.history
+    obs, _ = env.reset(options={"reset_mask": ended})
+    np.testing.assert_array_equal(obs[ended, 4:], 0)
+    np.testing.assert_array_equal(obs[~ended, 4:], before[~ended].reshape(int((~ended).sum()), -1))
+
+
+def test_vector_latency_feature_per_world():
+    env = ActionHistoryVector(cartpole_vector(2, AutoresetMode.NEXT_STEP, latency=True), k=1, include_latency=True)
+    obs, _ = env.reset(seed=0)
+    np.testing.assert_array_equal(obs[:, -1], 0.5)
+    seen = [env.step(np.array([0, 1]))[0][:, -1].tolist() for _ in range(4)]
+    assert seen == [[1.0, 1.0], [2.0, 2.0], [3.0, 3.0], [0.0, 0.0]]
+
+
+def test_vector_refuses_a_bad_action_batch_before_stepping():
+    env = ActionHistoryVector(cartpole_vector(2, AutoresetMode.NEXT_STEP), k=1)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="do not fit 2"):
+        env.step(np.array([0, 1, 1]))
+    np.testing.assert_array_equal(env.history, 0)
