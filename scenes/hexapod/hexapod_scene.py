@@ -8,10 +8,14 @@ joint/actuator ``i`` is leg ``i // 3``, joint ``i % 3``. All joint angles are
 
 Servos: 18 MuJoCo ``<position>`` actuators, kp 12 N m/rad, torque clamped to
 +-1.5 N m (``forcerange``). Velocity limit: joint damping 0.3 N m s/rad =
-stall torque / 5 rad/s (a DC servo's torque-speed line, done by MuJoCo's
-implicit integrator with no per-substep Python), so a servo cannot drive its
-joint faster than 5 rad/s; armature 0.005 kg m^2. Set points never leave the
-joint ranges: the action is clipped to [-1, 1] and scaled into them.
+stall torque / 5 rad/s, a DC servo's linear torque-speed line (integrated by
+MuJoCo's implicitfast integrator: no per-substep Python), so a servo's own
+torque cannot drive its joint faster than 5 rad/s. Outside forces can
+(gravity, ground impacts, the torso's motion): measured, the tripod gait
+stays under 5 rad/s, uniformly random actions reach about 7 rad/s at
+moments. Armature 0.005 kg m^2 (the gearbox's reflected inertia). Set points
+never leave the joint ranges: the action is clipped to [-1, 1] and scaled
+into them.
 
 Action: ``Box(-1, 1, (18,))`` float32, servo set points in actuator order:
 ``target_i = a_i * half_range_i`` (rad), so ``a = 0`` is the standing pose.
@@ -37,7 +41,9 @@ Reward per control tick: ``reward_forward + reward_ctrl`` where
 ``reward_forward`` = torso x displacement over the tick / dt (m/s) and
 ``reward_ctrl = -ctrl_cost_weight * sum(a^2)`` (default weight 0.01, so at
 most 0.18 per tick). Step info: ``reward_forward``, ``reward_ctrl``,
-``x_position`` (torso x, m); reset info: ``x_position``. Terminated when the torso flips: the z component of its up axis < 0.
+``x_position`` (torso x, m); reset info: ``x_position``. All python floats.
+
+Terminated when the torso flips: the world z component of its up axis < 0.
 Truncation at 1000 steps is the agent side's (``remoteenv/Hexapod-v0``).
 
 Time: physics timestep 0.005 s (implicitfast integrator), frame_skip 4, so a
