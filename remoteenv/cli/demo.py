@@ -24,22 +24,41 @@ def add_parser(sub: Any) -> None:
     p.add_argument("scene", choices=sorted(SCENES), help="which shipped scene")
     p.add_argument("--episodes", type=int, default=3, help="episodes to run (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first reset (default 0)")
-    p.add_argument("--continuous", action="store_true",
-                   help="cartpole: Box(-1, 1) action instead of Discrete(2)")
+    p.add_argument("--continuous", action="store_true", help="cartpole: Box(-1, 1) action instead of Discrete(2)")
     p.add_argument("--random", action="store_true", help="random actions instead of the controller")
-    p.add_argument("--transport", choices=["pipe", "ipc", "tcp"], default="pipe",
-                   help="how the env talks to its sim: the local pipe (default) or ZeroMQ over ipc or tcp")
-    p.add_argument("--record", metavar="DIR", default=None,
-                   help="render offscreen and write one mp4 per episode into DIR "
-                   "(gymnasium.wrappers.RecordVideo; needs moviepy, the [video] extra)")
-    p.add_argument("--real-time", action="store_true",
-                   help="run the sim on a paced wall clock: it keeps going while the agent thinks")
-    p.add_argument("--real-time-factor", type=float, default=1.0,
-                   help="with --real-time: simulated seconds per wall-clock second (default 1.0)")
-    p.add_argument("--think-ms", type=float, default=0.0,
-                   help="the agent sleeps this many ms before each action (default 0)")
-    p.add_argument("--action-delay", type=int, default=0,
-                   help="lock-step: each action takes effect this many ticks later (default 0)")
+    p.add_argument(
+        "--transport",
+        choices=["pipe", "ipc", "tcp"],
+        default="pipe",
+        help="how the env talks to its sim: the local pipe (default) or ZeroMQ over ipc or tcp",
+    )
+    p.add_argument(
+        "--record",
+        metavar="DIR",
+        default=None,
+        help="render offscreen and write one mp4 per episode into DIR "
+        "(gymnasium.wrappers.RecordVideo; needs moviepy, the [video] extra)",
+    )
+    p.add_argument(
+        "--real-time",
+        action="store_true",
+        help="run the sim on a paced wall clock: it keeps going while the agent thinks",
+    )
+    p.add_argument(
+        "--real-time-factor",
+        type=float,
+        default=1.0,
+        help="with --real-time: simulated seconds per wall-clock second (default 1.0)",
+    )
+    p.add_argument(
+        "--think-ms", type=float, default=0.0, help="the agent sleeps this many ms before each action (default 0)"
+    )
+    p.add_argument(
+        "--action-delay",
+        type=int,
+        default=0,
+        help="lock-step: each action takes effect this many ticks later (default 0)",
+    )
     p.set_defaults(run=run)
 
 
@@ -74,9 +93,7 @@ def make_env(args: argparse.Namespace) -> gym.Env:
     if getattr(args, "record", None):
         kwargs["render_mode"] = "rgb_array"
         env = gym.make(SCENES[args.scene], **kwargs)
-        return gym.wrappers.RecordVideo(
-            env, args.record, episode_trigger=lambda episode: True, name_prefix=args.scene
-        )
+        return gym.wrappers.RecordVideo(env, args.record, episode_trigger=lambda episode: True, name_prefix=args.scene)
     return gym.make(SCENES[args.scene], **kwargs)
 
 
@@ -89,9 +106,11 @@ def run(args: argparse.Namespace) -> int:
         obs, info = env.reset(seed=args.seed)
         remote: Any = env.unwrapped  # the OpenAIRemoteEnv under gym.make's wrappers
         dt = float(remote.dt)
-        print(f"{env.spec.id if env.spec else args.scene}: sim pid {remote.pid}, "
-              f"obs {env.observation_space}, action {env.action_space}; "
-              f"make + first reset {time.perf_counter() - t0:.3f} s")
+        print(
+            f"{env.spec.id if env.spec else args.scene}: sim pid {remote.pid}, "
+            f"obs {env.observation_space}, action {env.action_space}; "
+            f"make + first reset {time.perf_counter() - t0:.3f} s"
+        )
         total_steps, total_time = 0, 0.0
         for episode in range(args.episodes):
             if episode:
@@ -115,8 +134,9 @@ def run(args: argparse.Namespace) -> int:
             moved = ""
             if x_start is not None and "x_position" in info:
                 moved = f"  x moved {float(info['x_position']) - float(x_start):+.3f} m"
-            print(f"episode {episode}: return {ret:9.3f}  steps {steps:4d} ({end})  "
-                  f"{steps / elapsed:8.0f} steps/s{moved}")
+            print(
+                f"episode {episode}: return {ret:9.3f}  steps {steps:4d} ({end})  {steps / elapsed:8.0f} steps/s{moved}"
+            )
         print(f"all episodes: {total_steps} steps, {total_steps / max(total_time, 1e-9):.0f} steps/s")
         if args.real_time or args.action_delay or args.think_ms > 0:
             print("latency stats (env.unwrapped.latency_stats):")
