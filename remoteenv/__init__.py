@@ -4,7 +4,7 @@ Agent-side API: :class:`OpenAIRemoteEnv`, :class:`RemoteVectorEnv`, :class:`Laun
 :class:`RemoteEnvError` and its subclasses. Sim-side API lives in
 :mod:`remoteenv.sim`; the wire format in :mod:`remoteenv.wire`. Importing this
 package registers the shipped scenes (``remoteenv/CartPole-v0``,
-``remoteenv/Reacher-v0``) and nothing else: the agent-side classes are loaded
+``remoteenv/Reacher-v0``, ``remoteenv/Hexapod-v0``) and nothing else: the agent-side classes are loaded
 on first use, so a sim process (which imports :mod:`remoteenv.sim`) never
 loads agent code.
 
@@ -84,12 +84,14 @@ def __dir__() -> list[str]:
 
 ensure_scenes_package()
 import remoteenv.scenes.cartpole  # noqa: E402  (registers the id)
+import remoteenv.scenes.hexapod  # noqa: E402
 import remoteenv.scenes.reacher  # noqa: E402
 
 #: Gymnasium id of each shipped scene, by scene name.
 SHIPPED_SCENES = {
     "cartpole": remoteenv.scenes.cartpole.ENV_ID,
     "reacher": remoteenv.scenes.reacher.ENV_ID,
+    "hexapod": remoteenv.scenes.hexapod.ENV_ID,
 }
 
 __all__ = [

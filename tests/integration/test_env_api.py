@@ -308,4 +308,4 @@ def test_package_imported_from_the_checkout_finds_its_scenes():
     module_file, scenes_file, ids, registered = out.stdout.split("\n")[:4]
     assert module_file == os.path.join(root, "remoteenv", "__init__.py")
     assert scenes_file == os.path.join(root, "scenes", "__init__.py")
-    assert ids == "['remoteenv/CartPole-v0', 'remoteenv/Reacher-v0']" and registered == "True"
+    assert ids == "['remoteenv/CartPole-v0', 'remoteenv/Hexapod-v0', 'remoteenv/Reacher-v0']" and registered == "True"
