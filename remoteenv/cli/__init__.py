@@ -9,7 +9,7 @@ import sys
 from typing import Sequence
 
 #: Command name -> module in remoteenv.cli, in the order ``--help`` lists them.
-COMMANDS = {"demo": "demo", "bench": "bench", "keys": "keys_command", "launch": "launch"}
+COMMANDS = {"demo": "demo", "bench": "bench", "keys": "keys_command", "launch": "launch", "check": "check"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

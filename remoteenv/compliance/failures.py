@@ -1,0 +1,20 @@
+"""How a check says that a server broke the spec, or that the check does not apply."""
+
+from __future__ import annotations
+
+
+class CheckFailed(AssertionError):
+    """The server broke the spec; the message says how."""
+
+
+class CheckSkipped(Exception):
+    """The check does not apply to this server; the message says why."""
+
+
+def fail_unless(condition: object, message: str) -> None:
+    """Raise :class:`CheckFailed` with ``message`` if ``condition`` is false."""
+    if not condition:
+        raise CheckFailed(message)
+
+
+__all__ = ["CheckFailed", "CheckSkipped", "fail_unless"]
