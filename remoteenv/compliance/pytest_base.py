@@ -12,7 +12,8 @@ or, to start the server for the class, overrides the
 
     class TestMyBridge(ComplianceTests):
         @pytest.fixture(scope="class")
-        def compliance_launch_info(self, tmp_path_factory):
+        @classmethod
+        def compliance_launch_info(cls, tmp_path_factory):
             ...start the server, which writes the file...
             yield path
             ...stop it...
