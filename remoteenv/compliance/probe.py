@@ -69,7 +69,7 @@ def targets_from_launch_info(
     keys = sims.curve_client_keypair
     return [
         Target(endpoint=sim.endpoint, instance=sim.instance, curve_server_key=sim.curve_server_key,
-               curve_client_keypair=keys, death_check=sim.death if sim.pid is not None else None,
+               curve_client_keypair=keys, death_check=sim.death if sim.local and sim.pid is not None else None,
                timeout=timeout, allow_close=allow_close, source=os.fspath(path))
         for sim in sims.sims
     ]
