@@ -22,12 +22,13 @@ def add_parser(sub: Any) -> None:
         "Exit 0 = compliant, 1 = not, 2 = the file cannot be used.",
     )
     p.add_argument("launch_info", metavar="LAUNCH_INFO_FILE", help="the launch-info file")
-    p.add_argument("--instance", type=int, default=None,
-                   help="check only this instance of the file (default: every one)")
-    p.add_argument("--allow-close", action="store_true",
-                   help="also check 'close', which stops the server (default: skipped)")
-    p.add_argument("--timeout", type=float, default=10.0,
-                   help="seconds to wait for each reply (default 10)")
+    p.add_argument(
+        "--instance", type=int, default=None, help="check only this instance of the file (default: every one)"
+    )
+    p.add_argument(
+        "--allow-close", action="store_true", help="also check 'close', which stops the server (default: skipped)"
+    )
+    p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for each reply (default 10)")
     p.set_defaults(run=run)
 
 
@@ -39,8 +40,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"--timeout must be a number of seconds > 0, got {args.timeout}", file=sys.stderr)
         return 2
     try:
-        targets = targets_from_launch_info(args.launch_info, args.instance, timeout=args.timeout,
-                                           allow_close=args.allow_close)
+        targets = targets_from_launch_info(
+            args.launch_info, args.instance, timeout=args.timeout, allow_close=args.allow_close
+        )
     except RemoteEnvError as exc:
         print(f"cannot check: {exc}", file=sys.stderr)
         return 2

@@ -37,6 +37,20 @@ def __getattr__(name: str) -> Any:
 
 
 __all__ = [
-    "CHECKS", "FAIL", "PASS", "SKIP", "Check", "CheckFailed", "CheckSkipped", "ComplianceTests", "Probe",
-    "Result", "Target", "compliant", "format_report", "run_check", "run_suite", "targets_from_launch_info",
+    "CHECKS",
+    "FAIL",
+    "PASS",
+    "SKIP",
+    "Check",
+    "CheckFailed",
+    "CheckSkipped",
+    "ComplianceTests",
+    "Probe",
+    "Result",
+    "Target",
+    "compliant",
+    "format_report",
+    "run_check",
+    "run_suite",
+    "targets_from_launch_info",
 ]

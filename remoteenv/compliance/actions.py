@@ -74,11 +74,15 @@ def invalid_actions(space: spaces.Space) -> list[tuple[str, Any]]:
         start, n = int(space.start), int(space.n)
         found += [("above the range", start + n), ("below the range", start - 1), ("a float", start + 0.5)]
     elif isinstance(space, spaces.MultiDiscrete):
-        found += [("above the range", np.asarray(space.start + space.nvec, dtype=space.dtype)),
-                  ("an array of the wrong shape", np.zeros((*space.shape, 2), dtype=space.dtype))]
+        found += [
+            ("above the range", np.asarray(space.start + space.nvec, dtype=space.dtype)),
+            ("an array of the wrong shape", np.zeros((*space.shape, 2), dtype=space.dtype)),
+        ]
     elif isinstance(space, spaces.MultiBinary):
-        found += [("a 2", np.full(space.shape, 2, dtype=space.dtype)),
-                  ("an array of the wrong shape", np.zeros((*space.shape, 2), dtype=space.dtype))]
+        found += [
+            ("a 2", np.full(space.shape, 2, dtype=space.dtype)),
+            ("an array of the wrong shape", np.zeros((*space.shape, 2), dtype=space.dtype)),
+        ]
     return found
 
 

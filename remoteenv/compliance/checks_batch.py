@@ -101,8 +101,10 @@ def batch_step(p: Probe) -> str:
     _reset_all(p, hs, seeds=list(range(n)))
     actions = [neutral_action(space)] * n
     reply = _step_batch(p, hs, [OP_STEP] * n, stacked_actions(space, actions))
-    fail_unless(reply["final"] == [], f"step_batch with ops {[OP_STEP] * n} (step only) listed final "
-                f"entries for worlds {_final_worlds(reply)}")
+    fail_unless(
+        reply["final"] == [],
+        f"step_batch with ops {[OP_STEP] * n} (step only) listed final entries for worlds {_final_worlds(reply)}",
+    )
     _step_batch(p, hs, [OP_STEP] * n, actions)
     _step_batch(p, hs, [OP_STEP], stacked_actions(space, actions[:1]))
     return f"{n} world(s): stacked actions, a list of actions, and a prefix of 1 world"
@@ -114,18 +116,25 @@ def batch_ops(p: Probe) -> None:
     actions = stacked_actions(hs.action_space, [neutral_action(hs.action_space)] * n)
     _reset_all(p, hs)
     reply = _step_batch(p, hs, [OP_RESET] * n, actions)
-    fail_unless(reply["reward"] == [0.0] * n and not any(reply["terminated"]) and not any(reply["truncated"])
-                and reply["final"] == [],
-                f"ops 1 (reset) must give reward 0, not terminated, not truncated and no final entries; got "
-                f"reward {short_repr(reply['reward'])}, final worlds {_final_worlds(reply)}")
+    fail_unless(
+        reply["reward"] == [0.0] * n
+        and not any(reply["terminated"])
+        and not any(reply["truncated"])
+        and reply["final"] == [],
+        f"ops 1 (reset) must give reward 0, not terminated, not truncated and no final entries; got "
+        f"reward {short_repr(reply['reward'])}, final worlds {_final_worlds(reply)}",
+    )
     reply = _step_batch(p, hs, [OP_STEP_RESET] * n, actions)
-    fail_unless(_final_worlds(reply) == list(range(n)),
-                f"ops 3 (step, then reset) must list every world in final, got worlds {_final_worlds(reply)}")
+    fail_unless(
+        _final_worlds(reply) == list(range(n)),
+        f"ops 3 (step, then reset) must list every world in final, got worlds {_final_worlds(reply)}",
+    )
     reply = _step_batch(p, hs, [OP_STEP_AUTORESET] * n, actions)
     done = [w for w in range(n) if reply["terminated"][w] or reply["truncated"][w]]
-    fail_unless(_final_worlds(reply) == done,
-                f"ops 2 (step, reset if done) must list exactly the done worlds {done} in final, got "
-                f"{_final_worlds(reply)}")
+    fail_unless(
+        _final_worlds(reply) == done,
+        f"ops 2 (step, reset if done) must list exactly the done worlds {done} in final, got {_final_worlds(reply)}",
+    )
 
 
 def batch_errors(p: Probe) -> str:
@@ -137,8 +146,11 @@ def batch_errors(p: Probe) -> str:
     for cmd, why, args in (
         ("step_batch", "ops [9] (no such op)", {"ops": [9], "actions": stacked_actions(space, [neutral])}),
         ("step_batch", "ops [] (no worlds)", {"ops": [], "actions": []}),
-        ("step_batch", f"{n + 1} ops for {n} worlds",
-         {"ops": [OP_STEP] * (n + 1), "actions": stacked_actions(space, [neutral] * (n + 1))}),
+        (
+            "step_batch",
+            f"{n + 1} ops for {n} worlds",
+            {"ops": [OP_STEP] * (n + 1), "actions": stacked_actions(space, [neutral] * (n + 1))},
+        ),
         ("step_batch", "ops '0' (a str)", {"ops": "0", "actions": stacked_actions(space, [neutral])}),
         ("reset_batch", f"worlds [{n}] (the server hosts {n})", {"worlds": [n], "seeds": None, "options": None}),
         ("reset_batch", "2 seeds for 1 world", {"worlds": [0], "seeds": [1, 2], "options": None}),
@@ -146,8 +158,13 @@ def batch_errors(p: Probe) -> str:
         p.error(cmd, [PROTOCOL], why, **args)
     bad = invalid_actions(space)
     for label, action in bad:
-        p.error("step_batch", [INVALID_ACTION], f"world 0's action {label} ({short_repr(action)})",
-                ops=[OP_STEP] * n, actions=[action] + [neutral] * (n - 1))
+        p.error(
+            "step_batch",
+            [INVALID_ACTION],
+            f"world 0's action {label} ({short_repr(action)})",
+            ops=[OP_STEP] * n,
+            actions=[action] + [neutral] * (n - 1),
+        )
     p.still_serving("batch requests with bad arguments")
     return f"6 malformed requests and {len(bad)} invalid actions refused"
 
@@ -156,6 +173,5 @@ CHECKS = (
     Check("batch_reset", "reset_batch replies: stacked obs in the space, infos for each world", batch_reset),
     Check("batch_step", "step_batch replies: obs, float rewards, bool flags, infos, final", batch_step),
     Check("batch_ops", "step_batch ops 1 (reset), 2 (autoreset) and 3 (step, reset) as specified", batch_ops),
-    Check("batch_errors", "malformed batch requests get 'protocol', bad actions 'invalid_action'",
-          batch_errors),
+    Check("batch_errors", "malformed batch requests get 'protocol', bad actions 'invalid_action'", batch_errors),
 )

@@ -50,8 +50,10 @@ def step_before_reset(p: Probe) -> None:
     world = hs.num_worlds - 1
     reply = p.call("step", world=world, action=neutral_action(hs.action_space))
     if reply["ok"]:
-        raise CheckSkipped(f"world {world} had been reset before this check (the server is not fresh); "
-                           "run the checks on a fresh server to try a step before reset")
+        raise CheckSkipped(
+            f"world {world} had been reset before this check (the server is not fresh); "
+            "run the checks on a fresh server to try a step before reset"
+        )
     kind = reply["error"]["kind"]
     fail_unless(kind == STATE, f"a step before reset on world {world} got error kind {kind!r}, expected 'state'")
     p.still_serving("a step before reset")
@@ -88,8 +90,13 @@ def invalid_action(p: Probe) -> str:
     _reset(p, 0, seed=0)
     cases = invalid_actions(hs.action_space)
     for label, action in cases:
-        p.error("step", [INVALID_ACTION], f"an action that is {label} ({short_repr(action)}) for "
-                f"{hs.action_space}", world=0, action=action)
+        p.error(
+            "step",
+            [INVALID_ACTION],
+            f"an action that is {label} ({short_repr(action)}) for {hs.action_space}",
+            world=0,
+            action=action,
+        )
     p.ok("step", world=0, action=neutral_action(hs.action_space))
     return f"{len(cases)} invalid actions refused, then a valid step"
 
@@ -132,9 +139,14 @@ def _timing_problem(entry: Any, world: int) -> str | None:
         return f"timing of world {world} must be a map, got {type_name(entry)}"
     for key in ("pacing_error_s", "apply_delay_s"):
         summary = entry.get(key)
-        if not (isinstance(summary, dict) and all(is_number(summary.get(k)) for k in _SUMMARY_KEYS)
-                and is_int(summary["count"])):
-            return f"timing of world {world}: {key} must map {list(_SUMMARY_KEYS)} to numbers, got {short_repr(summary)}"
+        if not (
+            isinstance(summary, dict)
+            and all(is_number(summary.get(k)) for k in _SUMMARY_KEYS)
+            and is_int(summary["count"])
+        ):
+            return (
+                f"timing of world {world}: {key} must map {list(_SUMMARY_KEYS)} to numbers, got {short_repr(summary)}"
+            )
     for key, test in (("overruns", is_int), ("substeps", is_int), ("period_s", is_number)):
         if not test(entry.get(key)):
             return f"timing of world {world}: {key} must be a number, got {short_repr(entry.get(key))}"
@@ -169,8 +181,9 @@ def close(p: Probe) -> str:
     deadline = p.deadline()
     while death() is None:
         if time.monotonic() > deadline:
-            raise CheckFailed(f"the server process still runs {p.timeout:g} s after 'close' "
-                              "(the spec says it then exits)")
+            raise CheckFailed(
+                f"the server process still runs {p.timeout:g} s after 'close' (the spec says it then exits)"
+            )
         time.sleep(0.05)
     return "the server process exited"
 
@@ -179,10 +192,8 @@ CHECKS = (
     Check("step_before_reset", "a step on a fresh world gets a 'state' error", step_before_reset),
     Check("reset", "reset replies: obs in the observation space, info a map", reset),
     Check("step", "step replies: obs in the space, float reward, bool flags, info map", step),
-    Check("invalid_action", "actions outside the action space get an 'invalid_action' error",
-          invalid_action),
-    Check("bad_arguments", "out-of-range worlds and ill-typed seed/options get a 'protocol' error",
-          bad_arguments),
+    Check("invalid_action", "actions outside the action space get an 'invalid_action' error", invalid_action),
+    Check("bad_arguments", "out-of-range worlds and ill-typed seed/options get a 'protocol' error", bad_arguments),
     Check("render", "render replies with a uint8 H x W x 3 frame or nil", render),
     Check("timing", "timing replies with per-world pacing figures (real-time servers)", timing),
 )

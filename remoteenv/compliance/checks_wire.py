@@ -25,9 +25,10 @@ ALIEN_VERSION = 999
 
 def handshake(p: Probe) -> str:
     hs = p.handshake
-    fail_unless(hs.protocol == protocol.PROTOCOL_VERSION,
-                f"the server accepted protocol {protocol.PROTOCOL_VERSION} but its reply says "
-                f"protocol {hs.protocol}")
+    fail_unless(
+        hs.protocol == protocol.PROTOCOL_VERSION,
+        f"the server accepted protocol {protocol.PROTOCOL_VERSION} but its reply says protocol {hs.protocol}",
+    )
     return f"{hs.env_id}: {hs.mode}, {hs.num_worlds} world(s)"
 
 
@@ -35,10 +36,14 @@ def version_refusal(p: Probe) -> None:
     ours = p.handshake.protocol
     error = p.error("handshake", [PROTOCOL], f"protocol {ALIEN_VERSION}", protocol=ALIEN_VERSION)
     message = error["message"]
-    fail_unless(str(ALIEN_VERSION) in message,
-                f"the refusal does not name the agent's version {ALIEN_VERSION}: {_short(message)}")
-    fail_unless(re.search(rf"(?<!\d){ours}(?!\d)", message),
-                f"the refusal does not name the server's version {ours}: {_short(message)}")
+    fail_unless(
+        str(ALIEN_VERSION) in message,
+        f"the refusal does not name the agent's version {ALIEN_VERSION}: {_short(message)}",
+    )
+    fail_unless(
+        re.search(rf"(?<!\d){ours}(?!\d)", message),
+        f"the refusal does not name the server's version {ours}: {_short(message)}",
+    )
     p.still_serving("a refused handshake")
 
 
@@ -128,10 +133,13 @@ def stale_replies(p: Probe) -> None:
         reply = p.receive(f"request {i + 1} of 4 sent back to back ('{cmd}', seq {seq})")
         if reply["seq"] != seq:
             order = ", ".join(f"{c} (seq {s})" for c, s in sent)
-            raise CheckFailed(f"requests {order} were sent back to back; reply {i + 1} carries seq "
-                              f"{reply['seq']}, expected {seq} (each reply its own seq, in order)")
-        fail_unless(reply["ok"] == (cmd != "no_such_command"),
-                    f"back to back, '{cmd}' (seq {seq}) got ok={reply['ok']}")
+            raise CheckFailed(
+                f"requests {order} were sent back to back; reply {i + 1} carries seq "
+                f"{reply['seq']}, expected {seq} (each reply its own seq, in order)"
+            )
+        fail_unless(
+            reply["ok"] == (cmd != "no_such_command"), f"back to back, '{cmd}' (seq {seq}) got ok={reply['ok']}"
+        )
     p.silent(0.3, "after the four replies to four requests")
 
 
@@ -141,10 +149,12 @@ CHECKS = (
     Check("seq_echo", "replies echo seq values beyond 32 and 53 bits", seq_echo),
     Check("garbage_frames", "undecodable frames get a 'protocol' error with seq -1", garbage_frames),
     Check("non_map_requests", "requests that are not maps get a 'protocol' error with seq -1", non_map_requests),
-    Check("missing_seq_or_cmd", "maps without an int seq or a str cmd get a 'protocol' error with seq -1",
-          missing_seq_or_cmd),
+    Check(
+        "missing_seq_or_cmd",
+        "maps without an int seq or a str cmd get a 'protocol' error with seq -1",
+        missing_seq_or_cmd,
+    ),
     Check("malformed_arrays", "off-spec array extensions get a 'protocol' error with seq -1", malformed_arrays),
     Check("unknown_command", "an unknown command gets a 'protocol' error echoing its seq", unknown_command),
-    Check("stale_replies", "back-to-back requests get one reply each, with their own seq, in order",
-          stale_replies),
+    Check("stale_replies", "back-to-back requests get one reply each, with their own seq, in order", stale_replies),
 )

@@ -68,8 +68,9 @@ def _space(reply: dict[str, Any], key: str, problems: list[str]) -> spaces.Space
     try:
         return space_from_wire(desc)
     except Exception as exc:  # KeyError, ValueError, ProtocolError... from an off-spec map
-        problems.append(f"{key} {short_repr(desc)} is not a space map of the spec ({type(exc).__name__}: "
-                        f"{short_repr(str(exc))})")
+        problems.append(
+            f"{key} {short_repr(desc)} is not a space map of the spec ({type(exc).__name__}: {short_repr(str(exc))})"
+        )
         return None
 
 
@@ -104,15 +105,17 @@ def handshake_problems(reply: dict[str, Any]) -> list[str]:
                 problems.append(f"metadata.{key} must be {want}, got {short_repr(meta.get(key))}")
     stepping = reply.get("stepping")
     if not isinstance(stepping, dict) or stepping.get("mode") not in STEPPING_MODES:
-        problems.append(f"stepping must be a map whose mode is one of {list(STEPPING_MODES)}, "
-                        f"got {short_repr(stepping)}")
+        problems.append(
+            f"stepping must be a map whose mode is one of {list(STEPPING_MODES)}, got {short_repr(stepping)}"
+        )
     commands = reply.get("commands")
     if commands is not None:
         if not (isinstance(commands, list) and all(isinstance(c, str) for c in commands)):
             problems.append(f"commands (optional) must be a list of str, got {short_repr(commands)}")
         elif missing := [c for c in CORE_COMMANDS if c not in commands]:
-            problems.append(f"commands lists {short_repr(commands)} but leaves out {missing}, "
-                            "which every server answers")
+            problems.append(
+                f"commands lists {short_repr(commands)} but leaves out {missing}, which every server answers"
+            )
     return problems
 
 
@@ -134,5 +137,4 @@ def parse_handshake(reply: dict[str, Any]) -> Handshake:
     )
 
 
-__all__ = ["BATCH_COMMANDS", "CORE_COMMANDS", "STEPPING_MODES", "Handshake", "handshake_problems",
-           "parse_handshake"]
+__all__ = ["BATCH_COMMANDS", "CORE_COMMANDS", "STEPPING_MODES", "Handshake", "handshake_problems", "parse_handshake"]

@@ -68,9 +68,16 @@ def targets_from_launch_info(
     sims = AttachedSims(path, None if instance is None else [instance])
     keys = sims.curve_client_keypair
     return [
-        Target(endpoint=sim.endpoint, instance=sim.instance, curve_server_key=sim.curve_server_key,
-               curve_client_keypair=keys, death_check=sim.death if sim.local and sim.pid is not None else None,
-               timeout=timeout, allow_close=allow_close, source=os.fspath(path))
+        Target(
+            endpoint=sim.endpoint,
+            instance=sim.instance,
+            curve_server_key=sim.curve_server_key,
+            curve_client_keypair=keys,
+            death_check=sim.death if sim.local and sim.pid is not None else None,
+            timeout=timeout,
+            allow_close=allow_close,
+            source=os.fspath(path),
+        )
         for sim in sims.sims
     ]
 
@@ -173,12 +180,15 @@ class Probe:
         returns the ``error`` map. ``why`` says what makes the request wrong."""
         reply = self.call(cmd, **args)
         if reply["ok"]:
-            raise CheckFailed(f"'{cmd}' with {why} was answered ok; expected an error of kind "
-                              f"{' or '.join(repr(k) for k in kinds)}")
+            raise CheckFailed(
+                f"'{cmd}' with {why} was answered ok; expected an error of kind {' or '.join(repr(k) for k in kinds)}"
+            )
         error = reply["error"]
         if error["kind"] not in kinds:
-            raise CheckFailed(f"'{cmd}' with {why} got error kind {error['kind']!r}, expected "
-                              f"{' or '.join(repr(k) for k in kinds)} ({short_repr(error['message'])})")
+            raise CheckFailed(
+                f"'{cmd}' with {why} got error kind {error['kind']!r}, expected "
+                f"{' or '.join(repr(k) for k in kinds)} ({short_repr(error['message'])})"
+            )
         return error
 
     # ------------------------------------------------------------ handshake

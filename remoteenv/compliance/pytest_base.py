@@ -55,8 +55,9 @@ class ComplianceTests:
     def compliance_launch_info(self) -> str | os.PathLike[str]:
         """The launch-info file of the server under test (default: ``launch_info``)."""
         if self.launch_info is None:
-            pytest.fail(f"{type(self).__name__}: set launch_info or override the "
-                        "compliance_launch_info fixture", pytrace=False)
+            pytest.fail(
+                f"{type(self).__name__}: set launch_info or override the compliance_launch_info fixture", pytrace=False
+            )
         return self.launch_info
 
     @pytest.mark.parametrize("check", CHECKS, ids=[c.name for c in CHECKS])

@@ -20,12 +20,12 @@ from remoteenv.wire.errors import short_repr
 
 #: Every check, in the order they run.
 CHECKS: tuple[Check, ...] = (
-    *checks_wire.CHECKS[:1],          # handshake
-    *checks_episode.CHECKS[:1],       # step_before_reset: before anything resets a world
+    *checks_wire.CHECKS[:1],  # handshake
+    *checks_episode.CHECKS[:1],  # step_before_reset: before anything resets a world
     *checks_wire.CHECKS[1:],
     *checks_episode.CHECKS[1:],
     *checks_batch.CHECKS,
-    checks_episode.CLOSE,             # last: it stops the server
+    checks_episode.CLOSE,  # last: it stops the server
 )
 
 #: Longest reason shown on a report line (characters).
@@ -55,8 +55,7 @@ def unreachable(target: Target) -> str | None:
         if probe.socket.poll(round(target.timeout * 1000)):
             return None
     curve = " (with CURVE: are the keys right?)" if target.curve_server_key is not None else ""
-    return (f"no reply to a handshake from {target.endpoint} within {target.timeout:g} s{curve}; "
-            "is the server running?")
+    return f"no reply to a handshake from {target.endpoint} within {target.timeout:g} s{curve}; is the server running?"
 
 
 def run_suite(target: Target, checks: Sequence[Check] = CHECKS) -> list[Result]:
@@ -96,5 +95,4 @@ def format_report(target: Target, results: Sequence[Result]) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["CHECKS", "compliant", "format_report", "format_result", "run_check", "run_suite", "summary",
-           "unreachable"]
+__all__ = ["CHECKS", "compliant", "format_report", "format_result", "run_check", "run_suite", "summary", "unreachable"]

@@ -147,8 +147,10 @@ def infos_problem(infos: Any, n: int) -> str | None:
             return f"info column {short_repr(key)}: present must be a list of {n} bools, got {short_repr(present)}"
         kinds = {bool if isinstance(v, bool) else type(v) for v in values}
         if not kinds <= {bool, int, float} or len(kinds) > 1:
-            return (f"info column {short_repr(key)}: values must be bools, ints or floats of one type, "
-                    f"got {sorted(k.__name__ for k in kinds)}")
+            return (
+                f"info column {short_repr(key)}: values must be bools, ints or floats of one type, "
+                f"got {sorted(k.__name__ for k in kinds)}"
+            )
     return None
 
 
@@ -199,6 +201,16 @@ def frame_problem(frame: Any) -> str | None:
 
 
 __all__ = [
-    "ARRAY_SPACES", "batch_obs_problem", "envelope_problem", "frame_problem", "infos_problem", "is_int", "is_number",
-    "list_problem", "reset_reply_problem", "step_reply_problem", "type_name", "value_problem",
+    "ARRAY_SPACES",
+    "batch_obs_problem",
+    "envelope_problem",
+    "frame_problem",
+    "infos_problem",
+    "is_int",
+    "is_number",
+    "list_problem",
+    "reset_reply_problem",
+    "step_reply_problem",
+    "type_name",
+    "value_problem",
 ]

@@ -64,8 +64,13 @@ def _independent(tmp_path: Path, *args: str) -> contextlib.AbstractContextManage
 
 
 def _check(path: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "remoteenv", "check", str(path), *args],
-                          capture_output=True, text=True, env=_ENV, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "remoteenv", "check", str(path), *args],
+        capture_output=True,
+        text=True,
+        env=_ENV,
+        timeout=300,
+    )
 
 
 def _statuses(report: str) -> dict[str, str]:
@@ -162,11 +167,14 @@ def test_check_command_passes_the_reference_and_skips_what_a_used_server_cannot_
     assert _statuses(second.stdout)["step_before_reset"] == "SKIP"
 
 
-@pytest.mark.parametrize("flaw, failing", [
-    ("seq", {"step", "invalid_action", "stale_replies"}),
-    ("obs-dtype", {"reset", "step", "invalid_action", "bad_arguments", "render"}),
-    ("silent-garbage", {"garbage_frames", "non_map_requests", "missing_seq_or_cmd", "malformed_arrays"}),
-])
+@pytest.mark.parametrize(
+    "flaw, failing",
+    [
+        ("seq", {"step", "invalid_action", "stale_replies"}),
+        ("obs-dtype", {"reset", "step", "invalid_action", "bad_arguments", "render"}),
+        ("silent-garbage", {"garbage_frames", "non_map_requests", "missing_seq_or_cmd", "malformed_arrays"}),
+    ],
+)
 def test_check_command_names_each_broken_rule(tmp_path, flaw, failing):
     with _independent(tmp_path, "--flaw", flaw):
         result = _check(tmp_path / "bridge.json", "--timeout", "2")

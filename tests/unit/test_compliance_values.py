@@ -34,10 +34,16 @@ SPACES = [
 
 def _handshake(**changes):
     reply = {
-        "seq": 1, "ok": True, "protocol": 1, "env_id": "e/v0", "instance": 0, "pid": 7, "num_worlds": 2,
-        "observation_space": space_to_wire(SPACES[0]), "action_space": space_to_wire(SPACES[3]),
-        "metadata": {"render_modes": ["rgb_array"], "render_fps": 50, "dt": 0.02, "timestep": 0.01,
-                     "frame_skip": 2},
+        "seq": 1,
+        "ok": True,
+        "protocol": 1,
+        "env_id": "e/v0",
+        "instance": 0,
+        "pid": 7,
+        "num_worlds": 2,
+        "observation_space": space_to_wire(SPACES[0]),
+        "action_space": space_to_wire(SPACES[3]),
+        "metadata": {"render_modes": ["rgb_array"], "render_fps": 50, "dt": 0.02, "timestep": 0.01, "frame_skip": 2},
         "stepping": {"mode": "lock_step", "action_delay": 0},
     }
     reply.update(changes)
@@ -79,20 +85,22 @@ def test_value_problem_names_dtype_shape_range_and_keys():
 
 def test_envelope_problem():
     assert envelope_problem({"seq": 3, "ok": True}) is None
-    assert envelope_problem({"seq": -1, "ok": False,
-                             "error": {"kind": "protocol", "message": "m", "traceback": ""}}) is None
+    assert (
+        envelope_problem({"seq": -1, "ok": False, "error": {"kind": "protocol", "message": "m", "traceback": ""}})
+        is None
+    )
     assert "seq" in envelope_problem({"seq": True, "ok": True})
     assert "'ok'" in envelope_problem({"seq": 1, "ok": 1})
     assert "error.traceback" in envelope_problem({"seq": 1, "ok": False, "error": {"kind": "state", "message": ""}})
     assert "not one of" in envelope_problem(
-        {"seq": 1, "ok": False, "error": {"kind": "oops", "message": "", "traceback": ""}})
+        {"seq": 1, "ok": False, "error": {"kind": "oops", "message": "", "traceback": ""}}
+    )
     assert "map" in envelope_problem([1])
 
 
 def test_step_reply_problem_wants_a_float_reward_and_bool_flags():
     box = SPACES[0]
-    good = {"obs": np.zeros(2, dtype=np.float32), "reward": 1.0, "terminated": False, "truncated": False,
-            "info": {}}
+    good = {"obs": np.zeros(2, dtype=np.float32), "reward": 1.0, "terminated": False, "truncated": False, "info": {}}
     assert step_reply_problem(box, good) is None
     assert "reward" in step_reply_problem(box, {**good, "reward": 1})
     assert "terminated" in step_reply_problem(box, {**good, "terminated": 0})
@@ -135,14 +143,18 @@ def test_handshake_parsing_and_what_it_offers():
 
 
 def test_handshake_problems_name_every_bad_field():
-    problems = handshake_problems(_handshake(
-        num_worlds=0, pid="x", observation_space={"type": "Nope"}, stepping={"mode": "fast"},
-        metadata={"render_modes": "rgb_array", "render_fps": 50, "dt": -1, "timestep": 0.01, "frame_skip": 1},
-        commands=["handshake"],
-    ))
+    problems = handshake_problems(
+        _handshake(
+            num_worlds=0,
+            pid="x",
+            observation_space={"type": "Nope"},
+            stepping={"mode": "fast"},
+            metadata={"render_modes": "rgb_array", "render_fps": 50, "dt": -1, "timestep": 0.01, "frame_skip": 1},
+            commands=["handshake"],
+        )
+    )
     text = " | ".join(problems)
-    for field in ("num_worlds", "pid", "observation_space", "stepping", "render_modes", "metadata.dt",
-                  "commands"):
+    for field in ("num_worlds", "pid", "observation_space", "stepping", "render_modes", "metadata.dt", "commands"):
         assert field in text
     with pytest.raises(CheckFailed, match="num_worlds"):
         parse_handshake(_handshake(num_worlds=0))

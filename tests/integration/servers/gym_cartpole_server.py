@@ -73,7 +73,7 @@ def _from_wire(code: int, data: bytes) -> Any:
     if code != EXT_ARRAY:
         raise ValueError(f"unknown extension type {code}")
     n = data[0]
-    dtype = data[1:1 + n].decode("ascii")
+    dtype = data[1 : 1 + n].decode("ascii")
     ndim = data[1 + n]
     if dtype not in WIRE_DTYPES or ndim > MAX_NDIM:
         raise ValueError(f"array dtype {dtype!r} or ndim {ndim} is not allowed")
@@ -132,8 +132,9 @@ class CartPoleBridge:
     def _world(self, msg: dict[str, Any]) -> int:
         world = msg.get("world", 0)
         if type(world) is not int or not 0 <= world < len(self.envs):
-            raise RequestError("protocol", f"world {_short.repr(world)} out of range; "
-                                           f"this server hosts {len(self.envs)}")
+            raise RequestError(
+                "protocol", f"world {_short.repr(world)} out of range; this server hosts {len(self.envs)}"
+            )
         return world
 
     def _obs(self, obs: np.ndarray) -> np.ndarray:
@@ -141,19 +142,34 @@ class CartPoleBridge:
 
     def cmd_handshake(self, msg: dict[str, Any]) -> dict[str, Any]:
         if msg.get("protocol") != PROTOCOL_VERSION:
-            raise RequestError("protocol", f"protocol version mismatch: the agent speaks "
-                                           f"{_short.repr(msg.get('protocol'))}, this server speaks {PROTOCOL_VERSION}")
+            raise RequestError(
+                "protocol",
+                f"protocol version mismatch: the agent speaks "
+                f"{_short.repr(msg.get('protocol'))}, this server speaks {PROTOCOL_VERSION}",
+            )
         env = self.envs[0]
         obs_space, act_space = env.observation_space, env.action_space
         tau = float(env.unwrapped.tau)
         return {
-            "protocol": PROTOCOL_VERSION, "env_id": "CartPole-v1", "instance": 0, "pid": os.getpid(),
+            "protocol": PROTOCOL_VERSION,
+            "env_id": "CartPole-v1",
+            "instance": 0,
+            "pid": os.getpid(),
             "num_worlds": len(self.envs),
-            "observation_space": {"type": "Box", "low": obs_space.low, "high": obs_space.high,
-                                  "dtype": obs_space.dtype.str},
+            "observation_space": {
+                "type": "Box",
+                "low": obs_space.low,
+                "high": obs_space.high,
+                "dtype": obs_space.dtype.str,
+            },
             "action_space": {"type": "Discrete", "n": int(act_space.n), "start": int(act_space.start)},
-            "metadata": {"render_modes": [], "render_fps": env.metadata["render_fps"], "dt": tau,
-                         "timestep": tau, "frame_skip": 1},
+            "metadata": {
+                "render_modes": [],
+                "render_fps": env.metadata["render_fps"],
+                "dt": tau,
+                "timestep": tau,
+                "frame_skip": 1,
+            },
             "stepping": {"mode": "lock_step", "action_delay": 0},
             "commands": COMMANDS,
         }
@@ -180,8 +196,13 @@ class CartPoleBridge:
         if type(action) is not int or not 0 <= action < n:
             raise RequestError("invalid_action", f"action {_short.repr(action)} is not an int in [0, {n})")
         obs, reward, terminated, truncated, info = self.envs[world].step(action)
-        return {"obs": self._obs(obs), "reward": float(reward), "terminated": bool(terminated),
-                "truncated": bool(truncated), "info": info}
+        return {
+            "obs": self._obs(obs),
+            "reward": float(reward),
+            "terminated": bool(terminated),
+            "truncated": bool(truncated),
+            "info": info,
+        }
 
     def cmd_render(self, msg: dict[str, Any]) -> dict[str, Any]:
         self._world(msg)
@@ -197,9 +218,14 @@ class CartPoleBridge:
 
 def write_launch_info(path: str, endpoint: str, worlds: int) -> None:
     doc = {
-        "format": "remoteenv-launch/1", "scene": os.path.abspath(__file__), "env_id": "CartPole-v1",
-        "host": socket.gethostname(), "launcher_pid": os.getpid(), "worlds_per_instance": worlds,
-        "render_mode": None, "stepping": {"real_time": False, "real_time_factor": 1.0, "action_delay": 0},
+        "format": "remoteenv-launch/1",
+        "scene": os.path.abspath(__file__),
+        "env_id": "CartPole-v1",
+        "host": socket.gethostname(),
+        "launcher_pid": os.getpid(),
+        "worlds_per_instance": worlds,
+        "render_mode": None,
+        "stepping": {"real_time": False, "real_time_factor": 1.0, "action_delay": 0},
         "instances": [{"instance": 0, "endpoint": endpoint, "pid": os.getpid(), "curve_server_key": None}],
         "curve_client_secret_key_file": None,
     }
