@@ -139,7 +139,7 @@ class BaseEnv:
         if self._viewer is not None:
             self._viewer.sync(max_fps=60.0)  # real-time mode drives substeps, not step()
 
-    def step(self, action: Any) -> tuple[Any, float, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
         """One control tick: ``(obs, reward, terminated, info)``."""
         self.prepare_step(action)
         mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)

@@ -1,16 +1,16 @@
 """Where a sim process's requests come from: its ZeroMQ ROUTER and its local pipe.
 
 Runs in the sim process. Both channels carry the frames of
-:mod:`remoteenv.protocol`; the serving loops treat them alike through
-``receive_nowait`` (the frames that have arrived, each with whom to answer)
-and ``send``.
+:mod:`remoteenv.wire.protocol`; the server's loop treats them alike through
+the :class:`Channel` interface: ``receive_nowait`` (the frames that have
+arrived, each with whom to answer) and ``send``.
 """
 
 from __future__ import annotations
 
 import socket
 import time
-from typing import Any
+from typing import Any, Protocol
 
 import zmq
 
@@ -18,6 +18,31 @@ from remoteenv.wire import protocol
 from remoteenv.wire.hot_wait import yield_cpu
 
 _PIPE_READ_BYTES = 1 << 20
+
+
+class Channel(Protocol):
+    """Where requests come from and their replies go."""
+
+    #: True once the channel can carry nothing more (the pipe's end of file).
+    closed: bool
+    #: What to register in a ``zmq.Poller``.
+    pollable: Any
+    #: A file descriptor that becomes readable when requests may be waiting.
+    fd: int
+
+    def receive_nowait(self) -> list[tuple[Any, bytes]]:
+        """The request frames that have arrived, each with whom to answer (never blocks)."""
+        ...
+
+    def send(self, reply_to: Any, payload: bytes) -> None:
+        """Send one encoded reply to ``reply_to`` (a value ``receive_nowait`` gave)."""
+        ...
+
+
+#: A reply to send later: the channel (None for a request handed to the server
+#: directly, whose late reply has nowhere to go), whom to answer there, and the
+#: reply map (with its ``seq``); produced by real-time stepping when a tick ends.
+Outgoing = tuple["Channel | None", Any, dict[str, Any]]
 
 
 class ZmqChannel:
@@ -30,12 +55,12 @@ class ZmqChannel:
         self.pollable: Any = sock
         #: A file descriptor that becomes readable when requests may be waiting
         #: (edge-triggered: always drain with :meth:`receive_nowait`).
-        self.fd: int = sock.getsockopt(zmq.FD)
+        self.fd: int = int(sock.getsockopt(zmq.FD))
 
     def receive_nowait(self) -> list[tuple[Any, bytes]]:
         out = []
         sock = self.socket
-        while sock.getsockopt(zmq.EVENTS) & zmq.POLLIN:
+        while sock.getsockopt(zmq.EVENTS) & zmq.POLLIN:  # type: ignore[arg-type,operator]
             frames = sock.recv_multipart(zmq.NOBLOCK)
             if len(frames) == 2:  # anything else is not a DEALER-framed request: drop
                 out.append((frames[0], frames[1]))

@@ -1,7 +1,8 @@
 """What a sim process does when the agent that launched it dies.
 
-Runs in the sim process. The serving loops check the parent every 0.25 s
-between requests (``RemoteControlledAgent.check_parent``); :class:`ParentWatch`
+Runs in the sim process. The server's loop checks the parent every
+:data:`CHECK_INTERVAL_S` between requests (``RemoteControlledAgent.check_parent``),
+the frame publisher as often while it waits; :class:`ParentWatch`
 is the backstop for a sim whose main thread is busy (a long step, a stuck
 scene): a daemon thread that notices the parent is gone and, if the main
 thread has not shut down within a grace period, removes this instance's files
@@ -15,7 +16,7 @@ from __future__ import annotations
 import os
 import threading
 
-#: Seconds between two looks at the parent pid.
+#: Seconds between two looks at the parent pid (every sim-side loop and the watch).
 CHECK_INTERVAL_S = 0.25
 #: Seconds the main thread gets to shut down by itself once the parent is gone.
 GRACE_S = 1.0

@@ -38,10 +38,10 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
-import signal
 import sys
 import time
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 if __name__ == "__main__" and sys.path and os.path.abspath(sys.path[0]) == os.path.dirname(
     os.path.abspath(__file__)
@@ -51,14 +51,16 @@ if __name__ == "__main__" and sys.path and os.path.abspath(sys.path[0]) == os.pa
 
 import zmq
 
+from remoteenv.sim.base_env import BaseEnv
+from remoteenv.sim.lifecycle import exit_on_sigterm, remove_ipc_file, write_ready_file
+from remoteenv.sim.orphan import CHECK_INTERVAL_S, parent_alive
+from remoteenv.sim.scene_main import scene_argument_parser
 from remoteenv.wire import protocol
 from remoteenv.wire.addresses import is_loopback
-from remoteenv.sim.base_env import BaseEnv
-from remoteenv.sim.scene_main import scene_argument_parser
 
 #: Frames a PUSH socket queues before the publisher waits for its reader.
 SEND_HWM = 8
-_POLL_MS = 250
+_POLL_MS = round(CHECK_INTERVAL_S * 1000)
 
 
 def load_env_class(scene_script: str, class_name: str | None = None) -> type[BaseEnv]:
@@ -136,7 +138,7 @@ class FramePublisher:
         self.items = items
         self.episode_steps = episode_steps
         self.parent_pid = parent_pid
-        self._ctx = zmq.Context.instance()
+        self._ctx: zmq.Context[Any] = zmq.Context.instance()
         self.socket = self._ctx.socket(zmq.PUSH)
         self.socket.setsockopt(zmq.SNDHWM, SEND_HWM)
         self.socket.setsockopt(zmq.LINGER, 0)
@@ -145,7 +147,7 @@ class FramePublisher:
         self._labels = getattr(env, "stream_labels", None)
 
     def _parent_gone(self) -> bool:
-        return self.parent_pid is not None and os.getppid() != self.parent_pid
+        return self.parent_pid is not None and not parent_alive(self.parent_pid)
 
     def _send(self, frame: bytes) -> bool:
         """Send one item, waiting for room; False if the parent died meanwhile."""
@@ -176,7 +178,7 @@ class FramePublisher:
                 obs, info = env.reset()
                 episode, step = episode + 1, 0
         while not self._parent_gone():
-            time.sleep(_POLL_MS / 1000)
+            time.sleep(CHECK_INTERVAL_S)
 
     def close(self) -> None:
         self.socket.close(linger=0)
@@ -195,29 +197,18 @@ def main(argv: Sequence[str] | None = None) -> None:
     env_kwargs: dict[str, Any] = json.loads(args.env_kwargs)
     env_kwargs["render_mode"] = "rgb_array"
     env = load_env_class(args.scene, args.env_class)(**env_kwargs)
-
-    def _stop(signum: int, _frame: Any) -> None:
-        raise SystemExit(128 + signum)
-
-    signal.signal(signal.SIGTERM, _stop)
+    exit_on_sigterm()
     publisher = FramePublisher(
         env, args.address, instance=args.instance, seed=args.seed, items=args.items,
         episode_steps=args.episode_steps, parent_pid=args.parent_pid,
     )
     try:
         if args.ready_file:
-            tmp = f"{args.ready_file}.tmp"
-            with open(tmp, "w") as f:
-                json.dump({"endpoint": publisher.endpoint, "pid": os.getpid(), "instance": args.instance}, f)
-            os.replace(tmp, args.ready_file)
+            write_ready_file(args.ready_file, publisher.endpoint, args.instance)
         publisher.run()
     finally:
         publisher.close()
-        if publisher.endpoint.startswith("ipc://"):
-            try:
-                os.unlink(publisher.endpoint[len("ipc://"):])
-            except OSError:
-                pass
+        remove_ipc_file(publisher.endpoint)
 
 
 if __name__ == "__main__":

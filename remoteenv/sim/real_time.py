@@ -1,9 +1,11 @@
 """Real-time mode: physics paced to the wall clock while the agent thinks.
 
 Runs in the sim process. :class:`RealTimeStepper` owns the schedule and
-action handling of one world; :func:`serve_real_time` is the server loop that
+action handling of one world; :class:`RealTimeStepping` is the server loop's
+strategy for all of them (see :mod:`remoteenv.sim.stepping`): the loop
 answers requests between physics substeps and fires each world's substeps on
-their deadlines.
+their deadlines. Both read time from an injected clock (``time.monotonic`` in
+a sim process), in seconds.
 
 Semantics:
 
@@ -52,52 +54,52 @@ The agent adds ``wall_round_trip_s`` (see :mod:`remoteenv.remote_env`).
 from __future__ import annotations
 
 import math
-import select
 import time
 import traceback
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-
-from remoteenv.wire import protocol
-from remoteenv.wire.stats import RunningStats
 from remoteenv.sim.base_env import BaseEnv
+from remoteenv.sim.channels import Channel, Outgoing
+from remoteenv.sim.checks import RequestError
+from remoteenv.wire.errors import SCENE
+from remoteenv.wire.protocol import error_reply
+from remoteenv.wire.stats import RunningStats
 
-_PARENT_CHECK_S = 0.25
-#: Wall seconds before a deadline at which waiting turns from sleeping to spinning.
-_SPIN_S = 0.0003
-
-#: A reply waiting to be sent: (whom to answer, reply map with "seq"); whom to
-#: answer is opaque to the stepper (the server loop's channel and reply_to).
-Outgoing = tuple[Any, dict[str, Any]]
+#: A clock: seconds, monotonic (``time.monotonic`` in a sim process).
+Clock = Callable[[], float]
 
 _IDLE, _READY, _RUNNING, _FROZEN, _FAILED = "idle", "ready", "running", "frozen", "failed"
 
 
 @dataclass
 class _PendingStep:
-    identity: Any
+    channel: Channel | None
+    reply_to: Any
     seq: int
     action: Any
-    arrived: float  # time.monotonic() when the request was read
+    arrived: float  # clock time when the request was handed over
     applied_sim_time: float | None = None
     apply_delay_s: float | None = None
 
 
 class RealTimeStepper:
-    """One world advanced on the wall clock; driven by :func:`serve_real_time`.
+    """One world advanced on the wall clock; driven by :class:`RealTimeStepping`.
 
     Args:
         env: the world.
         real_time_factor: simulated seconds per wall-clock second (> 0).
+        clock: where wall time comes from (seconds, monotonic).
     """
 
-    def __init__(self, env: BaseEnv, real_time_factor: float = 1.0) -> None:
+    def __init__(self, env: BaseEnv, real_time_factor: float = 1.0, clock: Clock = time.monotonic) -> None:
         factor = float(real_time_factor)
         if not (math.isfinite(factor) and factor > 0):
             raise ValueError(f"real_time_factor must be a finite number > 0, got {real_time_factor!r}")
         self.env = env
         self.factor = factor
+        self.clock = clock
         #: Wall seconds per physics substep.
         self.period = float(env.model.opt.timestep) / factor
         self.state = _IDLE
@@ -136,7 +138,7 @@ class RealTimeStepper:
         return self.state == _READY
 
     def next_deadline(self) -> float | None:
-        """``time.monotonic()`` value at which the next substep boundary is due (None: nothing runs)."""
+        """Clock time at which the next substep boundary is due (None: nothing runs)."""
         return self._t0 + self._n * self.period if self.state == _RUNNING else None
 
     def describe(self) -> dict[str, Any]:
@@ -181,22 +183,28 @@ class RealTimeStepper:
             self._n = 0
             self.state = _RUNNING
 
-    def step(self, action: Any) -> dict[str, Any]:
-        raise RuntimeError("real-time steps are answered by serve_real_time, not by a direct call")
+    def submit(self, seq: int, action: Any, channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
+        """A checked ``step`` request; its arrival time is read from the clock now.
 
-    def submit(self, identity: Any, seq: int, action: Any, now: float) -> list[Outgoing]:
-        """A validated ``step`` request arrived at ``now``. Returns replies due at once."""
+        Returns the reply at once when the world is frozen at a termination;
+        otherwise None: the reply comes from :meth:`advance`. Raises
+        :class:`RequestError` (kind ``scene``) while the world is stopped by
+        a scene failure.
+        """
         if self.state == _FAILED:
-            return [(identity, protocol.error_reply(seq, "scene", self._failure))]
-        pending = _PendingStep(identity, seq, action, now)
+            raise RequestError(SCENE, self._failure)
+        pending = _PendingStep(channel, reply_to, seq, action, self.clock())
         if self.state == _FROZEN:
-            return [self._reply(pending, terminated=True)]
+            return self._reply(pending, terminated=True)
         # A newer request supersedes one still pending: its sender gave up on it.
         self._pending = pending
-        return []
+        return None
 
     def fail(self, exc: BaseException) -> list[Outgoing]:
-        """The scene raised while advancing: stop this world until the next reset."""
+        """The scene raised while advancing: stop this world until the next reset.
+
+        Call it from the ``except`` block (the message carries the traceback).
+        """
         self.state = _FAILED
         self._failure = (
             f"{type(exc).__name__} in the scene while advancing in real time: {exc}; "
@@ -205,10 +213,10 @@ class RealTimeStepper:
         pending, self._pending = self._pending, None
         if pending is None:
             return []
-        return [(pending.identity, protocol.error_reply(pending.seq, "scene", self._failure))]
+        return [(pending.channel, pending.reply_to, error_reply(pending.seq, SCENE, self._failure))]
 
     def advance(self, now: float) -> list[Outgoing]:
-        """Process the substep boundary that was due; ``now`` is the wall time it is processed.
+        """Process the substep boundary that was due; ``now`` is the clock time it is processed.
 
         At a tick end the tick is scored (and may end the episode); then a
         newly arrived action takes effect, and the next substep is computed.
@@ -229,7 +237,8 @@ class RealTimeStepper:
             pending = self._pending
             if pending is not None and (pending.applied_sim_time is not None or terminated):
                 self._pending = None
-                out.append(self._reply(pending, terminated=bool(terminated)))
+                reply = self._reply(pending, terminated=bool(terminated))
+                out.append((pending.channel, pending.reply_to, reply))
             if terminated:
                 self.state = _FROZEN
                 return out
@@ -238,7 +247,7 @@ class RealTimeStepper:
             env.prepare_step(pending.action)
             self._held = pending.action
             pending.applied_sim_time = float(env.data.time)
-            pending.apply_delay_s = time.monotonic() - pending.arrived
+            pending.apply_delay_s = self.clock() - pending.arrived
             self.apply_delay.add(pending.apply_delay_s)
         elif self._n % fs == 0:
             env.prepare_step(self._held)
@@ -247,8 +256,8 @@ class RealTimeStepper:
         self.substeps += 1
         return out
 
-    def _reply(self, pending: _PendingStep, *, terminated: bool) -> Outgoing:
-        """Answer ``pending`` with the current observation and what accumulated since the last reply."""
+    def _reply(self, pending: _PendingStep, *, terminated: bool) -> dict[str, Any]:
+        """The reply to ``pending``: the current observation and what accumulated since the last reply."""
         dt = self.env.dt
         sim_time = float(self.env.data.time)
         applied = pending.applied_sim_time
@@ -276,118 +285,64 @@ class RealTimeStepper:
         self._reward = 0.0
         self._ticks = 0
         self._obs_time = sim_time
-        return pending.identity, reply
-
-
-# ---------------------------------------------------------------- server loop
-
-
-def serve_real_time(server: Any) -> None:
-    """Serve ``server`` (a :class:`~remoteenv.sim.server.RemoteControlledAgent`
-    whose steppers are :class:`RealTimeStepper`) until it stops running.
-
-    Requests are read whenever they arrive, also between substeps: ``reset``,
-    ``handshake``, ``render`` and ``close`` are answered at once by the
-    server's handlers, ``step`` is handed to its world's stepper, ``timing``
-    returns each world's pacing figures. Waits use ``select`` on the socket's
-    file descriptor with microsecond timeouts, so substeps fire close to
-    their deadlines.
-    """
-    from remoteenv.sim.server import RequestError, validate_action
-
-    steppers: list[RealTimeStepper] = list(server.steppers)
-    for s in steppers:
-        if not isinstance(s, RealTimeStepper):
-            raise TypeError(f"serve_real_time needs RealTimeSteppers, got {type(s).__name__}")
-    channels = list(server.channels)
-    fds = [c.fd for c in channels]
-
-    def send(out: list[Outgoing]) -> None:
-        # An Outgoing's "identity" here is (channel, the channel's reply_to).
-        for (channel, reply_to), reply in out:
-            channel.send(reply_to, server.pack_reply(reply))
-
-    def handle_step(identity: Any, msg: dict[str, Any], now: float) -> list[Outgoing]:
-        seq = msg["seq"]
-        world = msg.get("world", 0)
-        if not isinstance(world, int) or isinstance(world, bool) or not 0 <= world < len(steppers):
-            return [(identity, protocol.error_reply(
-                seq, "protocol", f"world {world!r} out of range; this process hosts {len(steppers)}"))]
-        stepper = steppers[world]
-        if not stepper.has_reset:
-            return [(identity, protocol.error_reply(
-                seq, "state", f"step before reset on world {world} of instance {server.instance}"))]
-        try:
-            action = validate_action(stepper.env, msg.get("action"))
-        except RequestError as exc:
-            return [(identity, protocol.error_reply(seq, exc.kind, str(exc)))]
-        return stepper.submit(identity, seq, action, now)
-
-    def handle_timing(msg: dict[str, Any]) -> dict[str, Any]:
-        reply = {"seq": msg["seq"], "ok": True, "worlds": [s.timing() for s in steppers]}
-        if msg.get("clear"):
-            for s in steppers:
-                s.clear_timing()
         return reply
 
-    def drain() -> None:
-        """Read and handle every request that has arrived (non-blocking)."""
-        for channel in channels:
-            if server._running:
-                drain_channel(channel)
-            if channel.closed:  # the local pipe ended: the agent is gone
-                server.pipe_closed()
 
-    def drain_channel(channel: Any) -> None:
-        for reply_to, frame in channel.receive_nowait():
-            if not server._running:
-                return
-            now = time.monotonic()
-            identity = (channel, reply_to)
+class RealTimeStepping:
+    """The loop strategy of a real-time server: one clock, each world on its own schedule.
+
+    Args:
+        envs: the worlds, one :class:`RealTimeStepper` each.
+        real_time_factor: simulated seconds per wall-clock second (> 0).
+        clock: where wall time comes from (seconds, monotonic).
+    """
+
+    def __init__(
+        self, envs: Sequence[BaseEnv], real_time_factor: float = 1.0, clock: Clock = time.monotonic
+    ) -> None:
+        self.clock = clock
+        self._worlds = [RealTimeStepper(env, real_time_factor=real_time_factor, clock=clock) for env in envs]
+
+    @property
+    def worlds(self) -> list[RealTimeStepper]:
+        return self._worlds
+
+    @property
+    def clock_waiting(self) -> bool:
+        return any(w.awaiting_clock for w in self._worlds)
+
+    def start_clocks(self, now: float) -> None:
+        for w in self._worlds:
+            w.start(now)
+
+    def next_deadline(self) -> float | None:
+        deadlines = [d for w in self._worlds if (d := w.next_deadline()) is not None]
+        return min(deadlines) if deadlines else None
+
+    def run_due(self, now: float) -> Iterator[Outgoing]:
+        """Process one substep boundary of every world due at ``now``, earliest deadline first.
+
+        A world whose scene raises is stopped (see :meth:`RealTimeStepper.fail`);
+        the others go on.
+        """
+        due = sorted(
+            (d, w) for w, world in enumerate(self._worlds) if (d := world.next_deadline()) is not None and d <= now
+        )
+        for _, w in due:
+            world = self._worlds[w]
             try:
-                msg = protocol.decode_request(frame)
-            except protocol.ProtocolError as exc:
-                send([(identity, protocol.error_reply(-1, "protocol", str(exc)))])
-                continue
-            cmd = msg["cmd"]
-            if cmd == "step":
-                send(handle_step(identity, msg, now))
-            elif cmd == "timing":
-                send([(identity, handle_timing(msg))])
-            else:
-                send([(identity, server.handle(msg))])
-                started = time.monotonic()
-                for s in steppers:
-                    if s.awaiting_clock:
-                        s.start(started)
+                out = world.advance(self.clock())
+            except Exception as exc:  # the scene raised: keep serving
+                out = world.fail(exc)
+            yield from out
 
-    last_check = time.monotonic()
-    while server._running:
-        drain()
-        if not server._running:
-            break
-        now = time.monotonic()
-        deadlines = [(d, s) for s in steppers if (d := s.next_deadline()) is not None]
-        due = [s for d, s in sorted(deadlines, key=lambda p: p[0]) if d <= now]
-        if due:
-            for s in due:
-                try:
-                    send(s.advance(time.monotonic()))
-                except Exception as exc:  # the scene raised: keep serving
-                    send(s.fail(exc))
-        else:
-            timeout = _PARENT_CHECK_S
-            if deadlines:
-                timeout = min(timeout, min(d for d, _ in deadlines) - now)
-            if timeout > _SPIN_S:
-                # Wake a little early: the kernel's wake-up latency is then
-                # absorbed by the short spin below instead of making us late.
-                select.select(fds, [], [], timeout - _SPIN_S)
-            # else: spin (the loop re-checks requests and the clock)
-        now = time.monotonic()
-        if now - last_check > _PARENT_CHECK_S:
-            server.check_parent()
-            last_check = now
+    def timing(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        """The ``timing`` command: every world's pacing figures; ``clear`` resets them after reading."""
+        reply = {"worlds": [w.timing() for w in self._worlds]}
+        if msg.get("clear"):
+            for w in self._worlds:
+                w.clear_timing()
+        return reply
 
 
-__all__ = ["RealTimeStepper", "serve_real_time"]
+__all__ = ["Clock", "RealTimeStepper", "RealTimeStepping"]

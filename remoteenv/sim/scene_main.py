@@ -5,11 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
-from remoteenv.wire.keys import read_key, read_keys
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.server import RemoteControlledAgent
+from remoteenv.wire.keys import read_key, read_keys
 
 
 def scene_argument_parser(description: str | None = None) -> argparse.ArgumentParser:

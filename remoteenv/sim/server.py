@@ -1,42 +1,49 @@
 """RemoteControlledAgent: serves a scene's worlds to one agent over the wire.
 
-Runs in the sim process. It binds a ROUTER socket, answers the commands of
-:mod:`remoteenv.protocol` and keeps serving after errors in the scene code.
+Runs in the sim process. It binds a ROUTER socket (and serves the launcher's
+local pipe beside it), answers the commands of :mod:`remoteenv.wire.protocol`
+from one command table and keeps serving after errors in the scene code.
+
+One loop serves both stepping modes. It asks the server's
+:class:`~remoteenv.sim.stepping.Stepping` for its next deadline: with none
+(always, in lock-step) it blocks on its channels until a request arrives,
+busy-waiting for a short while first when the agent on the local pipe has
+been quick (:data:`SIM_SPIN_S`); with one (real time) it sleeps until just
+before it with ``select`` (microsecond timeouts), spins the rest, runs the
+work due and sends the replies that completes, and reads requests between
+substeps.
 """
 
 from __future__ import annotations
 
-import json
-import os
-import signal
+import select
 import time
 import traceback
-from typing import Any, Callable
+from collections.abc import Sequence
+from typing import Any
 
 import zmq
 
-from remoteenv.wire import protocol
-from remoteenv.wire import spaces as spaces_codec
-from remoteenv.wire.actions import check_action
-from remoteenv.wire.errors import InvalidAction
-from remoteenv.wire.addresses import ipc_path, is_loopback
 from remoteenv.sim.base_env import BaseEnv
+from remoteenv.sim.batch import BatchCommands
+from remoteenv.sim.channels import Channel, Outgoing, PipeChannel, ZmqChannel
+from remoteenv.sim.checks import RequestError
+from remoteenv.sim.commands import Commands, Handler
+from remoteenv.sim.lifecycle import exit_on_sigterm, remove_ipc_file, write_ready_file
+from remoteenv.sim.lock_step import LockStepping
+from remoteenv.sim.orphan import CHECK_INTERVAL_S, ParentWatch, parent_alive, remove_private_files
+from remoteenv.sim.real_time import Clock, RealTimeStepping
+from remoteenv.sim.stepping import Stepping
+from remoteenv.wire import protocol
+from remoteenv.wire.addresses import is_loopback
+from remoteenv.wire.errors import INVALID_ACTION, PROTOCOL, SCENE, InvalidAction, short_repr
 from remoteenv.wire.hot_wait import HotWait
-from remoteenv.sim.channels import PipeChannel, ZmqChannel
-from remoteenv.sim.orphan import ParentWatch, parent_alive, remove_private_files
-from remoteenv.sim.stepping import LockStepper, make_stepper
 
-_PARENT_CHECK_S = 0.25
 #: Longest busy-wait (seconds) for the agent's next request on the local pipe.
 SIM_SPIN_S = 1e-3
-
-
-class RequestError(Exception):
-    """Raised by a command handler; becomes a typed error reply."""
-
-    def __init__(self, kind: str, message: str) -> None:
-        super().__init__(message)
-        self.kind = kind
+#: Wall seconds before a deadline at which waiting turns from sleeping to spinning.
+DEADLINE_SPIN_S = 0.0003
+_CHECK_INTERVAL_MS = round(CHECK_INTERVAL_S * 1000)
 
 
 class RemoteControlledAgent:
@@ -51,8 +58,11 @@ class RemoteControlledAgent:
             died). None disables the check.
         ready_file: once bound, write ``{"endpoint", "pid", "instance"}`` as JSON
             here (atomically), so the launcher knows where and that we listen.
-        real_time, real_time_factor, action_delay: stepping mode, see
-            :mod:`remoteenv.sim.stepping`.
+        real_time, real_time_factor: run physics paced to the wall clock
+            (:mod:`remoteenv.sim.real_time`); the factor is simulated seconds
+            per wall-clock second.
+        action_delay: lock-step only: control ticks between an action's
+            arrival and its effect (:mod:`remoteenv.sim.lock_step`).
         allow_remote: permit binding a non-loopback interface.
         curve_secret_key: this server's Z85 CURVE secret key; turns on CURVE
             encryption (required beyond loopback).
@@ -62,8 +72,9 @@ class RemoteControlledAgent:
         private_dir: the launcher's private dir; if the agent dies, this sim
             removes its ``sim-<instance>.*`` files from it (and the dir, last).
         pipe_fd: inherited end of the launcher's socketpair, served besides
-            the socket (see "The local pipe" in :mod:`remoteenv.protocol`);
+            the socket (see "The local pipe" in :mod:`remoteenv.wire.protocol`);
             its end of file stops the server.
+        clock: the loop's and real-time stepping's clock (seconds, monotonic).
     """
 
     def __init__(
@@ -82,6 +93,7 @@ class RemoteControlledAgent:
         curve_client_keys: list[bytes] | None = None,
         private_dir: str | None = None,
         pipe_fd: int | None = None,
+        clock: Clock = time.monotonic,
     ) -> None:
         if not envs:
             raise ValueError("RemoteControlledAgent needs at least one env")
@@ -94,15 +106,17 @@ class RemoteControlledAgent:
         self.instance = instance
         self.parent_pid = parent_pid
         self.private_dir = private_dir
-        self.orphaned = False
-        self._authenticator: Any = None
-        self.steppers = [
-            make_stepper(env, real_time=real_time, real_time_factor=real_time_factor,
-                         action_delay=action_delay)
-            for env in envs
-        ]
         self.real_time = real_time
-        self._ctx = zmq.Context.instance()
+        self.clock = clock
+        self.orphaned = False
+        self.stepping, mode_commands = _stepping_and_commands(
+            envs, instance, real_time=real_time, real_time_factor=real_time_factor,
+            action_delay=action_delay, clock=clock,
+        )
+        self._handlers: dict[str, Handler] = Commands(envs, self.stepping, instance, self.stop).handlers()
+        self._handlers.update(mode_commands)
+        self._authenticator: Any = None
+        self._ctx: zmq.Context[Any] = zmq.Context.instance()
         self.socket = self._ctx.socket(zmq.ROUTER)
         self.socket.setsockopt(zmq.LINGER, 0)
         self.socket.setsockopt(zmq.MAXMSGSIZE, protocol.MAX_MESSAGE_BYTES)
@@ -115,47 +129,39 @@ class RemoteControlledAgent:
             raise ValueError(f"binding {address!r} beyond loopback requires CURVE keys")
         self.socket.bind(address)
         self.endpoint: str = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
-        self.channels: list[ZmqChannel | PipeChannel] = [ZmqChannel(self.socket)]
-        if pipe_fd is not None:
-            self.channels.append(PipeChannel(pipe_fd))
-        self._handlers: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
-            "handshake": self._handshake,
-            "reset": self._reset,
-            "step": self._step,
-            "render": self._render,
-            "close": self._close,
-        }
-        if not real_time:
-            from remoteenv.sim.batch import BatchCommands
-
-            self._handlers.update(BatchCommands(self).handlers())
+        self.channels: list[Channel] = [ZmqChannel(self.socket)]
+        self._pipe = PipeChannel(pipe_fd) if pipe_fd is not None else None
+        if self._pipe is not None:
+            self.channels.append(self._pipe)
         self._running = True
         if ready_file:
-            tmp = f"{ready_file}.tmp"
-            with open(tmp, "w") as f:
-                json.dump({"endpoint": self.endpoint, "pid": os.getpid(), "instance": instance}, f)
-            os.replace(tmp, ready_file)
+            write_ready_file(ready_file, self.endpoint, instance)
+
+    @property
+    def running(self) -> bool:
+        """True until a ``close`` command, the pipe's end or the parent's death stops serving."""
+        return self._running
+
+    @property
+    def commands(self) -> list[str]:
+        """The commands this server answers, sorted."""
+        return sorted(self._handlers)
+
+    def stop(self) -> None:
+        """Stop serving once the request in hand is answered."""
+        self._running = False
 
     # ------------------------------------------------------------ serving
 
     def serve(self) -> None:
         """Answer requests until a ``close`` command, SIGTERM/SIGINT or parent death."""
-
-        def _stop(signum: int, _frame: Any) -> None:
-            raise SystemExit(128 + signum)
-
-        signal.signal(signal.SIGTERM, _stop)
+        exit_on_sigterm()
         watch = None
         if self.parent_pid is not None:
             watch = ParentWatch(self.parent_pid, self.private_dir, self.instance)
             watch.start()
         try:
-            if self.real_time:
-                from remoteenv.sim.real_time import serve_real_time
-
-                serve_real_time(self)
-            else:
-                self._serve_lockstep()
+            self._serve_until_stopped()
         finally:
             self.shutdown()
             gone = self.orphaned or (self.parent_pid is not None and not parent_alive(self.parent_pid))
@@ -164,43 +170,76 @@ class RemoteControlledAgent:
             if watch is not None:
                 watch.finished()
 
-    def _serve_lockstep(self) -> None:
+    def _serve_until_stopped(self) -> None:
+        stepping, clock, pipe = self.stepping, self.clock, self._pipe
+        # Busy-waiting for the agent's next request pays in lock-step; in real
+        # time the loop's own waits are paced by the deadlines instead.
+        hot = HotWait(SIM_SPIN_S if pipe is not None and not self.real_time else 0.0)
         poller = zmq.Poller()
-        by_pollable = {}
+        by_pollable: dict[Any, Channel] = {}
         for channel in self.channels:
             poller.register(channel.pollable, zmq.POLLIN)
             by_pollable[channel.pollable] = channel
-        pipe = next((c for c in self.channels if isinstance(c, PipeChannel)), None)
-        hot = HotWait(SIM_SPIN_S if pipe is not None else 0.0)
-        last_check = time.monotonic()
+        fds = [channel.fd for channel in self.channels]
+        last_check = clock()
         while self._running:
-            if pipe is not None and hot.worth_it():
-                # The agent has been sending its next request quickly: wait hot.
-                frames = pipe.receive_spinning(hot.window_s)
-                if frames:
-                    hot.waited(time.perf_counter() - hot.since)
-                    self._answer(pipe, frames)
-                    hot.since = time.perf_counter()
-                    continue
-            events = poller.poll(_PARENT_CHECK_S * 1000)
-            for pollable, _ in events:
-                channel = by_pollable[pollable]
-                frames = channel.receive_nowait()
-                if channel is pipe and frames:
-                    hot.waited(time.perf_counter() - hot.since)
-                self._answer(channel, frames)
-                if channel is pipe:
-                    hot.since = time.perf_counter()
-                if channel.closed:
-                    self.pipe_closed()
-            now = time.monotonic()
-            if not events or now - last_check > _PARENT_CHECK_S:
+            deadline = stepping.next_deadline()
+            if deadline is None:
+                if pipe is not None and hot.worth_it():
+                    # The agent has been sending its next request quickly: wait hot.
+                    frames = pipe.receive_spinning(hot.window_s)
+                    if frames:
+                        hot.waited(time.perf_counter() - hot.since)
+                        self._answer(pipe, frames)
+                        hot.since = time.perf_counter()
+                        continue
+                events = poller.poll(_CHECK_INTERVAL_MS)
+                for pollable, _ in events:
+                    channel = by_pollable[pollable]
+                    frames = channel.receive_nowait()
+                    if channel is pipe and frames:
+                        hot.waited(time.perf_counter() - hot.since)
+                    self._answer(channel, frames)
+                    if channel is pipe:
+                        hot.since = time.perf_counter()
+                    if channel.closed:
+                        self.pipe_closed()
+                idle = not events
+            else:
+                now = clock()
+                if deadline <= now:
+                    for outgoing in stepping.run_due(now):
+                        self._send_later(outgoing)
+                else:
+                    timeout = min(deadline - now, CHECK_INTERVAL_S)
+                    if timeout > DEADLINE_SPIN_S:
+                        # Wake a little early: the kernel's wake-up latency is then
+                        # absorbed by spinning (looping) instead of making us late.
+                        select.select(fds, [], [], timeout - DEADLINE_SPIN_S)
+                # The ZeroMQ descriptor is edge-triggered: read every channel.
+                for channel in self.channels:
+                    self._answer(channel, channel.receive_nowait())
+                    if channel.closed:
+                        self.pipe_closed()
+                idle = False
+            now = clock()
+            if idle or now - last_check > CHECK_INTERVAL_S:
                 self.check_parent()
                 last_check = now
 
-    def _answer(self, channel: ZmqChannel | PipeChannel, frames: list[tuple[Any, bytes]]) -> None:
+    def _answer(self, channel: Channel, frames: list[tuple[Any, bytes]]) -> None:
+        stepping = self.stepping
         for reply_to, frame in frames:
-            channel.send(reply_to, self.pack_reply(self.handle_frame(frame)))
+            reply = self.handle_frame(frame, channel, reply_to)
+            if reply is not None:
+                channel.send(reply_to, self.pack_reply(reply))
+                if stepping.clock_waiting:  # a reset was answered: its world's clock starts now
+                    stepping.start_clocks(self.clock())
+
+    def _send_later(self, outgoing: Outgoing) -> None:
+        channel, reply_to, reply = outgoing
+        if channel is not None:
+            channel.send(reply_to, self.pack_reply(reply))
 
     def pipe_closed(self) -> None:
         """The local pipe ended: the agent died or closed it. Stop, and leave no files."""
@@ -213,6 +252,8 @@ class RemoteControlledAgent:
             self.orphaned = True
             self._running = False
 
+    # ------------------------------------------------------------ requests
+
     def pack_reply(self, reply: dict[str, Any]) -> bytes:
         """Encode a reply; one that cannot go on the wire becomes a typed error (never raises)."""
         try:
@@ -220,38 +261,50 @@ class RemoteControlledAgent:
         except Exception as exc:
             seq = reply.get("seq", -1)
             return protocol.pack(protocol.error_reply(
-                seq if isinstance(seq, int) else -1, "scene",
+                seq if isinstance(seq, int) else -1, SCENE,
                 f"the reply to this request cannot be sent on the wire ({type(exc).__name__}: {exc}); "
                 "scene code must return numpy arrays, numbers, strings, lists and str-keyed maps",
                 traceback.format_exc(),
             ))
 
-    def handle_frame(self, frame: bytes) -> dict[str, Any]:
-        """Decode one request frame and compute its reply (never raises)."""
+    def handle_frame(
+        self, frame: bytes, channel: Channel | None = None, reply_to: Any = None
+    ) -> dict[str, Any] | None:
+        """Decode one request frame and compute its reply (never raises); see :meth:`handle`.
+
+        A frame that is not a request gets a ``protocol`` error with ``seq`` -1.
+        """
         try:
             msg = protocol.decode_request(frame)
         except protocol.ProtocolError as exc:
-            return protocol.error_reply(-1, "protocol", str(exc))
-        return self.handle(msg)
+            return protocol.error_reply(-1, PROTOCOL, str(exc))
+        return self.handle(msg, channel, reply_to)
 
-    def handle(self, msg: dict[str, Any]) -> dict[str, Any]:
-        """Compute the reply to a decoded request (never raises)."""
+    def handle(
+        self, msg: dict[str, Any], channel: Channel | None = None, reply_to: Any = None
+    ) -> dict[str, Any] | None:
+        """The reply to a decoded request (never raises), or None if it comes later.
+
+        Only a real-time ``step`` answers later: its reply goes to ``reply_to``
+        on ``channel`` when its tick ends (nowhere if ``channel`` is None).
+        """
         seq = msg["seq"]
         handler = self._handlers.get(msg["cmd"])
         if handler is None:
             return protocol.error_reply(
-                seq, "protocol", f"unknown command {msg['cmd']!r}; known: {sorted(self._handlers)}"
+                seq, PROTOCOL, f"unknown command {short_repr(msg['cmd'])}; known: {sorted(self._handlers)}"
             )
         try:
-            reply = handler(msg)
+            reply = handler(msg, channel, reply_to)
         except RequestError as exc:
             return protocol.error_reply(seq, exc.kind, str(exc))
+        except InvalidAction as exc:
+            return protocol.error_reply(seq, INVALID_ACTION, str(exc))
         except Exception as exc:
-            return protocol.error_reply(
-                seq, "scene", f"{type(exc).__name__}: {exc}", traceback.format_exc()
-            )
-        reply["seq"] = seq
-        reply["ok"] = True
+            return protocol.error_reply(seq, SCENE, f"{type(exc).__name__}: {exc}", traceback.format_exc())
+        if reply is not None:
+            reply["seq"] = seq
+            reply["ok"] = True
         return reply
 
     def shutdown(self) -> None:
@@ -262,84 +315,30 @@ class RemoteControlledAgent:
             except Exception:
                 traceback.print_exc()
         self.socket.close(linger=0)
-        for channel in self.channels:
-            if isinstance(channel, PipeChannel):
-                channel.close()
+        if self._pipe is not None:
+            self._pipe.close()
         if self._authenticator is not None:
             self._authenticator.stop()
-        path = ipc_path(self.endpoint)
-        if path is not None:
-            try:
-                os.unlink(path)
-            except OSError:
-                pass
-
-    # ------------------------------------------------------------ commands
-
-    def _world(self, msg: dict[str, Any]) -> int:
-        world = msg.get("world", 0)
-        if not isinstance(world, int) or isinstance(world, bool) or not 0 <= world < len(self.envs):
-            raise RequestError(
-                "protocol", f"world {world!r} out of range; this process hosts {len(self.envs)}"
-            )
-        return world
-
-    def _handshake(self, msg: dict[str, Any]) -> dict[str, Any]:
-        version = msg.get("protocol")
-        if version != protocol.PROTOCOL_VERSION:
-            raise RequestError(
-                "protocol",
-                f"protocol version mismatch: agent speaks {version!r}, sim instance "
-                f"{self.instance} speaks {protocol.PROTOCOL_VERSION}",
-            )
-        env = self.envs[0]
-        return {
-            "protocol": protocol.PROTOCOL_VERSION,
-            "env_id": env.env_id,
-            "instance": self.instance,
-            "pid": os.getpid(),
-            "num_worlds": len(self.envs),
-            "observation_space": spaces_codec.space_to_wire(env.observation_space),
-            "action_space": spaces_codec.space_to_wire(env.action_space),
-            "metadata": {
-                "render_modes": list(env.metadata.get("render_modes", [])),
-                "render_fps": int(round(1.0 / env.dt)),
-                "dt": float(env.dt),
-                "timestep": float(env.model.opt.timestep),
-                "frame_skip": env.frame_skip,
-            },
-            "stepping": self.steppers[0].describe(),
-        }
-
-    def _reset(self, msg: dict[str, Any]) -> dict[str, Any]:
-        world = self._world(msg)
-        seed = msg.get("seed")
-        if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool) or seed < 0):
-            raise RequestError("protocol", f"seed must be a non-negative int or nil, got {seed!r}")
-        options = msg.get("options")
-        if options is not None and not isinstance(options, dict):
-            raise RequestError("protocol", f"options must be a map or nil, got {type(options).__name__}")
-        obs, info = self.steppers[world].reset(seed=seed, options=options)
-        return {"obs": obs, "info": info}
-
-    def _step(self, msg: dict[str, Any]) -> dict[str, Any]:
-        world = self._world(msg)
-        stepper = self.steppers[world]
-        if not stepper.has_reset:
-            raise RequestError("state", f"step before reset on world {world} of instance {self.instance}")
-        action = validate_action(self.envs[world], msg.get("action"))
-        return stepper.step(action)
-
-    def _render(self, msg: dict[str, Any]) -> dict[str, Any]:
-        world = self._world(msg)
-        return {"frame": self.envs[world].render()}
-
-    def _close(self, msg: dict[str, Any]) -> dict[str, Any]:
-        self._running = False
-        return {}
+        remove_ipc_file(self.endpoint)
 
 
-def _start_client_key_check(ctx: zmq.Context, client_keys: list[bytes]) -> Any:
+def _stepping_and_commands(
+    envs: Sequence[BaseEnv], instance: int, *, real_time: bool, real_time_factor: float, action_delay: int,
+    clock: Clock,
+) -> tuple[Stepping, dict[str, Handler]]:
+    """The stepping of the requested mode and the commands only that mode answers:
+    ``timing`` in real time, ``reset_batch`` and ``step_batch`` in lock-step."""
+    if real_time:
+        if action_delay:
+            raise ValueError("action_delay is the lock-step twin of real_time; use one or the other")
+        real = RealTimeStepping(envs, real_time_factor=real_time_factor, clock=clock)
+        return real, {"timing": real.timing}
+    lock = LockStepping(envs, action_delay=action_delay)
+    batch = BatchCommands(lock.worlds, envs[0].action_space, instance)
+    return lock, {"reset_batch": batch.reset_batch, "step_batch": batch.step_batch}
+
+
+def _start_client_key_check(ctx: zmq.Context[Any], client_keys: list[bytes]) -> Any:
     """Run a ZAP handler thread that admits only CURVE clients whose public key is listed."""
     from zmq.auth.thread import ThreadAuthenticator
 
@@ -355,12 +354,4 @@ def _start_client_key_check(ctx: zmq.Context, client_keys: list[bytes]) -> Any:
     return auth
 
 
-def validate_action(env: BaseEnv, action: Any) -> Any:
-    """``action`` checked against the env's action space (:mod:`remoteenv.wire.actions`)."""
-    try:
-        return check_action(env.action_space, action)
-    except InvalidAction as exc:
-        raise RequestError("invalid_action", str(exc)) from None
-
-
-__all__ = ["RemoteControlledAgent", "RequestError", "validate_action", "LockStepper"]
+__all__ = ["DEADLINE_SPIN_S", "SIM_SPIN_S", "RemoteControlledAgent"]

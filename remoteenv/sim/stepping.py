@@ -1,79 +1,85 @@
-"""How a world advances when asked: lock-step, optionally with an action delay.
+"""How worlds advance: the interfaces the server's one loop drives.
 
-Runs in the sim process. Lock-step means the world advances only on a ``step``
-request, so the same seed and the same actions give the same trajectory in
-any process.
+Runs in the sim process. Two strategies implement them: lock-step
+(:mod:`remoteenv.sim.lock_step`, the default: a world advances only on a
+``step`` request) and real time (:mod:`remoteenv.sim.real_time`: physics
+paced to the wall clock while the agent thinks).
+
+The server's loop asks its :class:`Stepping` for the next deadline on its
+clock. None (always, in lock-step) means nothing is due: the loop blocks
+until a request arrives. Otherwise the loop waits until that deadline (or
+a request), calls :meth:`Stepping.run_due` and sends the replies it yields.
+A ``step`` request goes to its world's :class:`WorldStepper`, which answers
+at once (lock-step) or records where to answer and does so from
+``run_due`` (real time).
 """
 
 from __future__ import annotations
 
-from collections import deque
-from typing import Any
+from collections.abc import Iterable, Sequence
+from typing import Any, Protocol
 
 from remoteenv.sim.base_env import BaseEnv
+from remoteenv.sim.channels import Channel, Outgoing
+
+# The lock-step world's stepper has lived here; this import path keeps working.
+from remoteenv.sim.lock_step import LockStepper
 
 
-class LockStepper:
-    """Advances one world by one control tick per ``step`` request.
+class WorldStepper(Protocol):
+    """How one world answers ``reset`` and ``step``."""
 
-    With ``action_delay=k`` the action received with step ``t`` takes effect
-    at tick ``t + k`` (ticks counted from 0 after a reset); during the first
-    ``k`` ticks the scene's default action is applied (see
-    :meth:`BaseEnv.default_action`). The reply's ``info["applied_action"]``
-    is then the action actually in force, or ``None`` for the default, and
-    the info carries real-time mode's timing keys with their exact values:
-    ``sim_time``, ``ticks_elapsed`` = 1, ``latency_ticks`` = k, ``latency_s``
-    = k * dt and ``late`` = True (a whole tick runs before the action counts).
-    """
+    @property
+    def env(self) -> BaseEnv:
+        """The world."""
+        ...
 
-    def __init__(self, env: BaseEnv, action_delay: int = 0) -> None:
-        if action_delay < 0:
-            raise ValueError(f"action_delay must be >= 0 ticks, got {action_delay}")
-        self.env = env
-        self.action_delay = int(action_delay)
-        self.has_reset = False
-        self._queue: deque[Any] = deque()
+    @property
+    def has_reset(self) -> bool:
+        """Whether the world has been reset since the process started (steps need it)."""
+        ...
 
     def describe(self) -> dict[str, Any]:
-        return {"mode": "lock_step", "action_delay": self.action_delay}
+        """The handshake's ``stepping`` map: ``mode`` and the mode's parameters."""
+        ...
 
     def reset(self, *, seed: int | None, options: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
-        obs, info = self.env.reset(seed=seed, options=options)
-        self.has_reset = True
-        self._queue = deque([self.env.default_action()] * self.action_delay)
-        return obs, info
+        """Start an episode; ``(obs, info)``."""
+        ...
 
-    def step(self, action: Any) -> dict[str, Any]:
-        if self.action_delay:
-            self._queue.append(action)
-            action = self._queue.popleft()
-        obs, reward, terminated, info = self.env.step(action)
-        if self.action_delay:
-            info = dict(info)
-            info["applied_action"] = action
-            # The timing keys of real-time mode, exact by construction here.
-            info["sim_time"] = float(self.env.data.time)
-            info["ticks_elapsed"] = 1
-            info["latency_ticks"] = float(self.action_delay)
-            info["latency_s"] = self.action_delay * self.env.dt
-            info["late"] = True
-        return {
-            "obs": obs,
-            "reward": float(reward),
-            "terminated": bool(terminated),
-            "truncated": False,
-            "info": info,
-        }
+    def submit(self, seq: int, action: Any, channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
+        """A checked ``step`` request (``seq``, ``action``) that came on ``channel`` from ``reply_to``.
+
+        Returns the reply's fields to send at once, or None when the reply
+        will come later from :meth:`Stepping.run_due`.
+        """
+        ...
 
 
-def make_stepper(
-    env: BaseEnv, *, real_time: bool = False, real_time_factor: float = 1.0, action_delay: int = 0
-) -> Any:
-    """The stepper for one world in the requested mode."""
-    if real_time:
-        if action_delay:
-            raise ValueError("action_delay is the lock-step twin of real_time; use one or the other")
-        from remoteenv.sim.real_time import RealTimeStepper
+class Stepping(Protocol):
+    """The loop strategy of one server: its worlds and their schedule."""
 
-        return RealTimeStepper(env, real_time_factor=real_time_factor)
-    return LockStepper(env, action_delay=action_delay)
+    @property
+    def worlds(self) -> Sequence[WorldStepper]:
+        """One stepper per world, in world order."""
+        ...
+
+    @property
+    def clock_waiting(self) -> bool:
+        """A world was reset and its clock starts once the reset's reply is sent."""
+        ...
+
+    def next_deadline(self) -> float | None:
+        """When, on the stepping's clock (seconds), the next piece of work is due; None if none is."""
+        ...
+
+    def start_clocks(self, now: float) -> None:
+        """Start the clock of every world waiting for it, at ``now``."""
+        ...
+
+    def run_due(self, now: float) -> Iterable[Outgoing]:
+        """Do the work due at ``now``; yields the replies it completes, as soon as each is ready."""
+        ...
+
+
+__all__ = ["LockStepper", "Stepping", "WorldStepper"]

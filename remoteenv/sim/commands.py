@@ -1,0 +1,109 @@
+"""The commands every sim server answers: handshake, reset, step, render, close.
+
+Runs in the sim process. Each handler takes the decoded request, the channel
+it came on and whom to answer there, and returns the reply's fields (the
+server adds ``seq`` and ``ok``), or None when the reply comes later (a
+real-time step). A refused request raises
+:class:`~remoteenv.sim.checks.RequestError` or
+:class:`~remoteenv.wire.errors.InvalidAction`; the server turns either into a
+typed error reply. The wire form of each command is specified in
+:mod:`remoteenv.wire.protocol`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from remoteenv.sim.base_env import BaseEnv
+from remoteenv.sim.channels import Channel
+from remoteenv.sim.checks import RequestError, options_value, require_reset, seed_value, world_index
+from remoteenv.sim.stepping import Stepping
+from remoteenv.wire import protocol
+from remoteenv.wire import spaces as spaces_codec
+from remoteenv.wire.actions import check_action
+from remoteenv.wire.errors import PROTOCOL, short_repr
+
+#: A command handler: ``(request, channel, reply_to) -> reply fields``, or None
+#: when the reply will be sent later.
+Handler = Callable[[dict[str, Any], "Channel | None", Any], "dict[str, Any] | None"]
+
+
+class Commands:
+    """The commands common to both stepping modes, for the worlds of one process.
+
+    Args:
+        envs: the worlds, in world order.
+        stepping: how they advance (its ``worlds`` match ``envs``).
+        instance: this sim process's index (reported in the handshake, named in errors).
+        stop: called by ``close`` to end serving once the reply is sent.
+    """
+
+    def __init__(self, envs: Sequence[BaseEnv], stepping: Stepping, instance: int, stop: Callable[[], None]) -> None:
+        self.envs = envs
+        self.stepping = stepping
+        self._worlds = stepping.worlds
+        self.instance = instance
+        self._stop = stop
+
+    def handlers(self) -> dict[str, Handler]:
+        return {
+            "handshake": self.handshake,
+            "reset": self.reset,
+            "step": self.step,
+            "render": self.render,
+            "close": self.close,
+        }
+
+    def handshake(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        version = msg.get("protocol")
+        if version != protocol.PROTOCOL_VERSION:
+            raise RequestError(
+                PROTOCOL,
+                f"protocol version mismatch: agent speaks {short_repr(version)}, sim instance "
+                f"{self.instance} speaks {protocol.PROTOCOL_VERSION}",
+            )
+        env = self.envs[0]
+        return {
+            "protocol": protocol.PROTOCOL_VERSION,
+            "env_id": env.env_id,
+            "instance": self.instance,
+            "pid": os.getpid(),
+            "num_worlds": len(self.envs),
+            "observation_space": spaces_codec.space_to_wire(env.observation_space),
+            "action_space": spaces_codec.space_to_wire(env.action_space),
+            "metadata": {
+                "render_modes": list(env.metadata.get("render_modes", [])),
+                "render_fps": int(round(1.0 / env.dt)),
+                "dt": float(env.dt),
+                "timestep": float(env.model.opt.timestep),
+                "frame_skip": env.frame_skip,
+            },
+            "stepping": self._worlds[0].describe(),
+        }
+
+    def reset(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        world = world_index(msg, len(self.envs))
+        seed = seed_value(msg.get("seed"))
+        options = options_value(msg.get("options"))
+        obs, info = self._worlds[world].reset(seed=seed, options=options)
+        return {"obs": obs, "info": info}
+
+    def step(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
+        world = world_index(msg, len(self.envs))
+        stepper = self._worlds[world]
+        require_reset(stepper.has_reset, world, self.instance)
+        action = check_action(self.envs[world].action_space, msg.get("action"))
+        return stepper.submit(msg["seq"], action, channel, reply_to)
+
+    def render(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        world = world_index(msg, len(self.envs))
+        return {"frame": self.envs[world].render()}
+
+    def close(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        self._stop()
+        return {}
+
+
+__all__ = ["Commands", "Handler"]
