@@ -193,6 +193,9 @@ class RemoteControlledAgent:
                         self._answer(pipe, frames)
                         hot.since = time.perf_counter()
                         continue
+                    if pipe.closed:
+                        self.pipe_closed()
+                        continue
                 events = poller.poll(_CHECK_INTERVAL_MS)
                 for pollable, _ in events:
                     channel = by_pollable[pollable]
