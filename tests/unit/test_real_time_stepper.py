@@ -124,7 +124,7 @@ def test_an_action_takes_effect_at_the_next_substep_and_is_answered_at_the_end_o
     stepper, world, clock = make()
     start(stepper, clock)
     assert run_until(stepper, clock, T0 + 0.025) == []  # boundaries 0, 1, 2 on the default action
-    channel = object()
+    channel: Any = object()
     assert stepper.submit(7, "a", channel, "peer") is None  # answered later
     out = run_until(stepper, clock, T0 + 0.03)  # boundary 3: the action takes effect
     assert out == [] and world.applied == [(0, None), (3, "a")]
@@ -314,14 +314,24 @@ def test_a_real_scene_matches_a_substep_replay_with_the_action_switched_where_re
     stepping.start_clocks(T0)
     period = world.period
     actions = [np.array([0.4], np.float32), np.array([-0.7], np.float32), np.array([0.1], np.float32)]
-    # Submit each action a little after some boundary, then run until its reply comes.
+
+    def next_deadline() -> float:
+        deadline = world.next_deadline()
+        assert deadline is not None
+        return deadline
+
+    # Let the held action run for a while (7k substeps), submit the next one
+    # between two substep boundaries, then run until its reply comes.
     replies = []
     for k, action in enumerate(actions):
-        clock.t = world.next_deadline() - 0.3 * period + k * period
+        for _ in range(7 * k):
+            clock.t = next_deadline()
+            assert list(stepping.run_due(clock.t)) == []
+        clock.t = next_deadline() - 0.3 * period
         world.submit(k, action, None, None)
         got: list[Any] = []
         while not got:
-            clock.t = world.next_deadline()
+            clock.t = next_deadline()
             got = list(stepping.run_due(clock.t))
         replies.append(got[0][2])
 

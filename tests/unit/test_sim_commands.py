@@ -46,7 +46,7 @@ def make_server(tmp_path) -> Iterator[MakeServer]:
         server.shutdown()
 
 
-def ask(server: RemoteControlledAgent, cmd: str, seq: int = 11, **fields: Any) -> dict[str, Any] | None:
+def ask(server: RemoteControlledAgent, cmd: str, seq: int = 11, **fields: Any) -> Any:
     """Send one request through the codec, as the wire would."""
     return server.handle_frame(protocol.pack({"seq": seq, "cmd": cmd, **fields}))
 
@@ -192,7 +192,7 @@ def test_a_real_time_step_is_answered_by_its_world_when_its_tick_ends(make_serve
     assert stepping.clock_waiting  # the loop starts the clock once the reply is sent
     stepping.start_clocks(clock())
     assert ask(server, "step", seq=21, action=np.array([0.5], np.float32)) is None
-    replies = []
+    replies: list[Any] = []
     while not replies:
         clock.t = stepping.next_deadline()
         replies = list(stepping.run_due(clock.t))
