@@ -42,8 +42,9 @@ seconds unless noted):
 ``late``              True if at least one whole tick ran on the previous
                       action (``ticks_elapsed > 1``) or the action never took
                       effect.
-``apply_delay_s``     wall seconds from the request's arrival in the sim
-                      process to the substep where it took effect.
+``apply_delay_s``     wall seconds from the request's arrival at its world
+                      (once decoded and checked) to the substep where it
+                      took effect.
 ``pacing_overruns``   running count, for this world since the process
                       started, of substeps that ran more than one substep
                       period (``timestep / factor`` wall seconds) late.
