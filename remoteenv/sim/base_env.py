@@ -123,9 +123,7 @@ class BaseEnv:
 
     # ------------------------------------------------------------ driving
 
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[Any, dict[str, Any]]:
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         """Start an episode. ``seed`` reseeds the RNG; None continues the current stream."""
         if seed is not None:
             self.seed_rng(seed)

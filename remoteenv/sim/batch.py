@@ -59,10 +59,7 @@ class BatchCommands:
     def step_batch(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
         ops = msg.get("ops")
         num = len(self.worlds)
-        if (
-            not isinstance(ops, list) or not 0 < len(ops) <= num
-            or not all(type(op) is int and op in OPS for op in ops)
-        ):
+        if not isinstance(ops, list) or not 0 < len(ops) <= num or not all(type(op) is int and op in OPS for op in ops):
             raise RequestError(PROTOCOL, f"ops must be a list of 1..{num} ints from {OPS}, got {short_repr(ops)}")
         n = len(ops)
         worlds = self.worlds

@@ -32,17 +32,13 @@ def world_index(msg: dict[str, Any], num_worlds: int) -> int:
     """The request's ``world`` (default 0), one of the ``num_worlds`` this process hosts."""
     world = msg.get("world", 0)
     if not _is_int(world) or not 0 <= world < num_worlds:
-        raise RequestError(
-            PROTOCOL, f"world {short_repr(world)} out of range; this process hosts {num_worlds}"
-        )
+        raise RequestError(PROTOCOL, f"world {short_repr(world)} out of range; this process hosts {num_worlds}")
     return world
 
 
 def world_list(worlds: Any, num_worlds: int) -> list[int]:
     """A non-empty list of world indices, each in ``[0, num_worlds)``."""
-    if not isinstance(worlds, list) or not worlds or not all(
-        _is_int(w) and 0 <= w < num_worlds for w in worlds
-    ):
+    if not isinstance(worlds, list) or not worlds or not all(_is_int(w) and 0 <= w < num_worlds for w in worlds):
         raise RequestError(
             PROTOCOL, f"worlds must be a non-empty list of ints in [0, {num_worlds}), got {short_repr(worlds)}"
         )
@@ -60,8 +56,10 @@ def seed_list(seeds: Any, count: int) -> list[int | None]:
     """One seed (or None) per world of a batch reset; None for the whole list means no seeds."""
     if seeds is None:
         return [None] * count
-    if not isinstance(seeds, list) or len(seeds) != count or not all(
-        s is None or (_is_int(s) and s >= 0) for s in seeds
+    if (
+        not isinstance(seeds, list)
+        or len(seeds) != count
+        or not all(s is None or (_is_int(s) and s >= 0) for s in seeds)
     ):
         raise RequestError(PROTOCOL, "seeds must be nil or a list (one per world) of non-negative ints or nil")
     return seeds
@@ -81,5 +79,11 @@ def require_reset(has_reset: bool, world: int, instance: int) -> None:
 
 
 __all__ = [
-    "RequestError", "options_value", "require_reset", "seed_list", "seed_value", "world_index", "world_list",
+    "RequestError",
+    "options_value",
+    "require_reset",
+    "seed_list",
+    "seed_value",
+    "world_index",
+    "world_list",
 ]

@@ -43,9 +43,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-if __name__ == "__main__" and sys.path and os.path.abspath(sys.path[0]) == os.path.dirname(
-    os.path.abspath(__file__)
-):
+if __name__ == "__main__" and sys.path and os.path.abspath(sys.path[0]) == os.path.dirname(os.path.abspath(__file__)):
     # Run as a script: keep this folder's module names (server, viewer, ...) off the import path.
     sys.path.pop(0)
 
@@ -80,7 +78,8 @@ def load_env_class(scene_script: str, class_name: str | None = None) -> type[Bas
             raise ValueError(f"{path} has no BaseEnv subclass named {class_name!r}")
         return cls
     found = [
-        obj for obj in vars(module).values()
+        obj
+        for obj in vars(module).values()
         if isinstance(obj, type) and issubclass(obj, BaseEnv) and obj.__module__ == name
     ]
     if len(found) != 1:
@@ -166,8 +165,12 @@ class FramePublisher:
         while self.items is None or index < self.items:
             labels = self._labels(obs, info) if self._labels else default_labels(env, obs, info)
             item = {
-                "instance": self.instance, "index": index, "episode": episode, "step": step,
-                "frame": env.render(), "labels": labels,
+                "instance": self.instance,
+                "index": index,
+                "episode": episode,
+                "step": step,
+                "frame": env.render(),
+                "labels": labels,
             }
             if not self._send(protocol.pack(item)):
                 return
@@ -199,8 +202,13 @@ def main(argv: Sequence[str] | None = None) -> None:
     env = load_env_class(args.scene, args.env_class)(**env_kwargs)
     exit_on_sigterm()
     publisher = FramePublisher(
-        env, args.address, instance=args.instance, seed=args.seed, items=args.items,
-        episode_steps=args.episode_steps, parent_pid=args.parent_pid,
+        env,
+        args.address,
+        instance=args.instance,
+        seed=args.seed,
+        items=args.items,
+        episode_steps=args.episode_steps,
+        parent_pid=args.parent_pid,
     )
     try:
         if args.ready_file:

@@ -298,9 +298,7 @@ class RealTimeStepping:
         clock: where wall time comes from (seconds, monotonic).
     """
 
-    def __init__(
-        self, envs: Sequence[BaseEnv], real_time_factor: float = 1.0, clock: Clock = time.monotonic
-    ) -> None:
+    def __init__(self, envs: Sequence[BaseEnv], real_time_factor: float = 1.0, clock: Clock = time.monotonic) -> None:
         self.clock = clock
         self._worlds = [RealTimeStepper(env, real_time_factor=real_time_factor, clock=clock) for env in envs]
 

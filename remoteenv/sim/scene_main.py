@@ -15,34 +15,52 @@ from remoteenv.wire.keys import read_key, read_keys
 
 def scene_argument_parser(description: str | None = None) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=description)
-    p.add_argument("--address", required=True,
-                   help="ZeroMQ endpoint to bind, e.g. ipc:///tmp/d/sim-0.sock or tcp://127.0.0.1:*")
-    p.add_argument("--seed", type=int, default=None,
-                   help="seed of the worlds' RNGs until the first reset(seed=...); world w uses seed + w")
+    p.add_argument(
+        "--address", required=True, help="ZeroMQ endpoint to bind, e.g. ipc:///tmp/d/sim-0.sock or tcp://127.0.0.1:*"
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="seed of the worlds' RNGs until the first reset(seed=...); world w uses seed + w",
+    )
     p.add_argument("--instance", type=int, default=0, help="index of this sim process")
     p.add_argument("--worlds", type=int, default=1, help="number of MuJoCo worlds this process hosts")
     p.add_argument("--env-kwargs", default="{}", help="JSON map of keyword arguments for the env class")
     p.add_argument("--render-mode", default=None, help="render mode of the env, e.g. rgb_array")
     p.add_argument("--real-time", action="store_true", help="run physics on a paced wall clock")
-    p.add_argument("--real-time-factor", type=float, default=1.0,
-                   help="simulated seconds per wall-clock second in real-time mode")
-    p.add_argument("--action-delay", type=int, default=0,
-                   help="lock-step: an action takes effect this many control ticks later")
-    p.add_argument("--parent-pid", type=int, default=None,
-                   help="exit when this process stops being our parent")
+    p.add_argument(
+        "--real-time-factor", type=float, default=1.0, help="simulated seconds per wall-clock second in real-time mode"
+    )
+    p.add_argument(
+        "--action-delay", type=int, default=0, help="lock-step: an action takes effect this many control ticks later"
+    )
+    p.add_argument("--parent-pid", type=int, default=None, help="exit when this process stops being our parent")
     p.add_argument("--ready-file", default=None, help="write the bound endpoint here as JSON")
-    p.add_argument("--allow-remote", action="store_true",
-                   help="permit binding a non-loopback interface (requires --curve-secret-key-file)")
-    p.add_argument("--curve-secret-key-file", default=None,
-                   help="file holding this server's Z85 CURVE secret key")
-    p.add_argument("--curve-client-keys-file", default=None,
-                   help="file of Z85 CURVE public keys (one a line) of the clients allowed to "
-                   "connect; without it any client knowing the server's public key may")
-    p.add_argument("--pipe-fd", type=int, default=None,
-                   help="inherited file descriptor of the launcher's socketpair (the local pipe)")
-    p.add_argument("--private-dir", default=None,
-                   help="the launcher's private dir: if the agent dies, remove this instance's "
-                   "sim-<instance>.* files from it, and the dir once empty")
+    p.add_argument(
+        "--allow-remote",
+        action="store_true",
+        help="permit binding a non-loopback interface (requires --curve-secret-key-file)",
+    )
+    p.add_argument("--curve-secret-key-file", default=None, help="file holding this server's Z85 CURVE secret key")
+    p.add_argument(
+        "--curve-client-keys-file",
+        default=None,
+        help="file of Z85 CURVE public keys (one a line) of the clients allowed to "
+        "connect; without it any client knowing the server's public key may",
+    )
+    p.add_argument(
+        "--pipe-fd",
+        type=int,
+        default=None,
+        help="inherited file descriptor of the launcher's socketpair (the local pipe)",
+    )
+    p.add_argument(
+        "--private-dir",
+        default=None,
+        help="the launcher's private dir: if the agent dies, remove this instance's "
+        "sim-<instance>.* files from it, and the dir once empty",
+    )
     return p
 
 

@@ -110,8 +110,12 @@ class RemoteControlledAgent:
         self.clock = clock
         self.orphaned = False
         self.stepping, mode_commands = _stepping_and_commands(
-            envs, instance, real_time=real_time, real_time_factor=real_time_factor,
-            action_delay=action_delay, clock=clock,
+            envs,
+            instance,
+            real_time=real_time,
+            real_time_factor=real_time_factor,
+            action_delay=action_delay,
+            clock=clock,
         )
         self._handlers: dict[str, Handler] = Commands(envs, self.stepping, instance, self.stop).handlers()
         self._handlers.update(mode_commands)
@@ -263,16 +267,17 @@ class RemoteControlledAgent:
             return protocol.pack(reply)
         except Exception as exc:
             seq = reply.get("seq", -1)
-            return protocol.pack(protocol.error_reply(
-                seq if isinstance(seq, int) else -1, SCENE,
-                f"the reply to this request cannot be sent on the wire ({type(exc).__name__}: {exc}); "
-                "scene code must return numpy arrays, numbers, strings, lists and str-keyed maps",
-                traceback.format_exc(),
-            ))
+            return protocol.pack(
+                protocol.error_reply(
+                    seq if isinstance(seq, int) else -1,
+                    SCENE,
+                    f"the reply to this request cannot be sent on the wire ({type(exc).__name__}: {exc}); "
+                    "scene code must return numpy arrays, numbers, strings, lists and str-keyed maps",
+                    traceback.format_exc(),
+                )
+            )
 
-    def handle_frame(
-        self, frame: bytes, channel: Channel | None = None, reply_to: Any = None
-    ) -> dict[str, Any] | None:
+    def handle_frame(self, frame: bytes, channel: Channel | None = None, reply_to: Any = None) -> dict[str, Any] | None:
         """Decode one request frame and compute its reply (never raises); see :meth:`handle`.
 
         A frame that is not a request gets a ``protocol`` error with ``seq`` -1.
@@ -326,7 +331,12 @@ class RemoteControlledAgent:
 
 
 def _stepping_and_commands(
-    envs: Sequence[BaseEnv], instance: int, *, real_time: bool, real_time_factor: float, action_delay: int,
+    envs: Sequence[BaseEnv],
+    instance: int,
+    *,
+    real_time: bool,
+    real_time_factor: float,
+    action_delay: int,
     clock: Clock,
 ) -> tuple[Stepping, dict[str, Handler]]:
     """The stepping of the requested mode and the commands only that mode answers:

@@ -36,9 +36,7 @@ _ALTERNATIVE = (
 
 def display_problem() -> str | None:
     """Why no viewer window can be opened here, or None if one can."""
-    if sys.platform.startswith("linux") and not (
-        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
-    ):
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         return "no display: neither DISPLAY nor WAYLAND_DISPLAY is set"
     if os.environ.get("MUJOCO_GL", "glfw").lower() not in ("glfw", ""):
         return (
@@ -53,7 +51,9 @@ def display_problem() -> str | None:
         warnings.simplefilter("ignore")
         ok = glfw.init()
     if not ok:
-        return f"GLFW could not connect to the display {os.environ.get('DISPLAY') or os.environ.get('WAYLAND_DISPLAY')!r}"
+        return (
+            f"GLFW could not connect to the display {os.environ.get('DISPLAY') or os.environ.get('WAYLAND_DISPLAY')!r}"
+        )
     glfw.terminate()
     return None
 

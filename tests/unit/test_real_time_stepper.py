@@ -153,7 +153,7 @@ def test_an_action_arriving_in_a_ticks_last_substep_is_answered_a_tick_later():
     assert run_until(stepper, clock, T0 + 0.04) == []  # tick 1 ran without "a": no reply yet
     assert world.applied[-1] == (4, "a")  # "a" takes effect as tick 2 starts
     assert run_until(stepper, clock, T0 + 0.075) == []
-    (_, _, reply), = run_until(stepper, clock, T0 + 0.08)  # end of tick 2
+    ((_, _, reply),) = run_until(stepper, clock, T0 + 0.08)  # end of tick 2
     assert reply["reward"] == 1.0 + 2.0 and reply["info"]["ticks_elapsed"] == 2
     assert reply["info"]["action_sim_time"] == pytest.approx(0.04) and reply["info"]["late"] is True
 
@@ -164,7 +164,7 @@ def test_reward_is_summed_over_every_tick_since_the_last_reply():
     run_until(stepper, clock, T0 + 0.105)  # ticks 1 and 2 end at boundaries 4 and 8
     assert stepper.submit(1, "a", None, None) is None
     out = run_until(stepper, clock, T0 + 0.12)  # applied at boundary 11; tick 3 ends at 12
-    (_, _, reply), = out
+    ((_, _, reply),) = out
     assert reply["reward"] == 1.0 + 2.0 + 3.0
     info = reply["info"]
     assert info["ticks_elapsed"] == 3 and info["late"] is True
@@ -172,7 +172,7 @@ def test_reward_is_summed_over_every_tick_since_the_last_reply():
     assert info["latency_s"] == pytest.approx(0.11) and info["latency_ticks"] == pytest.approx(0.11 / DT)
     # The next reply counts from here: one tick, its reward only.
     assert stepper.submit(2, "b", None, None) is None
-    (_, _, reply), = run_until(stepper, clock, T0 + 0.16)
+    ((_, _, reply),) = run_until(stepper, clock, T0 + 0.16)
     assert reply["reward"] == 4.0 and reply["info"]["ticks_elapsed"] == 1
     assert reply["info"]["latency_s"] == pytest.approx(0.13 - 0.12)
 
@@ -194,7 +194,7 @@ def test_termination_freezes_the_world_until_the_next_reset():
     run_until(stepper, clock, T0 + 0.075)
     # Sent just before the boundary that ends the episode: it never takes effect.
     assert stepper.submit(1, "late", None, None) is None
-    (_, _, reply), = run_until(stepper, clock, T0 + 1.0)
+    ((_, _, reply),) = run_until(stepper, clock, T0 + 1.0)
     assert reply["terminated"] is True and reply["reward"] == 1.0 + 2.0
     info = reply["info"]
     assert info["action_sim_time"] is None and info["latency_s"] is None and info["latency_ticks"] is None
@@ -223,7 +223,7 @@ def test_substeps_more_than_one_period_late_are_counted_as_overruns():
     assert stepper.pacing_error.count == 3
     assert stepper.pacing_error.max == pytest.approx(1.5 * TIMESTEP)
     stepper.submit(1, "a", None, None)
-    (_, _, reply), = run_until(stepper, clock, T0 + 0.04)
+    ((_, _, reply),) = run_until(stepper, clock, T0 + 0.04)
     assert reply["info"]["pacing_overruns"] == 1
     timing = stepper.timing()
     assert timing["overruns"] == 1 and timing["substeps"] == 5 and timing["period_s"] == pytest.approx(TIMESTEP)
@@ -280,7 +280,7 @@ def test_a_scene_failure_stops_only_its_world_and_answers_with_a_scene_error():
     for n in range(3):
         clock.t = T0 + n * TIMESTEP
         replies += list(stepping.run_due(clock.t))
-    (_, reply_to, reply), = replies
+    ((_, reply_to, reply),) = replies
     assert reply_to == "peer" and reply["seq"] == 5 and not reply["ok"]
     assert reply["error"]["kind"] == "scene" and "the scene broke" in reply["error"]["message"]
     assert "Traceback" in reply["error"]["message"]

@@ -34,8 +34,9 @@ class FakeClock:
 def make_server(tmp_path) -> Iterator[MakeServer]:
     servers: list[RemoteControlledAgent] = []
 
-    def make(worlds: int = 1, env_cls: type = CartPoleEnv, env_kwargs: dict | None = None,
-             **kwargs: Any) -> RemoteControlledAgent:
+    def make(
+        worlds: int = 1, env_cls: type = CartPoleEnv, env_kwargs: dict | None = None, **kwargs: Any
+    ) -> RemoteControlledAgent:
         envs = [env_cls(**(env_kwargs or {})) for _ in range(worlds)]
         server = RemoteControlledAgent(envs, f"ipc://{tmp_path}/sim-{len(servers)}.sock", **kwargs)
         servers.append(server)
@@ -105,18 +106,34 @@ def test_step_before_reset_is_a_state_error_naming_world_and_instance(make_serve
         assert err["kind"] == "state" and "world 1" in err["message"] and "instance 3" in err["message"]
 
 
-@pytest.mark.parametrize("fields", [
-    {"seed": -4}, {"seed": "abc"}, {"seed": True}, {"seed": 1.0}, {"options": [1, 2]}, {"options": "x"},
-])
+@pytest.mark.parametrize(
+    "fields",
+    [
+        {"seed": -4},
+        {"seed": "abc"},
+        {"seed": True},
+        {"seed": 1.0},
+        {"options": [1, 2]},
+        {"options": "x"},
+    ],
+)
 def test_bad_seed_or_options_are_protocol_errors(server, fields):
     err = error_of(ask(server, "reset", **fields))
     assert err["kind"] == "protocol"
     assert ask(server, "reset", seed=1)["ok"]  # still serving
 
 
-@pytest.mark.parametrize("action", [
-    np.array([1.5], np.float32), np.array([np.nan], np.float32), np.zeros(2, np.float32), "left", None, {"a": 1},
-])
+@pytest.mark.parametrize(
+    "action",
+    [
+        np.array([1.5], np.float32),
+        np.array([np.nan], np.float32),
+        np.zeros(2, np.float32),
+        "left",
+        None,
+        {"a": 1},
+    ],
+)
 def test_an_action_outside_the_space_is_an_invalid_action_error(server, action):
     assert ask(server, "reset", seed=0)["ok"]
     err = error_of(ask(server, "step", action=action))
@@ -130,10 +147,16 @@ def test_an_unknown_command_is_a_protocol_error_listing_the_known_ones(server):
     assert len(err["message"]) < 3 * MAX_ECHO_CHARS
 
 
-@pytest.mark.parametrize("frame", [
-    b"\xc1", protocol.pack([1, "reset"]), protocol.pack({"cmd": "reset"}), protocol.pack({"seq": "1", "cmd": "x"}),
-    protocol.pack({"seq": 1, "cmd": 5}),
-])
+@pytest.mark.parametrize(
+    "frame",
+    [
+        b"\xc1",
+        protocol.pack([1, "reset"]),
+        protocol.pack({"cmd": "reset"}),
+        protocol.pack({"seq": "1", "cmd": "x"}),
+        protocol.pack({"seq": 1, "cmd": 5}),
+    ],
+)
 def test_a_frame_that_is_not_a_request_gets_a_protocol_error_with_seq_minus_one(server, frame):
     err = error_of(server.handle_frame(frame), seq=-1)
     assert err["kind"] == "protocol"
@@ -196,7 +219,7 @@ def test_a_real_time_step_is_answered_by_its_world_when_its_tick_ends(make_serve
     while not replies:
         clock.t = stepping.next_deadline()
         replies = list(stepping.run_due(clock.t))
-    (channel, _, reply), = replies
+    ((channel, _, reply),) = replies
     assert channel is None  # handed in directly, so the reply has nowhere to go
     assert reply["seq"] == 21 and reply["ok"] and reply["info"]["action_sim_time"] is not None
     substeps = stepping.worlds[0].substeps
@@ -227,26 +250,32 @@ def test_step_batch_steps_resets_and_reports_final_observations(make_server):
     assert [f[0] for f in reply["final"]] == [2]
 
 
-@pytest.mark.parametrize("fields, kind", [
-    ({"worlds": []}, "protocol"),
-    ({"worlds": [0, 3]}, "protocol"),
-    ({"worlds": [True]}, "protocol"),
-    ({"worlds": [0, 1], "seeds": [1]}, "protocol"),
-    ({"worlds": [0], "seeds": [-1]}, "protocol"),
-    ({"worlds": [0], "options": [1]}, "protocol"),
-])
+@pytest.mark.parametrize(
+    "fields, kind",
+    [
+        ({"worlds": []}, "protocol"),
+        ({"worlds": [0, 3]}, "protocol"),
+        ({"worlds": [True]}, "protocol"),
+        ({"worlds": [0, 1], "seeds": [1]}, "protocol"),
+        ({"worlds": [0], "seeds": [-1]}, "protocol"),
+        ({"worlds": [0], "options": [1]}, "protocol"),
+    ],
+)
 def test_bad_reset_batch_requests_get_typed_errors(make_server, fields, kind):
     assert error_of(ask(make_server(3), "reset_batch", **fields))["kind"] == kind
 
 
-@pytest.mark.parametrize("fields, kind", [
-    ({"ops": [0, 0, 0, 0], "actions": [0, 0, 0, 0]}, "protocol"),
-    ({"ops": [0, 9], "actions": [0, 0]}, "protocol"),
-    ({"ops": "x" * 100_000, "actions": [0]}, "protocol"),
-    ({"ops": [1, 0], "actions": [0, 0]}, "state"),
-    ({"ops": [1, 1], "actions": np.array([0, 5])}, "invalid_action"),
-    ({"ops": [1, 1], "actions": [0]}, "invalid_action"),
-])
+@pytest.mark.parametrize(
+    "fields, kind",
+    [
+        ({"ops": [0, 0, 0, 0], "actions": [0, 0, 0, 0]}, "protocol"),
+        ({"ops": [0, 9], "actions": [0, 0]}, "protocol"),
+        ({"ops": "x" * 100_000, "actions": [0]}, "protocol"),
+        ({"ops": [1, 0], "actions": [0, 0]}, "state"),
+        ({"ops": [1, 1], "actions": np.array([0, 5])}, "invalid_action"),
+        ({"ops": [1, 1], "actions": [0]}, "invalid_action"),
+    ],
+)
 def test_bad_step_batch_requests_get_typed_errors(make_server, fields, kind):
     server = make_server(3)
     err = error_of(ask(server, "step_batch", **fields))

@@ -71,7 +71,7 @@ def test_requests_on_the_pipe_are_answered_in_order_until_close(pipe_server):
     assert [r["ok"] for r in got] == [True, True, True, False, False, True]
     assert got[2]["reward"] == 1.0
     assert not server.running and not server.orphaned
-    assert not os.path.exists(address[len("ipc://"):])  # the socket file is gone
+    assert not os.path.exists(address[len("ipc://") :])  # the socket file is gone
 
 
 def test_the_pipes_end_of_file_stops_the_server_as_orphaned(pipe_server):
