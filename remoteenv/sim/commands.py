@@ -43,6 +43,8 @@ class Commands:
     def __init__(self, envs: Sequence[BaseEnv], stepping: Stepping, instance: int, stop: Callable[[], None]) -> None:
         self.envs = envs
         self.stepping = stepping
+        #: Every command the server answers, sent in the handshake (the server fills it in).
+        self.advertised: list[str] = []
         self._worlds = stepping.worlds
         self.instance = instance
         self._stop = stop
@@ -81,6 +83,7 @@ class Commands:
                 "frame_skip": env.frame_skip,
             },
             "stepping": self._worlds[0].describe(),
+            "commands": list(self.advertised),
         }
 
     def reset(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:

@@ -117,8 +117,10 @@ class RemoteControlledAgent:
             action_delay=action_delay,
             clock=clock,
         )
-        self._handlers: dict[str, Handler] = Commands(envs, self.stepping, instance, self.stop).handlers()
+        common = Commands(envs, self.stepping, instance, self.stop)
+        self._handlers: dict[str, Handler] = common.handlers()
         self._handlers.update(mode_commands)
+        common.advertised = sorted(self._handlers)
         self._authenticator: Any = None
         self._ctx: zmq.Context[Any] = zmq.Context.instance()
         self.socket = self._ctx.socket(zmq.ROUTER)

@@ -44,8 +44,11 @@ Commands (version 1)
 --------------------
 ``handshake`` ``{"protocol": int}`` -> ``{"protocol", "env_id", "instance",
 "pid", "num_worlds", "observation_space", "action_space", "metadata",
-"stepping"}``. The server refuses a protocol version it does not speak,
-naming both versions. ``metadata`` holds ``render_modes``, ``render_fps``,
+"stepping", "commands"}``. The server refuses a protocol version it does not speak,
+naming both versions. ``commands`` (optional; a list of str) names every
+command the server answers; a client that finds no such field assumes
+``reset_batch``/``step_batch`` exist exactly when ``stepping.mode`` is
+``"lock_step"`` and ``timing`` exactly when it is ``"real_time"``. ``metadata`` holds ``render_modes``, ``render_fps``,
 ``dt`` (seconds of simulated time per env step), ``timestep`` (seconds per
 physics substep) and ``frame_skip``; ``stepping`` holds ``mode``
 (``"lock_step"`` or ``"real_time"``) and that mode's parameters.
