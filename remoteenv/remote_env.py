@@ -9,19 +9,19 @@ from __future__ import annotations
 
 import os
 import time
-from typing import Any, Mapping, SupportsFloat
+from collections.abc import Mapping
+from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
 
-from remoteenv.wire import protocol
-from remoteenv.wire import spaces as spaces_codec
-from remoteenv.agent.connection import Connection, connect_sim
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.latency import LatencyStats
-from remoteenv.agent.launcher import Launcher, SimProcess
 from remoteenv.agent.restart import RestartBudget, restarted_info
+from remoteenv.agent.session import SimSession, choose_group, scene_label
+from remoteenv.agent.sim_group import LaunchSpec, SimGroup
 from remoteenv.wire.actions import check_action
+from remoteenv.wire.handshake import Handshake
 
 __all__ = ["OpenAIRemoteEnv", "check_action"]
 
@@ -61,6 +61,12 @@ class OpenAIRemoteEnv(gym.Env):
         bind_host: have the sim bind tcp on this interface; beyond loopback
             this turns on CURVE (see :class:`remoteenv.Launcher`).
         curve: encrypt and authenticate with ZMQ CURVE even on loopback.
+        launcher: the :class:`~remoteenv.agent.sim_group.SimGroup` that starts
+            the sim (default: a local :class:`remoteenv.Launcher` with
+            ``transport``, ``bind_host`` and ``curve``, which are ignored when
+            this is given). A group whose layout is fixed already (e.g.
+            :class:`~remoteenv.agent.attach.AttachedSims`) is driven as it is;
+            it must hold one sim. The env closes the group when it closes.
         attach: instead of launching a sim, drive instance 0 of the sims named
             by this launch-info file (see :mod:`remoteenv.agent.attach`, and
             :meth:`attach` for other instances). The launch options above are
@@ -94,52 +100,45 @@ class OpenAIRemoteEnv(gym.Env):
         max_restarts: int = 3,
         bind_host: str | None = None,
         curve: bool | None = None,
+        launcher: SimGroup | None = None,
         attach: Any = None,
         **scene_kwargs: Any,
     ) -> None:
         self.render_mode = render_mode
         self.timeout = timeout
-        self.call_timeouts: dict[str, float | None] = dict(call_timeouts or {})
         self.startup_timeout = startup_timeout
-        self.restarts = RestartBudget(restart_on_failure, max_restarts)
         self.latency_stats = LatencyStats()
-        self._timed_steps = bool(real_time or action_delay)
         self._last_obs: Any = None
         self.scene = os.fspath(scene)
-        self._launcher: Launcher | None = None
-        self._conn: Connection | None = None
-        if attach is not None:
-            from remoteenv.agent.attach import AttachedSims
-
-            if restart_on_failure:
-                raise ValueError("restart_on_failure needs sims this env launched; attached sims "
-                                 "belong to the launch command")
-            attach = attach if isinstance(attach, AttachedSims) else AttachedSims(attach, [0])
-            self._timed_steps = attach.timed_steps
-        self._launcher = attach if attach is not None else Launcher(
-            self.scene,
-            1,
-            seed=seed,
-            env_kwargs=scene_kwargs,
-            render_mode=render_mode,
-            transport=transport,
+        group = choose_group(launcher, attach, attach_instances=[0], transport=transport,
+                             bind_host=bind_host, curve=curve)
+        layout = group.layout
+        if layout is not None and layout.num_instances != 1:
+            raise ValueError(f"an OpenAIRemoteEnv drives one sim; {layout.source} has {layout.num_instances}: "
+                             "pick one (e.g. OpenAIRemoteEnv.attach(path, instance=i))")
+        spec = None if layout is not None else LaunchSpec(
+            self.scene, 1, 1, seed=seed, env_kwargs=scene_kwargs, render_mode=render_mode,
+            real_time=real_time, real_time_factor=real_time_factor, action_delay=action_delay,
             startup_timeout=startup_timeout,
-            real_time=real_time,
-            real_time_factor=real_time_factor,
-            action_delay=action_delay,
-            bind_host=bind_host,
-            curve=curve,
         )
-        try:
-            self._connect(self._launcher.sims[0])
-        except BaseException:
-            self.close()
-            raise
+        self._session = SimSession(
+            group, spec, timeout=timeout, call_timeouts=call_timeouts, startup_timeout=startup_timeout,
+            restart_on_failure=restart_on_failure, max_restarts=max_restarts,
+            label=scene_label(type(self).__name__, self.scene),
+        )
+        self._session.open()
+        hs = self._session.handshake
+        self.observation_space = hs.observation_space
+        self.action_space = hs.action_space
+        self.metadata = {"render_modes": list(hs.render_modes), "render_fps": hs.render_fps}
+        #: Simulated seconds per step.
+        self.dt: float = hs.dt
+        self._timed_steps = hs.timed_steps
 
     @classmethod
     def attach(
         cls, launch_info: str | os.PathLike[str], instance: int = 0, **kwargs: Any
-    ) -> "OpenAIRemoteEnv":
+    ) -> OpenAIRemoteEnv:
         """Drive sim ``instance`` of a launch-info file written by ``python -m
         remoteenv launch`` (or by any server speaking the protocol). ``kwargs``:
         ``render_mode`` (default: the one the sims were launched with),
@@ -152,39 +151,39 @@ class OpenAIRemoteEnv(gym.Env):
         kwargs.setdefault("render_mode", sims.info.render_mode)
         return cls(sims.scene, attach=sims, **kwargs)
 
-    def _connect(self, sim: SimProcess) -> None:
-        assert self._launcher is not None
-        self._conn = connect_sim(
-            sim, timeout=self.timeout, curve_client_keypair=self._launcher.curve_client_keypair
-        )
-        self._handshake(self.call_timeouts.get("handshake", self.startup_timeout))
+    # ------------------------------------------------------------ state
 
-    # ------------------------------------------------------------ setup
+    @property
+    def handshake(self) -> Handshake:
+        """The sim's handshake (the latest, after a restart); ``hs["key"]`` reads the raw reply."""
+        return self._session.handshake
 
-    def _handshake(self, timeout: float) -> None:
-        assert self._conn is not None
-        hs = self._conn.request("handshake", timeout=timeout, protocol=protocol.PROTOCOL_VERSION)
-        self.handshake: dict[str, Any] = hs
-        self.observation_space = spaces_codec.space_from_wire(hs["observation_space"])
-        self.action_space = spaces_codec.space_from_wire(hs["action_space"])
-        meta = hs["metadata"]
-        self.metadata = {
-            "render_modes": list(meta["render_modes"]),
-            "render_fps": meta["render_fps"],
-        }
-        #: Simulated seconds per step.
-        self.dt: float = float(meta["dt"])
+    @property
+    def restarts(self) -> RestartBudget:
+        """The :class:`~remoteenv.agent.restart.RestartBudget` (``.count`` restarts so far)."""
+        return self._session.restarts
+
+    @property
+    def call_timeouts(self) -> dict[str, float | None]:
+        """Per-command timeouts (seconds) overriding ``timeout``; may be edited."""
+        return self._session.call_timeouts
 
     @property
     def pid(self) -> int | None:
         """Process id of the sim process (None once closed)."""
-        if self._launcher is None or self._launcher.closed:
-            return None
-        return self._launcher.pids[0]
+        pids = self._session.pids
+        return pids[0] if pids else None
 
     @property
-    def launcher(self) -> Launcher | None:
-        return self._launcher
+    def launcher(self) -> SimGroup | None:
+        """The group of the sim (None once closed)."""
+        return None if self._session.closed else self._session.group
+
+    @property
+    def _conn(self) -> Any:
+        """The connection to the sim (None once closed)."""
+        conns = self._session.conns
+        return conns[0] if conns else None
 
     # ------------------------------------------------------------ gym API
 
@@ -196,12 +195,12 @@ class OpenAIRemoteEnv(gym.Env):
         restarted: dict[str, Any] = {}
         while True:
             try:
-                reply = self._request("reset", seed=seed, options=options)
+                reply = self._session.request(0, "reset", seed=seed, options=options)
                 break
             except RemoteEnvError as err:
-                if not self.restarts.covers(err):
+                if not self._session.restarts.covers(err):
                     raise
-                restarted = restarted_info(err, self._restart(err))
+                restarted = restarted_info(err, self._session.relaunch(0, err))
         self._last_obs = reply["obs"]
         return reply["obs"], {**reply["info"], **restarted}
 
@@ -210,12 +209,12 @@ class OpenAIRemoteEnv(gym.Env):
         wire_action = check_action(self.action_space, action)
         try:
             sent = time.perf_counter()
-            reply = self._request("step", action=wire_action)
+            reply = self._session.request(0, "step", action=wire_action)
             round_trip = time.perf_counter() - sent
         except RemoteEnvError as err:
-            if not self.restarts.covers(err):
+            if not self._session.restarts.covers(err):
                 raise
-            info = restarted_info(err, self._restart(err))
+            info = restarted_info(err, self._session.relaunch(0, err))
             # The episode is lost with the process: end it as truncated at the
             # last observation the agent saw; the next reset() starts afresh.
             return self._last_obs, 0.0, False, True, info
@@ -226,51 +225,21 @@ class OpenAIRemoteEnv(gym.Env):
         self.latency_stats.record(info, round_trip)
         return reply["obs"], reply["reward"], reply["terminated"], reply["truncated"], info
 
-    def render(self) -> np.ndarray | None:  # type: ignore[override]
+    def render(self) -> np.ndarray | None:
         """With ``render_mode="rgb_array"``: the current frame, uint8 H x W x 3.
         With ``"human"``: redraw the sim's MuJoCo viewer window (it also redraws
         after every step) and return None."""
         if self.render_mode == "human":
-            self._request("render")
+            self._session.request(0, "render")
             return None
         if self.render_mode != "rgb_array":
             return None
-        return self._request("render")["frame"]
+        return self._session.request(0, "render")["frame"]
 
     def close(self) -> None:
-        """Ask the sim to exit, then make sure it has (no process or socket file remains)."""
-        conn, self._conn = self._conn, None
-        if conn is not None:
-            try:
-                if not getattr(self._launcher, "attached", False):  # attached sims outlive the env
-                    conn.request("close", timeout=1.0)
-            except RemoteEnvError:
-                pass
-            conn.close()
-        launcher, self._launcher = self._launcher, None
-        if launcher is not None:
-            launcher.close()
+        """Ask the sim to exit, then make sure it has (no process or socket file
+        remains). An attached sim is left running."""
+        session = getattr(self, "_session", None)
+        if session is not None:
+            session.close()
         super().close()
-
-    def _request(self, cmd: str, **args: Any) -> dict[str, Any]:
-        if self._conn is None:
-            raise RemoteEnvError(
-                f"{cmd} on a closed OpenAIRemoteEnv ({os.path.basename(self.scene)}); create a new env",
-                kind="state",
-            )
-        return self._conn.request(cmd, timeout=self.call_timeouts.get(cmd, self.timeout), **args)
-
-    def _restart(self, err: RemoteEnvError) -> int:
-        """Relaunch the sim after ``err`` (spending restarts until one comes up);
-        returns the restarts spent so far."""
-        while True:
-            count = self.restarts.spend(err)
-            if self._conn is not None:
-                self._conn.close()
-                self._conn = None
-            assert self._launcher is not None
-            try:
-                self._connect(self._launcher.restart(0))
-                return count
-            except RemoteEnvError as again:
-                err = again

@@ -31,7 +31,8 @@ the finished envs at once with ``reset(options={"reset_mask": dones})``.
 
 from __future__ import annotations
 
-from typing import Any, Iterable, Sequence
+from collections.abc import Iterable, Sequence
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -102,7 +103,7 @@ class SB3VecEnv(VecEnv):
         if any(o != self._options[0] for o in self._options):
             raise ValueError("SB3VecEnv passes one options map to the vector env's reset; "
                              "set the same options for every env")
-        obs, infos = self.venv.reset(seed=seeds, options=options)
+        obs, infos = self.venv.reset(seed=cast(Any, seeds), options=options)  # one seed per world
         self.reset_infos = split_infos(infos, self.num_envs)
         self._reset_seeds()
         self._reset_options()
@@ -125,11 +126,11 @@ class SB3VecEnv(VecEnv):
                 final_obs = infos["final_obs"]
                 final_info = infos.get("final_info")
                 finals = split_infos(final_info, self.num_envs) if final_info else per_env
-                for i in np.flatnonzero(dones):
+                for i in np.flatnonzero(dones).tolist():
                     per_env[i] = dict(finals[i])
                     per_env[i]["terminal_observation"] = final_obs[i]
             else:
-                for i in np.flatnonzero(dones):
+                for i in np.flatnonzero(dones).tolist():
                     per_env[i]["terminal_observation"] = _item(obs, i)
                 reset_obs, reset_infos = self.venv.reset(options={"reset_mask": dones})
                 obs = _put(obs, reset_obs, dones)
@@ -151,7 +152,7 @@ class SB3VecEnv(VecEnv):
         frames = self.venv.render()
         if frames is None:
             return [None] * self.num_envs
-        return list(frames)
+        return list(cast(Sequence[Any], frames))
 
     def _per_env(self, name: str) -> list[Any]:
         if name == "render_mode":

@@ -40,7 +40,8 @@ import zmq
 
 from remoteenv.wire import protocol
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout
-from remoteenv.agent.launcher import Launcher, pid_alive
+from remoteenv.agent.launcher import Launcher
+from remoteenv.agent.processes import pid_alive
 
 #: Frames a reader's PULL socket buffers per publisher.
 RECV_HWM = 8

@@ -31,30 +31,17 @@ from __future__ import annotations
 import json
 import os
 import socket
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
+from remoteenv.agent.connection import SimConnection, connect_sim
 from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.agent.processes import pid_alive
+from remoteenv.agent.sim_group import LaunchSpec, SimLayout
 from remoteenv.wire.keys import KeyPair, load_keypair
 
 FORMAT = "remoteenv-launch/1"
-
-
-def _pid_state(pid: int) -> str | None:
-    """The /proc state letter of ``pid``, or None if there is no such process."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0]
-    except (FileNotFoundError, ProcessLookupError, IndexError):
-        return None
-    except OSError:
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return None
-        except PermissionError:
-            pass
-        return "?"
 
 
 @dataclass
@@ -68,13 +55,24 @@ class AttachedSim:
     #: True when the sim runs on this machine, so its pid can be watched.
     local: bool = True
     restarts: int = 0
+    #: The host the launch-info file names, when it is not this machine.
+    host: str | None = None
+
+    @property
+    def node(self) -> str | None:
+        """Where the sim runs: None for this machine, else its host name."""
+        return None if self.local else (self.host or "another machine")
+
+    @property
+    def pipe(self) -> None:
+        """Attached sims have no local pipe to this process."""
+        return None
 
     def death(self) -> str | None:
         """Why the sim's process is gone, or None while it runs (or cannot be watched)."""
         if not self.local or self.pid is None:
             return None
-        state = _pid_state(self.pid)
-        if state is None or state == "Z":
+        if not pid_alive(self.pid):
             return (f"pid {self.pid} is gone; the sims of a launch-info file live as long as "
                     "the launch command that started them")
         return None
@@ -173,6 +171,7 @@ def read_launch_info(path: str | os.PathLike[str]) -> LaunchInfo:
                 pid=None if s.get("pid") is None else int(s["pid"]),
                 curve_server_key=None if not s.get("curve_server_key") else str(s["curve_server_key"]).encode(),
                 local=local,
+                host=None if local else host,
             )
             for s in doc["instances"]
         ]
@@ -200,18 +199,18 @@ def read_launch_info(path: str | os.PathLike[str]) -> LaunchInfo:
 
 
 class AttachedSims:
-    """Sims named by a launch-info file, in the shape the envs expect of a
-    :class:`remoteenv.Launcher` (``sims``, ``pids``, ``endpoints``,
-    ``curve_client_keypair``, ``close``). Closing it leaves the sims running:
-    the launch command that started them owns them.
+    """The sims named by a launch-info file, as a
+    :class:`~remoteenv.agent.sim_group.SimGroup` that does not own them: its
+    :attr:`layout` is fixed by the file, closing it leaves the sims running
+    (the launch command that started them owns them) and it cannot relaunch one.
 
     Args:
         info: the launch info, or the path of a launch-info file.
         instances: which of its instances to use (default: all, in order).
     """
 
-    #: Envs built on attached sims do not ask the sims to exit when closed.
-    attached = True
+    #: The launch command owns the sims: envs neither ask them to exit nor relaunch them.
+    owns_sims = False
 
     def __init__(self, info: LaunchInfo | str | os.PathLike[str], instances: Sequence[int] | None = None) -> None:
         if not isinstance(info, LaunchInfo):
@@ -232,6 +231,12 @@ class AttachedSims:
         self._closed = False
 
     @property
+    def layout(self) -> SimLayout:
+        """As the file says (the instances chosen, its worlds per instance and stepping)."""
+        return SimLayout(self.num_instances, self.worlds_per_instance, self.info.real_time,
+                         source=f"launch-info file {self.info.path}")
+
+    @property
     def scene(self) -> str:
         return self.info.scene
 
@@ -248,12 +253,21 @@ class AttachedSims:
         """True if the sims run real time or with an action delay."""
         return bool(self.info.real_time or self.info.action_delay)
 
-    def restart(self, instance: int) -> AttachedSim:
+    def start(self, spec: LaunchSpec) -> None:
+        """Attached sims are running already; there is nothing to start."""
+        raise RuntimeError(f"the sims of launch-info file {self.info.path} are running already; "
+                           "an env drives them as its layout says, without start()")
+
+    def connect(self, index: int, timeout: float | None) -> SimConnection:
+        """A ZeroMQ connection to ``sims[index]`` (with CURVE when the file names keys)."""
+        return connect_sim(self.sims[index], timeout=timeout, curve_client_keypair=self.curve_client_keypair)
+
+    def restart(self, index: int) -> AttachedSim:
         raise RemoteEnvError(
-            f"cannot restart sim instance {instance}: it was started by the launch command "
-            f"(pid {self.info.launcher_pid}), not by this process; restart that command",
+            f"cannot restart sim instance {self.sims[index].instance}: it was started by the launch "
+            f"command (pid {self.info.launcher_pid}), not by this process; restart that command",
             kind="launch",
-            instance=instance,
+            instance=self.sims[index].instance,
         )
 
     def close(self) -> None:

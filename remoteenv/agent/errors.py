@@ -17,7 +17,7 @@ a kind, including error replies decoded from the wire, raises the right type.
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 from remoteenv.wire import errors as wire_errors
 
@@ -35,20 +35,20 @@ class RemoteEnvError(RuntimeError):
 
     #: The kind each subclass stands for (the base: any other kind).
     KIND: ClassVar[str] = "remote"
-    _by_kind: ClassVar[dict[str, type["RemoteEnvError"]]] = {}
+    _by_kind: ClassVar[dict[str, type[RemoteEnvError]]] = {}
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         if "KIND" in cls.__dict__:
             RemoteEnvError._by_kind.setdefault(cls.KIND, cls)
 
-    def __new__(cls, message: str = "", *, kind: str | None = None, **kwargs: Any) -> "RemoteEnvError":
+    def __new__(cls, message: str = "", *, kind: str | None = None, **kwargs: Any) -> RemoteEnvError:
         if cls is RemoteEnvError and kind is not None:
             cls = RemoteEnvError._by_kind.get(kind, RemoteEnvError)
         # The builtin base with the widest instance layout must allocate
         # (OSError's, for the TimeoutError of RemoteEnvTimeout).
         builtin = max((b for b in cls.__mro__ if b.__module__ == "builtins"), key=lambda b: b.__basicsize__)
-        return builtin.__new__(cls)  # type: ignore[no-any-return]
+        return cast(RemoteEnvError, cast(Any, builtin).__new__(cls))
 
     def __init__(
         self,

@@ -1,7 +1,8 @@
 """The agent's latency record of a real-time (or ``action_delay``) env.
 
 Runs in the agent process (:class:`LatencyStats`, kept by
-:class:`remoteenv.OpenAIRemoteEnv` as ``env.unwrapped.latency_stats``).
+:class:`remoteenv.OpenAIRemoteEnv` and :class:`remoteenv.RemoteVectorEnv` as
+``env.unwrapped.latency_stats``).
 
 All durations are in seconds unless a name says ``ticks`` (control ticks of
 ``env.dt`` simulated seconds each).
@@ -9,7 +10,10 @@ All durations are in seconds unless a name says ``ticks`` (control ticks of
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
 
 from remoteenv.wire.stats import DEFAULT_WINDOW, RunningStats
 
@@ -66,6 +70,33 @@ class LatencyStats:
         overruns = info.get("pacing_overruns")
         if overruns is not None:
             self.pacing_overruns = max(self.pacing_overruns, int(overruns))
+
+    def record_vector(self, infos: Mapping[str, Any], round_trip_s: float | None = None) -> None:
+        """Add one vector step: its Gymnasium vector ``infos`` (each key an array
+        over the worlds, ``_key`` saying which worlds have it) and the wall round
+        trip of the whole call. Counts one step and one round trip per call, and
+        one latency sample per world that reported one."""
+        self.steps += 1
+        if round_trip_s is not None:
+            self.round_trip_s.add(round_trip_s)
+        latency = infos.get("latency_s")
+        if latency is not None:
+            ticks = infos.get("latency_ticks")
+            for i in np.flatnonzero(infos["_latency_s"]):
+                if latency[i] is None:
+                    self.never_applied += 1
+                else:
+                    self.latency_s.add(latency[i])
+                    if ticks is not None:
+                        self.latency_ticks.add(ticks[i])
+        late = infos.get("late")
+        if late is not None:
+            self.late_actions += int(np.count_nonzero(np.asarray(late, dtype=bool) & infos["_late"]))
+        overruns = infos.get("pacing_overruns")
+        if overruns is not None:
+            present = np.flatnonzero(infos["_pacing_overruns"])
+            if len(present):
+                self.pacing_overruns = max(self.pacing_overruns, int(np.max(np.asarray(overruns)[present])))
 
     def reset(self) -> None:
         """Forget everything recorded (the sim's overrun count is re-read on the next step)."""

@@ -1,7 +1,7 @@
-"""Launcher: starts sim processes, watches them and stops them.
+"""Launcher: starts sim processes on this machine, watches them and stops them.
 
-Runs in the agent process. Each sim is ``python <scene script> --address ...``
-in a session (process group) of its own, bound to a collision-free address:
+Runs in the agent process; the local :class:`~remoteenv.agent.sim_group.SimGroup`.
+Each sim is ``python <scene script> --address ...`` in a session (process group) of its own, bound to a collision-free address:
 an ipc socket in a private temp dir, or tcp on 127.0.0.1 with a port the OS
 assigns. The launcher waits until each sim reports its bound endpoint (never a
 fixed sleep), and stops them on :meth:`close`, on interpreter exit or when it
@@ -12,9 +12,9 @@ and exits if the agent dies.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -22,141 +22,45 @@ import sys
 import tempfile
 import time
 import weakref
-from dataclasses import dataclass, field
-from typing import Any, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
-from remoteenv.wire.addresses import ipc_address, ipc_path, is_loopback, tcp_loopback_address, zmq_transport
+from remoteenv.agent.connection import SimConnection, connect_sim
 from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.agent.processes import pid_alive
+from remoteenv.agent.sim_group import LaunchSpec, SimLayout
+from remoteenv.agent.sim_process import LaunchState, SimProcess, stop_all
+from remoteenv.wire.addresses import ipc_address, ipc_path, is_loopback, tcp_loopback_address, zmq_transport
 from remoteenv.wire.keys import KeyPair, generate_keypair, write_public_keys, write_secret_key
 
-_STDERR_TAIL_LINES = 20
-
-
-def pid_alive(pid: int) -> bool:
-    """True while process ``pid`` exists and is not a zombie (Linux /proc; elsewhere signal 0)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
-    except OSError:
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return False
-        except PermissionError:
-            return True
-        return True
-
-
-@dataclass
-class SimProcess:
-    """One launched sim process."""
-
-    instance: int
-    proc: subprocess.Popen
-    log_path: str
-    ready_file: str
-    endpoint: str | None = None
-    restarts: int = 0
-    #: The sim's public Z85 CURVE key when CURVE is on, else None.
-    curve_server_key: bytes | None = None
-    #: Where this process's stderr starts in the log (a restart appends to it).
-    log_offset: int = 0
-    #: The launcher's end of the local pipe (see :mod:`remoteenv.protocol`), or None.
-    pipe: socket.socket | None = None
-
-    def close_pipe(self) -> None:
-        if self.pipe is not None:
-            self.pipe.close()
-            self.pipe = None
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
-    def stderr_tail(self, lines: int = _STDERR_TAIL_LINES) -> str:
-        """The last ``lines`` lines the process wrote to stderr."""
-        try:
-            with open(self.log_path, "rb") as f:
-                f.seek(0, os.SEEK_END)
-                size = f.tell()
-                f.seek(max(self.log_offset, size - 16384))
-                text = f.read().decode("utf-8", "replace")
-        except OSError:
-            return ""
-        return "\n".join(text.splitlines()[-lines:])
-
-    def death(self) -> str | None:
-        """Why the process is gone (exit code or signal, stderr tail), or None if it runs."""
-        code = self.proc.poll()
-        if code is None:
-            return None
-        if code < 0:
-            try:
-                how = f"killed by signal {signal.Signals(-code).name}"
-            except ValueError:
-                how = f"killed by signal {-code}"
-        else:
-            how = f"exited with code {code}"
-        tail = self.stderr_tail()
-        text = f"pid {self.proc.pid} {how}"
-        if tail:
-            text += f"; last lines of its stderr:\n{tail}"
-        return text
-
-
-@dataclass
-class _State:
-    """What the finalizer needs; holds no reference to the Launcher."""
-
-    workdir: str
-    sims: list[SimProcess] = field(default_factory=list)
-
-
-def _stop_all(state: _State, grace: float = 2.0) -> None:
-    for sim in state.sims:
-        if sim.proc.poll() is None:
-            try:
-                os.killpg(sim.proc.pid, signal.SIGTERM)
-            except (ProcessLookupError, PermissionError):
-                pass
-    deadline = time.monotonic() + grace
-    for sim in state.sims:
-        try:
-            sim.proc.wait(timeout=max(0.0, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            try:
-                os.killpg(sim.proc.pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
-            sim.proc.wait()
-        # Reap the group even if the sim exited by itself but left children.
-        try:
-            os.killpg(sim.proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-        sim.close_pipe()
-    shutil.rmtree(state.workdir, ignore_errors=True)
+#: The launch arguments of :class:`Launcher` and their defaults (a Launcher
+#: made without a scene must leave them alone: :meth:`Launcher.start` gets them).
+_LAUNCH_DEFAULTS: dict[str, Any] = {
+    "num_instances": 1, "seed": None, "worlds_per_instance": 1, "env_kwargs": None,
+    "render_mode": None, "startup_timeout": 60.0, "real_time": False, "real_time_factor": 1.0,
+    "action_delay": 0,
+}
 
 
 class Launcher:
-    """Starts ``num_instances`` sim processes of one scene.
+    """Starts sim processes of one scene on this machine (a
+    :class:`~remoteenv.agent.sim_group.SimGroup` that owns its sims).
+
+    ``Launcher(scene, n, ...)`` starts ``n`` sims at once. ``Launcher()``
+    without a scene (only the connection options below) starts nothing until
+    :meth:`start` gets a :class:`~remoteenv.agent.sim_group.LaunchSpec`: that
+    is what an env's ``launcher=`` argument takes.
 
     Args:
-        scene: path of the scene script.
-        num_instances: how many sim processes.
-        seed: RNG seed; instance ``i`` gets ``seed + i * worlds_per_instance``.
-        worlds_per_instance: MuJoCo worlds hosted by each process.
-        env_kwargs: keyword arguments for the scene's env class (JSON-able).
-        render_mode: passed to the scene's env.
+        scene: path of the scene script; None to start later with :meth:`start`.
+        num_instances, seed, worlds_per_instance, env_kwargs, render_mode,
+        startup_timeout, real_time, real_time_factor, action_delay: the launch
+            (see :class:`~remoteenv.agent.sim_group.LaunchSpec`); only with ``scene``.
         transport: ``"ipc"`` (default): each sim binds an ipc endpoint in the
             private dir; ``"tcp"``: 127.0.0.1 with an OS-assigned port;
             ``"pipe"``: ipc, and each sim also gets one end of a Unix socketpair
             (the local pipe, :attr:`SimProcess.pipe`), the fastest way for this
             process to talk to it.
-        startup_timeout: seconds to wait for a sim to report ready.
-        real_time, real_time_factor, action_delay: stepping mode of the sims.
         extra_args: more command-line arguments for the scene script.
         bind_host: bind tcp on this interface (OS-assigned port) instead of the
             default. Anything but loopback turns CURVE on and cannot turn it off.
@@ -167,14 +71,17 @@ class Launcher:
             beyond loopback.
     """
 
+    #: Closing the launcher stops its sims; an env may relaunch them.
+    owns_sims = True
+
     def __init__(
         self,
-        scene: str | os.PathLike[str],
+        scene: str | os.PathLike[str] | None = None,
         num_instances: int = 1,
         *,
         seed: int | None = None,
         worlds_per_instance: int = 1,
-        env_kwargs: dict[str, Any] | None = None,
+        env_kwargs: Mapping[str, Any] | None = None,
         render_mode: str | None = None,
         transport: str = "ipc",
         startup_timeout: float = 60.0,
@@ -185,22 +92,28 @@ class Launcher:
         bind_host: str | None = None,
         curve: bool | None = None,
     ) -> None:
-        self.scene = os.path.abspath(os.fspath(scene))
-        if not os.path.isfile(self.scene):
-            raise FileNotFoundError(f"scene script {self.scene!r} does not exist")
-        if num_instances < 1 or worlds_per_instance < 1:
-            raise ValueError("num_instances and worlds_per_instance must be >= 1")
-        self.num_instances = num_instances
-        self.seed = seed
-        self.worlds_per_instance = worlds_per_instance
-        self.env_kwargs = dict(env_kwargs or {})
-        self.render_mode = render_mode
+        launch = {
+            "num_instances": num_instances, "seed": seed, "worlds_per_instance": worlds_per_instance,
+            "env_kwargs": env_kwargs, "render_mode": render_mode, "startup_timeout": startup_timeout,
+            "real_time": real_time, "real_time_factor": real_time_factor, "action_delay": action_delay,
+        }
+        spec = None
+        if scene is not None:
+            spec = LaunchSpec(
+                os.path.abspath(os.fspath(scene)), num_instances, worlds_per_instance, seed=seed,
+                env_kwargs=env_kwargs or {}, render_mode=render_mode, real_time=real_time,
+                real_time_factor=real_time_factor, action_delay=action_delay, startup_timeout=startup_timeout,
+            )
+            if not os.path.isfile(spec.scene):
+                raise FileNotFoundError(f"scene script {spec.scene!r} does not exist")
+        else:
+            given = sorted(k for k, v in launch.items() if v != _LAUNCH_DEFAULTS[k])
+            if given:
+                raise TypeError(f"Launcher() without a scene takes no launch arguments (got {', '.join(given)}): "
+                                "pass them to start() as a LaunchSpec, or give the scene")
         self.transport = zmq_transport(transport)  # raises for an unknown transport
-        self.pipe = transport == "pipe"
-        self.startup_timeout = startup_timeout
-        self.real_time = real_time
-        self.real_time_factor = real_time_factor
-        self.action_delay = action_delay
+        #: Whether each sim gets a local pipe to this process.
+        self.local_pipe = transport == "pipe"
         self.extra_args = list(extra_args)
         self.bind_address: str | None = None
         if bind_host is not None:
@@ -216,14 +129,30 @@ class Launcher:
         self.curve_client_keypair: KeyPair | None = (
             generate_keypair() if (remote or bool(curve)) else None
         )
+        #: What was started (None until :meth:`start`).
+        self.spec: LaunchSpec | None = None
+        self._state: LaunchState | None = None
+        self._closed = False
+        if spec is not None:
+            self.start(spec)
+
+    # ------------------------------------------------------------ SimGroup
+
+    def start(self, spec: LaunchSpec) -> None:
+        """Start ``spec.num_instances`` sims and wait until each serves its endpoint.
+
+        Raises :class:`remoteenv.LaunchError` naming the instance that failed to
+        start (the others are stopped first)."""
+        if self.spec is not None or self._closed:
+            raise RuntimeError("this Launcher has already started its sims; create another one")
+        spec = dataclasses.replace(spec, scene=os.path.abspath(spec.scene))
+        if not os.path.isfile(spec.scene):
+            raise FileNotFoundError(f"scene script {spec.scene!r} does not exist")
+        self.spec = spec
+        self._state = LaunchState(workdir=tempfile.mkdtemp(prefix="remoteenv-"))
+        self._finalizer = weakref.finalize(self, stop_all, self._state)
         try:
-            json.dumps(self.env_kwargs)
-        except TypeError as exc:
-            raise TypeError(f"env kwargs must be JSON-serializable to reach the scene: {exc}") from None
-        self._state = _State(workdir=tempfile.mkdtemp(prefix="remoteenv-"))
-        self._finalizer = weakref.finalize(self, _stop_all, self._state)
-        try:
-            for i in range(num_instances):
+            for i in range(spec.num_instances):
                 self._state.sims.append(self._spawn(i))
             for sim in self._state.sims:
                 self._wait_ready(sim)
@@ -231,31 +160,26 @@ class Launcher:
             self.close()
             raise
 
-    # ------------------------------------------------------------ public
-
-    @property
-    def workdir(self) -> str:
-        """The private temp dir holding socket files and logs."""
-        return self._state.workdir
-
     @property
     def sims(self) -> list[SimProcess]:
-        return self._state.sims
+        return [] if self._state is None else self._state.sims
 
     @property
-    def endpoints(self) -> list[str]:
-        return [s.endpoint for s in self._state.sims if s.endpoint is not None]
+    def layout(self) -> SimLayout | None:
+        """The layout of the started sims; None before :meth:`start`."""
+        if self.spec is None:
+            return None
+        return SimLayout(self.spec.num_instances, self.spec.worlds_per_instance, self.spec.real_time,
+                         source=f"the launcher of {os.path.basename(self.spec.scene)}")
 
-    @property
-    def pids(self) -> list[int]:
-        return [s.pid for s in self._state.sims]
-
-    def instance_seed(self, instance: int) -> int | None:
-        return None if self.seed is None else self.seed + instance * self.worlds_per_instance
+    def connect(self, index: int, timeout: float | None) -> SimConnection:
+        """A connection to sim ``index``: its local pipe if it has one, else ZeroMQ."""
+        return connect_sim(self.sims[index], timeout=timeout, curve_client_keypair=self.curve_client_keypair)
 
     def restart(self, instance: int) -> SimProcess:
         """Kill instance ``instance`` if it still runs and launch it afresh."""
-        old = self._state.sims[instance]
+        state = self._started()
+        old = state.sims[instance]
         if old.proc.poll() is None:
             try:
                 os.killpg(old.proc.pid, signal.SIGKILL)
@@ -265,19 +189,52 @@ class Launcher:
         old.close_pipe()
         new = self._spawn(instance)
         new.restarts = old.restarts + 1
-        self._state.sims[instance] = new
+        state.sims[instance] = new
         self._wait_ready(new)
         return new
 
     def close(self) -> None:
         """Stop every sim (SIGTERM, then SIGKILL after 2 s) and remove the private dir."""
-        self._finalizer()
+        self._closed = True
+        if self._state is not None:
+            self._finalizer()
 
     @property
     def closed(self) -> bool:
-        return not self._finalizer.alive
+        return self._closed or (self._state is not None and not self._finalizer.alive)
 
-    def __enter__(self) -> "Launcher":
+    # ------------------------------------------------------------ more
+
+    @property
+    def scene(self) -> str:
+        """Absolute path of the scene script the sims run."""
+        return self._spec().scene
+
+    @property
+    def num_instances(self) -> int:
+        return self._spec().num_instances
+
+    @property
+    def worlds_per_instance(self) -> int:
+        return self._spec().worlds_per_instance
+
+    @property
+    def workdir(self) -> str:
+        """The private temp dir holding socket files and logs."""
+        return self._started().workdir
+
+    @property
+    def endpoints(self) -> list[str]:
+        return [s.endpoint for s in self.sims if s.endpoint is not None]
+
+    @property
+    def pids(self) -> list[int]:
+        return [s.pid for s in self.sims]
+
+    def instance_seed(self, instance: int) -> int | None:
+        return self._spec().instance_seed(instance)
+
+    def __enter__(self) -> Launcher:
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -285,8 +242,19 @@ class Launcher:
 
     # ------------------------------------------------------------ internals
 
+    def _spec(self) -> LaunchSpec:
+        if self.spec is None:
+            raise RuntimeError("this Launcher has not started any sims yet: call start(spec)")
+        return self.spec
+
+    def _started(self) -> LaunchState:
+        self._spec()
+        assert self._state is not None
+        return self._state
+
     def _spawn(self, instance: int) -> SimProcess:
-        workdir = self._state.workdir
+        spec = self._spec()
+        workdir = self._started().workdir
         if self.bind_address is not None:
             address = self.bind_address
         elif self.transport == "ipc":
@@ -299,11 +267,11 @@ class Launcher:
             if path and os.path.exists(path):
                 os.unlink(path)
         cmd = [
-            sys.executable, self.scene,
+            sys.executable, spec.scene,
             "--address", address,
             "--instance", str(instance),
-            "--worlds", str(self.worlds_per_instance),
-            "--env-kwargs", json.dumps(self.env_kwargs),
+            "--worlds", str(spec.worlds_per_instance),
+            "--env-kwargs", json.dumps(dict(spec.env_kwargs)),
             "--parent-pid", str(os.getpid()),
             "--ready-file", ready_file,
             "--private-dir", workdir,
@@ -322,21 +290,21 @@ class Launcher:
             cmd += ["--curve-secret-key-file", secret_file, "--curve-client-keys-file", clients_file]
             if self.remote:
                 cmd += ["--allow-remote"]
-        seed = self.instance_seed(instance)
+        seed = spec.instance_seed(instance)
         if seed is not None:
             cmd += ["--seed", str(seed)]
-        if self.render_mode is not None:
-            cmd += ["--render-mode", self.render_mode]
-        if self.real_time:
-            cmd += ["--real-time", "--real-time-factor", repr(float(self.real_time_factor))]
-        if self.action_delay:
-            cmd += ["--action-delay", str(int(self.action_delay))]
+        if spec.render_mode is not None:
+            cmd += ["--render-mode", spec.render_mode]
+        if spec.real_time:
+            cmd += ["--real-time", "--real-time-factor", repr(float(spec.real_time_factor))]
+        if spec.action_delay:
+            cmd += ["--action-delay", str(int(spec.action_delay))]
         cmd += self.extra_args
         env = dict(os.environ)
-        if self.render_mode != "human":
+        if spec.render_mode != "human":
             env.setdefault("MUJOCO_GL", "egl")
         ours = theirs = None
-        if self.pipe:
+        if self.local_pipe:
             ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
             cmd += ["--pipe-fd", str(theirs.fileno())]
         try:
@@ -357,7 +325,9 @@ class Launcher:
                           curve_server_key=server_key, log_offset=log_offset, pipe=ours)
 
     def _wait_ready(self, sim: SimProcess) -> None:
-        deadline = time.monotonic() + self.startup_timeout
+        spec = self._spec()
+        scene = os.path.basename(spec.scene)
+        deadline = time.monotonic() + spec.startup_timeout
         delay = 0.002
         while True:
             try:
@@ -370,18 +340,20 @@ class Launcher:
             why = sim.death()
             if why is not None:
                 raise RemoteEnvError(
-                    f"sim instance {sim.instance} of {os.path.basename(self.scene)} failed to "
-                    f"start: {why}",
+                    f"sim instance {sim.instance} of {scene} failed to start: {why}",
                     kind="launch",
                     instance=sim.instance,
                 )
             if time.monotonic() > deadline:
                 raise RemoteEnvError(
-                    f"sim instance {sim.instance} (pid {sim.pid}) of {os.path.basename(self.scene)} "
-                    f"did not report ready within {self.startup_timeout:g} s; raise "
-                    f"startup_timeout= if the machine is busy. Its stderr so far:\n{sim.stderr_tail()}",
+                    f"sim instance {sim.instance} (pid {sim.pid}) of {scene} did not report ready "
+                    f"within {spec.startup_timeout:g} s; raise startup_timeout= if the machine is "
+                    f"busy. Its stderr so far:\n{sim.stderr_tail()}",
                     kind="launch",
                     instance=sim.instance,
                 )
             time.sleep(delay)
             delay = min(delay * 1.5, 0.05)
+
+
+__all__ = ["Launcher", "SimProcess", "pid_alive"]

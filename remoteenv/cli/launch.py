@@ -72,12 +72,11 @@ def _advertised(endpoint: str, args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from remoteenv.wire import protocol
     from remoteenv.agent.attach import AttachedSim, LaunchInfo, write_launch_info
-    from remoteenv.agent.connection import connect_sim
     from remoteenv.agent.errors import RemoteEnvError
-    from remoteenv.wire.keys import write_secret_key
     from remoteenv.agent.launcher import Launcher
+    from remoteenv.wire.handshake import handshake_request, parse_handshake
+    from remoteenv.wire.keys import write_secret_key
 
     env_kwargs = json.loads(args.env_kwargs)
     if not isinstance(env_kwargs, dict):
@@ -102,9 +101,9 @@ def run(args: argparse.Namespace) -> int:
         return 1
     try:
         keys = launcher.curve_client_keypair
-        conn = connect_sim(launcher.sims[0], curve_client_keypair=keys)
+        conn = launcher.connect(0, timeout=60.0)
         try:
-            env_id = conn.request("handshake", protocol=protocol.PROTOCOL_VERSION)["env_id"]
+            env_id = parse_handshake(conn.request("handshake", **handshake_request())).env_id
         finally:
             conn.close()
         if keys is not None:

@@ -1,0 +1,198 @@
+"""The agent's end of one sim connection, whatever carries its frames:
+sequence numbers, stale replies, timeouts, error replies, a dead peer.
+
+Runs in the agent process (the sim's ends are :mod:`remoteenv.sim.channels`).
+Every request gets a fresh sequence number; replies with another number are
+stale (from a request that timed out) and are dropped. The transports are
+subclasses: :class:`remoteenv.agent.zmq_connection.ZmqConnection` and
+:class:`remoteenv.agent.pipe_connection.PipeConnection`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout
+from remoteenv.wire import protocol
+
+#: How often (seconds) a waiting call checks that the sim process still lives.
+LIVENESS_CHECK_S = 0.1
+
+
+class SimConnection:
+    """Request/reply channel to one sim, whatever carries the frames.
+
+    Subclasses implement the transport: ``_send_frame``, ``_recv_frame`` (wait
+    up to :data:`LIVENESS_CHECK_S`), ``_recv_frame_nowait``, ``_after_timeout``,
+    :meth:`reconnect`, :meth:`close` and :attr:`pollable`.
+
+    Args:
+        endpoint: where the sim is, named in error messages.
+        instance: the sim's instance number, for error messages.
+        timeout: default seconds to wait for a reply (None waits forever, but
+            still notices a dead process).
+        death_check: returns a description of why the sim process is gone,
+            or None while it lives (or nobody can tell).
+    """
+
+    def __init__(
+        self,
+        endpoint: str,
+        *,
+        instance: int = 0,
+        timeout: float | None = 60.0,
+        death_check: Callable[[], str | None] | None = None,
+    ) -> None:
+        self.endpoint = endpoint
+        self.instance = instance
+        self.timeout = timeout
+        self.death_check = death_check
+        self.closed = False
+        self._seq = 0
+
+    # ------------------------------------------------------------ transport
+
+    @property
+    def pollable(self) -> Any:
+        """What to register in a ``zmq.Poller`` to learn that replies may be
+        waiting (a ZeroMQ socket or a file descriptor); None if the transport
+        cannot be polled, in which case a waiting caller asks :meth:`try_receive`."""
+        return None
+
+    def _send_frame(self, payload: bytes) -> None:
+        raise NotImplementedError
+
+    def _recv_frame(self) -> bytes | None:
+        """The next frame, waiting up to :data:`LIVENESS_CHECK_S`; None if none came."""
+        raise NotImplementedError
+
+    def _recv_frame_nowait(self) -> bytes | None:
+        raise NotImplementedError
+
+    def _after_timeout(self) -> None:
+        """Make the transport usable again after a reply did not come in time."""
+
+    def reconnect(self) -> None:
+        """Drop anything queued and start afresh (after a timeout)."""
+
+    def close(self) -> None:
+        self.closed = True
+
+    # ------------------------------------------------------------ requests
+
+    def send(self, cmd: str, **args: Any) -> int:
+        """Send a request without waiting; returns its sequence number."""
+        self._seq += 1
+        args["seq"] = self._seq
+        args["cmd"] = cmd
+        if self.closed:
+            raise RemoteEnvError(f"connection to sim instance {self.instance} is closed",
+                                 kind="state", instance=self.instance)
+        self._send_frame(protocol.pack(args))
+        return self._seq
+
+    def receive(self, seq: int, timeout: float | None = ..., what: str = "reply") -> dict[str, Any]:  # type: ignore[assignment]
+        """Wait for the reply to request ``seq`` and return it.
+
+        Raises :class:`RemoteEnvError` if the sim reports an error or its
+        process dies, :class:`RemoteEnvTimeout` after ``timeout`` seconds.
+        """
+        if timeout is ...:
+            timeout = self.timeout
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            frame = self._recv_frame()
+            if frame is None:
+                self._check_alive(what)
+                if deadline is not None and time.monotonic() > deadline:
+                    self._after_timeout()
+                    raise RemoteEnvTimeout(
+                        f"sim instance {self.instance} at {self.endpoint} did not answer "
+                        f"{what} within {timeout:g} s; the process is alive but stuck or "
+                        "overloaded. Raise the env's timeout= or check the scene code. "
+                        "A late reply will be dropped; the next call can go ahead.",
+                        kind="timeout",
+                        instance=self.instance,
+                    ) from None
+                continue
+            reply = self._decode(frame)
+            if reply.get("seq") == seq:
+                break
+            if reply.get("seq") == -1 and not reply.get("ok", True):
+                self._raise(reply, what)
+            # A stale reply to an earlier, abandoned request: drop it.
+        if not reply.get("ok"):
+            self._raise(reply, what)
+        return reply
+
+    def request(self, cmd: str, timeout: float | None = ..., **args: Any) -> dict[str, Any]:  # type: ignore[assignment]
+        """Send ``cmd`` and wait for its reply (see :meth:`receive`)."""
+        return self.receive(self.send(cmd, **args), timeout, what=f"'{cmd}'")
+
+    def try_receive(self, seq: int, what: str = "reply") -> dict[str, Any] | None:
+        """The reply to request ``seq`` if it has arrived, else None; never blocks.
+
+        Drops stale replies and raises like :meth:`receive`. Lets a caller wait
+        on many connections with one ``zmq.Poller`` on their :attr:`pollable`.
+        """
+        while True:
+            frame = self._recv_frame_nowait()
+            if frame is None:
+                return None
+            reply = self._decode(frame)
+            if reply.get("seq") == seq:
+                if not reply.get("ok"):
+                    self._raise(reply, what)
+                return reply
+            if reply.get("seq") == -1 and not reply.get("ok", True):
+                self._raise(reply, what)
+
+    def check_alive(self, what: str = "a reply") -> None:
+        """Raise :class:`remoteenv.SimDiedError` (kind ``"died"``) if the sim process is gone."""
+        self._check_alive(what)
+
+    # ------------------------------------------------------------ helpers
+
+    def _check_alive(self, what: str) -> None:
+        if self.death_check is None:
+            return
+        why = self.death_check()
+        if why is not None:
+            raise RemoteEnvError(
+                f"sim instance {self.instance} died while the agent waited for {what}: {why}",
+                kind="died",
+                instance=self.instance,
+            )
+
+    def _decode(self, frame: bytes) -> dict[str, Any]:
+        try:
+            reply = protocol.unpack(frame)
+        except protocol.ProtocolError as exc:
+            raise RemoteEnvError(
+                f"sim instance {self.instance} sent an undecodable reply: {exc}",
+                kind="protocol",
+                instance=self.instance,
+            ) from None
+        if not isinstance(reply, dict):
+            raise RemoteEnvError(
+                f"sim instance {self.instance} sent a reply that is not a map",
+                kind="protocol",
+                instance=self.instance,
+            )
+        return reply
+
+    def _raise(self, reply: dict[str, Any], what: str) -> None:
+        err = reply.get("error") or {}
+        kind = str(err.get("kind", "remote"))
+        message = str(err.get("message", "unknown error"))
+        raise RemoteEnvError(
+            f"sim instance {self.instance} failed {what} ({kind}): {message}",
+            kind=kind,
+            instance=self.instance,
+            remote_traceback=str(err.get("traceback", "")),
+        )
+
+
+__all__ = ["LIVENESS_CHECK_S", "SimConnection"]

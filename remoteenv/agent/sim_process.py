@@ -1,0 +1,118 @@
+"""One sim process this machine launched: its handle, and stopping a group of them.
+
+Runs in the agent process (used by :class:`remoteenv.agent.launcher.Launcher`).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import time
+from dataclasses import dataclass, field
+
+_STDERR_TAIL_LINES = 20
+
+
+@dataclass
+class SimProcess:
+    """One launched sim process."""
+
+    instance: int
+    proc: subprocess.Popen
+    log_path: str
+    ready_file: str
+    endpoint: str | None = None
+    restarts: int = 0
+    #: The sim's public Z85 CURVE key when CURVE is on, else None.
+    curve_server_key: bytes | None = None
+    #: Where this process's stderr starts in the log (a restart appends to it).
+    log_offset: int = 0
+    #: The launcher's end of the local pipe (see :mod:`remoteenv.protocol`), or None.
+    pipe: socket.socket | None = None
+
+    def close_pipe(self) -> None:
+        if self.pipe is not None:
+            self.pipe.close()
+            self.pipe = None
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    @property
+    def node(self) -> None:
+        """Where the process runs: always this machine."""
+        return None
+
+    def stderr_tail(self, lines: int = _STDERR_TAIL_LINES) -> str:
+        """The last ``lines`` lines the process wrote to stderr."""
+        try:
+            with open(self.log_path, "rb") as f:
+                f.seek(0, os.SEEK_END)
+                size = f.tell()
+                f.seek(max(self.log_offset, size - 16384))
+                text = f.read().decode("utf-8", "replace")
+        except OSError:
+            return ""
+        return "\n".join(text.splitlines()[-lines:])
+
+    def death(self) -> str | None:
+        """Why the process is gone (exit code or signal, stderr tail), or None if it runs."""
+        code = self.proc.poll()
+        if code is None:
+            return None
+        if code < 0:
+            try:
+                how = f"killed by signal {signal.Signals(-code).name}"
+            except ValueError:
+                how = f"killed by signal {-code}"
+        else:
+            how = f"exited with code {code}"
+        tail = self.stderr_tail()
+        text = f"pid {self.proc.pid} {how}"
+        if tail:
+            text += f"; last lines of its stderr:\n{tail}"
+        return text
+
+
+@dataclass
+class LaunchState:
+    """What a launcher's finalizer needs (its private dir and its sims); holds
+    no reference to the launcher, so the launcher can be garbage collected."""
+
+    workdir: str
+    sims: list[SimProcess] = field(default_factory=list)
+
+
+def stop_all(state: LaunchState, grace: float = 2.0) -> None:
+    """Stop every sim of ``state`` (SIGTERM to its process group, SIGKILL after
+    ``grace`` seconds), close the pipes and remove the private dir."""
+    for sim in state.sims:
+        if sim.proc.poll() is None:
+            try:
+                os.killpg(sim.proc.pid, signal.SIGTERM)
+            except (ProcessLookupError, PermissionError):
+                pass
+    deadline = time.monotonic() + grace
+    for sim in state.sims:
+        try:
+            sim.proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            try:
+                os.killpg(sim.proc.pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
+            sim.proc.wait()
+        # Reap the group even if the sim exited by itself but left children.
+        try:
+            os.killpg(sim.proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+        sim.close_pipe()
+    shutil.rmtree(state.workdir, ignore_errors=True)
+
+
+__all__ = ["LaunchState", "SimProcess", "stop_all"]

@@ -1,0 +1,142 @@
+"""The ``handshake`` exchange, both directions: the request and the reply parsed
+into a :class:`Handshake` (part of the spec in :mod:`remoteenv.wire.protocol`).
+
+Any client of the protocol parses the reply here (the agent's envs and the
+compliance checker alike), so a server's reply is judged by one set of rules:
+the fields an env needs (``protocol``, both spaces, ``metadata`` with
+``render_modes``, ``render_fps`` and ``dt``) must be present and well typed;
+the others default when absent (``env_id``/``pid`` nil, ``instance`` 0,
+``num_worlds`` 1, ``stepping`` lock-step without delay).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from gymnasium import spaces
+
+from remoteenv.wire.errors import ProtocolError, short_repr
+from remoteenv.wire.protocol import PROTOCOL_VERSION
+from remoteenv.wire.spaces import space_from_wire
+
+#: ``stepping["mode"]`` of a sim that advances only when asked.
+LOCK_STEP = "lock_step"
+#: ``stepping["mode"]`` of a sim that runs on a paced wall clock.
+REAL_TIME = "real_time"
+
+
+def handshake_request(version: int = PROTOCOL_VERSION) -> dict[str, Any]:
+    """The arguments of a ``handshake`` request (without ``seq``/``cmd``)."""
+    return {"protocol": version}
+
+
+@dataclass(frozen=True)
+class Handshake:
+    """A sim's answer to ``handshake``. Times are in simulated seconds.
+
+    Mapping access (``hs["metadata"]["dt"]``) reads the reply as received, for
+    code written against the plain map.
+    """
+
+    protocol: int
+    observation_space: spaces.Space
+    action_space: spaces.Space
+    render_modes: tuple[str, ...]
+    #: Frames per second a viewer should show (None: unspecified).
+    render_fps: float | None
+    #: Simulated seconds per env step.
+    dt: float
+    env_id: str | None = None
+    instance: int = 0
+    pid: int | None = None
+    num_worlds: int = 1
+    #: Simulated seconds per physics substep, if the server says.
+    timestep: float | None = None
+    #: Physics substeps per env step, if the server says.
+    frame_skip: int | None = None
+    #: ``LOCK_STEP`` or ``REAL_TIME``.
+    stepping_mode: str = LOCK_STEP
+    #: Lock-step: ticks by which an action's effect is delayed.
+    action_delay: int = 0
+    #: Real time: simulated seconds per wall-clock second (None in lock-step).
+    real_time_factor: float | None = None
+    #: The reply map as received.
+    raw: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def real_time(self) -> bool:
+        return self.stepping_mode == REAL_TIME
+
+    @property
+    def timed_steps(self) -> bool:
+        """True when step replies carry timing keys (real time, or an action delay)."""
+        return self.real_time or self.action_delay > 0
+
+    def __getitem__(self, key: str) -> Any:
+        return self.raw[key]
+
+
+def _need(doc: Mapping[str, Any], key: str, types: type | tuple[type, ...], where: str) -> Any:
+    if key not in doc:
+        raise ProtocolError(f"handshake reply lacks {where}{key!r}")
+    return _typed(doc, key, types, where)
+
+
+def _typed(doc: Mapping[str, Any], key: str, types: type | tuple[type, ...], where: str) -> Any:
+    """``doc[key]`` checked against ``types``, or None when absent or nil."""
+    value = doc.get(key)
+    if value is None:
+        return None
+    if isinstance(value, bool) and bool not in (types if isinstance(types, tuple) else (types,)):
+        raise ProtocolError(f"handshake {where}{key!r} must not be a bool, got {value!r}")
+    if not isinstance(value, types):
+        raise ProtocolError(f"handshake {where}{key!r} has the wrong type: {short_repr(value)}")
+    return value
+
+
+def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_VERSION) -> Handshake:
+    """Check a ``handshake`` reply and parse it; :class:`ProtocolError` names what is wrong."""
+    if not isinstance(reply, Mapping):
+        raise ProtocolError(f"a handshake reply must be a map, got {type(reply).__name__}")
+    version = _need(reply, "protocol", int, "")
+    if version != expected_version:
+        raise ProtocolError(f"the sim answered the handshake with protocol version {version}; "
+                            f"this client speaks {expected_version}")
+    meta = _need(reply, "metadata", dict, "")
+    stepping = _typed(reply, "stepping", dict, "") or {}
+    try:
+        obs_space = space_from_wire(_need(reply, "observation_space", dict, ""))
+        act_space = space_from_wire(_need(reply, "action_space", dict, ""))
+    except ProtocolError:
+        raise
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ProtocolError(f"handshake reply holds a malformed space: {type(exc).__name__}: {exc}") from None
+    render_modes = _need(meta, "render_modes", list, "metadata ")
+    if not all(isinstance(m, str) for m in render_modes):
+        raise ProtocolError(f"handshake metadata 'render_modes' must be strings: {short_repr(render_modes)}")
+    fps = _typed(meta, "render_fps", (int, float), "metadata ")
+    timestep = _typed(meta, "timestep", (int, float), "metadata ")
+    rtf = _typed(stepping, "real_time_factor", (int, float), "stepping ")
+    return Handshake(
+        protocol=version,
+        observation_space=obs_space,
+        action_space=act_space,
+        render_modes=tuple(render_modes),
+        render_fps=fps,
+        dt=float(_need(meta, "dt", (int, float), "metadata ")),
+        env_id=_typed(reply, "env_id", str, ""),
+        instance=_typed(reply, "instance", int, "") or 0,
+        pid=_typed(reply, "pid", int, ""),
+        num_worlds=_typed(reply, "num_worlds", int, "") or 1,
+        timestep=None if timestep is None else float(timestep),
+        frame_skip=_typed(meta, "frame_skip", int, "metadata "),
+        stepping_mode=_typed(stepping, "mode", str, "stepping ") or LOCK_STEP,
+        action_delay=_typed(stepping, "action_delay", int, "stepping ") or 0,
+        real_time_factor=None if rtf is None else float(rtf),
+        raw=reply,
+    )
+
+
+__all__ = ["LOCK_STEP", "REAL_TIME", "Handshake", "handshake_request", "parse_handshake"]
