@@ -108,7 +108,7 @@ def test_pipe_and_zeromq_transports_give_the_same_trajectory(make):
     pipe = make("remoteenv/Reacher-v0", transport="pipe")
     zmq_env = make("remoteenv/Reacher-v0", transport="ipc")
     assert type(pipe.unwrapped._conn).__name__ == "PipeConnection"
-    assert type(zmq_env.unwrapped._conn).__name__ == "Connection"
+    assert type(zmq_env.unwrapped._conn).__name__ == "ZmqConnection"
     pipe.action_space.seed(3)
     actions = [pipe.action_space.sample() for _ in range(60)]
     _assert_same(_rollout(pipe, 9, actions), _rollout(zmq_env, 9, actions))
