@@ -32,16 +32,17 @@ from __future__ import annotations
 
 import os
 import time
-from typing import Any, Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
 import torch
 import torch.utils.data
 import zmq
 
-from remoteenv.wire import protocol
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout
 from remoteenv.agent.launcher import Launcher
 from remoteenv.agent.processes import pid_alive
+from remoteenv.wire import protocol
 
 #: Frames a reader's PULL socket buffers per publisher.
 RECV_HWM = 8
@@ -70,7 +71,7 @@ class Publishers:
     def close(self) -> None:
         self.launcher.close()
 
-    def __enter__(self) -> "Publishers":
+    def __enter__(self) -> Publishers:
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -151,7 +152,7 @@ class RemoteIterableDataset(torch.utils.data.IterableDataset):
         self.transform = transform
 
     @classmethod
-    def from_publishers(cls, publishers: Publishers, **kwargs: Any) -> "RemoteIterableDataset":
+    def from_publishers(cls, publishers: Publishers, **kwargs: Any) -> RemoteIterableDataset:
         """The dataset reading the publishers :func:`launch_publishers` started."""
         kwargs.setdefault("items_per_publisher", publishers.items_per_instance)
         return cls(publishers.endpoints, pids=publishers.pids, **kwargs)

@@ -31,6 +31,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, iterate
 
 from remoteenv.agent.autoreset import after_reset, after_step, plan_ops
+from remoteenv.agent.errors import StateError
 from remoteenv.agent.latency import LatencyStats
 from remoteenv.agent.reset_args import is_int_seed, split_reset_mask, world_seeds
 from remoteenv.agent.restart import RestartBudget, restarted_info
@@ -296,7 +297,7 @@ class RemoteVectorEnv(VectorEnv):
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every world once (or autoreset it, see ``autoreset_mode``)."""
         if not self._has_reset:
-            raise RuntimeError("step() before reset(): call reset() on the RemoteVectorEnv first")
+            raise StateError("step() before reset(): call reset() on the RemoteVectorEnv first")
         acts = self._check_actions(actions)
         mode, limit = self.autoreset_mode, self.max_episode_steps
         ops = plan_ops(mode, self._autoreset, self._elapsed, limit)

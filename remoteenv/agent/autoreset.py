@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
+from remoteenv.agent.errors import StateError
 from remoteenv.wire.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET
 
 
@@ -42,7 +43,8 @@ def plan_ops(
         max_episode_steps: the time limit, or None.
 
     Raises:
-        RuntimeError: in ``DISABLED`` mode, if a world ended and was not reset.
+        remoteenv.StateError: (a ``RuntimeError``) in ``DISABLED`` mode, if a
+            world ended and was not reset.
     """
     n = len(needs_reset)
     if mode == AutoresetMode.NEXT_STEP:
@@ -54,7 +56,7 @@ def plan_ops(
         return ops
     if needs_reset.any():
         ended = np.flatnonzero(needs_reset).tolist()
-        raise RuntimeError(
+        raise StateError(
             f"worlds {ended} ended at the last step and autoreset_mode is DISABLED: reset "
             "them with reset(options={'reset_mask': mask}) before stepping again"
         )

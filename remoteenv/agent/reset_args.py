@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from remoteenv.agent.errors import StateError
 from remoteenv.wire.errors import short_repr
 
 
@@ -48,7 +49,7 @@ def split_reset_mask(
         if not mask.any():
             raise ValueError("options['reset_mask'] must select at least one world")
         if first_reset and not mask.all():
-            raise RuntimeError("the first reset must reset every world; drop reset_mask")
+            raise StateError("the first reset must reset every world; drop reset_mask")
     return options, mask
 
 

@@ -1,0 +1,75 @@
+"""Parsing a handshake reply into the Handshake dataclass."""
+
+from __future__ import annotations
+
+import copy
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from remoteenv.wire.errors import ProtocolError
+from remoteenv.wire.handshake import LOCK_STEP, Handshake, handshake_request, parse_handshake
+from remoteenv.wire.protocol import PROTOCOL_VERSION
+from remoteenv.wire.spaces import space_to_wire
+
+OBS = gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
+ACT = gym.spaces.Discrete(2)
+
+REPLY = {
+    "seq": 1, "ok": True, "protocol": PROTOCOL_VERSION, "env_id": "x/Y-v0", "instance": 2, "pid": 77,
+    "num_worlds": 4, "observation_space": space_to_wire(OBS), "action_space": space_to_wire(ACT),
+    "metadata": {"render_modes": ["rgb_array"], "render_fps": 50, "dt": 0.02, "timestep": 0.01, "frame_skip": 2},
+    "stepping": {"mode": "real_time", "real_time_factor": 2.0, "action_delay": 0},
+}
+
+
+def test_a_full_reply():
+    hs = parse_handshake(REPLY)
+    assert isinstance(hs, Handshake)
+    assert hs.observation_space == OBS and hs.action_space == ACT
+    assert (hs.env_id, hs.instance, hs.pid, hs.num_worlds) == ("x/Y-v0", 2, 77, 4)
+    assert (hs.render_modes, hs.render_fps, hs.dt, hs.timestep, hs.frame_skip) == (("rgb_array",), 50, 0.02, 0.01, 2)
+    assert hs.real_time and hs.timed_steps and hs.real_time_factor == 2.0
+    assert hs["metadata"]["frame_skip"] == 2  # the reply as received
+
+
+def test_a_minimal_reply_gets_the_defaults():
+    reply = {k: REPLY[k] for k in ("protocol", "observation_space", "action_space")}
+    reply["metadata"] = {"render_modes": [], "render_fps": None, "dt": 1}
+    hs = parse_handshake(reply)
+    assert (hs.env_id, hs.instance, hs.pid, hs.num_worlds, hs.timestep) == (None, 0, None, 1, None)
+    assert hs.stepping_mode == LOCK_STEP and not hs.timed_steps and hs.dt == 1.0 and isinstance(hs.dt, float)
+
+
+def test_an_action_delay_makes_steps_timed():
+    reply = copy.deepcopy(REPLY)
+    reply["stepping"] = {"mode": "lock_step", "action_delay": 3}
+    hs = parse_handshake(reply)
+    assert not hs.real_time and hs.timed_steps and hs.action_delay == 3
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda r: r.pop("action_space"), "lacks 'action_space'"),
+    (lambda r: r["metadata"].pop("dt"), "lacks metadata 'dt'"),
+    (lambda r: r.update(protocol=99), "protocol version 99; this client speaks"),
+    (lambda r: r.update(protocol=True), "'protocol' must not be a bool"),
+    (lambda r: r.update(instance="two"), "'instance' has the wrong type"),
+    (lambda r: r["metadata"].update(render_modes=["a", 3]), "must be strings"),
+    (lambda r: r.update(observation_space={"type": "Torus"}), "unknown space type"),
+    (lambda r: r.update(action_space={"type": "Discrete"}), "malformed space"),
+])
+def test_a_bad_reply_is_a_protocol_error_naming_the_field(change, message):
+    reply = copy.deepcopy(REPLY)
+    change(reply)
+    with pytest.raises(ProtocolError, match=message):
+        parse_handshake(reply)
+
+
+def test_not_a_map():
+    with pytest.raises(ProtocolError, match="must be a map"):
+        parse_handshake([1, 2])  # type: ignore[arg-type]
+
+
+def test_the_request():
+    assert handshake_request() == {"protocol": PROTOCOL_VERSION}
