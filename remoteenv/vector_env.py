@@ -342,6 +342,8 @@ class RemoteVectorEnv(VectorEnv):
         space = self.single_action_space
         if self._box_act:
             return check_actions(space, np.asarray(actions), n)
+        if isinstance(space, gym.spaces.Discrete) and isinstance(actions, np.ndarray) and actions.dtype.kind in "iu":
+            return check_actions(space, actions, n)  # one vectorised range check
         checked = check_actions(space, list(iterate(self.action_space, actions)), n)
         if isinstance(space, gym.spaces.Discrete):
             return np.asarray(checked, dtype=np.int64)
