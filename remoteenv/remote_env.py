@@ -185,6 +185,10 @@ class OpenAIRemoteEnv(gym.Env):
         conns = self._session.conns
         return conns[0] if conns else None
 
+    def _request(self, cmd: str, **args: Any) -> dict[str, Any]:
+        """Send ``cmd`` to the sim as is (no checks on this side) and wait for its reply."""
+        return self._session.request(0, cmd, **args)
+
     # ------------------------------------------------------------ gym API
 
     def reset(
@@ -195,7 +199,7 @@ class OpenAIRemoteEnv(gym.Env):
         restarted: dict[str, Any] = {}
         while True:
             try:
-                reply = self._session.request(0, "reset", seed=seed, options=options)
+                reply = self._request("reset", seed=seed, options=options)
                 break
             except RemoteEnvError as err:
                 if not self._session.restarts.covers(err):
@@ -209,7 +213,7 @@ class OpenAIRemoteEnv(gym.Env):
         wire_action = check_action(self.action_space, action)
         try:
             sent = time.perf_counter()
-            reply = self._session.request(0, "step", action=wire_action)
+            reply = self._request("step", action=wire_action)
             round_trip = time.perf_counter() - sent
         except RemoteEnvError as err:
             if not self._session.restarts.covers(err):
@@ -230,11 +234,11 @@ class OpenAIRemoteEnv(gym.Env):
         With ``"human"``: redraw the sim's MuJoCo viewer window (it also redraws
         after every step) and return None."""
         if self.render_mode == "human":
-            self._session.request(0, "render")
+            self._request("render")
             return None
         if self.render_mode != "rgb_array":
             return None
-        return self._session.request(0, "render")["frame"]
+        return self._request("render")["frame"]
 
     def close(self) -> None:
         """Ask the sim to exit, then make sure it has (no process or socket file
