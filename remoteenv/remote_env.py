@@ -110,20 +110,39 @@ class OpenAIRemoteEnv(gym.Env):
         self.latency_stats = LatencyStats()
         self._last_obs: Any = None
         self.scene = os.fspath(scene)
-        group = choose_group(launcher, attach, attach_instances=[0], transport=transport,
-                             bind_host=bind_host, curve=curve)
+        group = choose_group(
+            launcher, attach, attach_instances=[0], transport=transport, bind_host=bind_host, curve=curve
+        )
         layout = group.layout
         if layout is not None and layout.num_instances != 1:
-            raise ValueError(f"an OpenAIRemoteEnv drives one sim; {layout.source} has {layout.num_instances}: "
-                             "pick one (e.g. OpenAIRemoteEnv.attach(path, instance=i))")
-        spec = None if layout is not None else LaunchSpec(
-            self.scene, 1, 1, seed=seed, env_kwargs=scene_kwargs, render_mode=render_mode,
-            real_time=real_time, real_time_factor=real_time_factor, action_delay=action_delay,
-            startup_timeout=startup_timeout,
+            raise ValueError(
+                f"an OpenAIRemoteEnv drives one sim; {layout.source} has {layout.num_instances}: "
+                "pick one (e.g. OpenAIRemoteEnv.attach(path, instance=i))"
+            )
+        spec = (
+            None
+            if layout is not None
+            else LaunchSpec(
+                self.scene,
+                1,
+                1,
+                seed=seed,
+                env_kwargs=scene_kwargs,
+                render_mode=render_mode,
+                real_time=real_time,
+                real_time_factor=real_time_factor,
+                action_delay=action_delay,
+                startup_timeout=startup_timeout,
+            )
         )
         self._session = SimSession(
-            group, spec, timeout=timeout, call_timeouts=call_timeouts, startup_timeout=startup_timeout,
-            restart_on_failure=restart_on_failure, max_restarts=max_restarts,
+            group,
+            spec,
+            timeout=timeout,
+            call_timeouts=call_timeouts,
+            startup_timeout=startup_timeout,
+            restart_on_failure=restart_on_failure,
+            max_restarts=max_restarts,
             label=scene_label(type(self).__name__, self.scene),
         )
         self._session.open()
@@ -136,9 +155,7 @@ class OpenAIRemoteEnv(gym.Env):
         self._timed_steps = hs.timed_steps
 
     @classmethod
-    def attach(
-        cls, launch_info: str | os.PathLike[str], instance: int = 0, **kwargs: Any
-    ) -> OpenAIRemoteEnv:
+    def attach(cls, launch_info: str | os.PathLike[str], instance: int = 0, **kwargs: Any) -> OpenAIRemoteEnv:
         """Drive sim ``instance`` of a launch-info file written by ``python -m
         remoteenv launch`` (or by any server speaking the protocol). ``kwargs``:
         ``render_mode`` (default: the one the sims were launched with),
@@ -191,9 +208,7 @@ class OpenAIRemoteEnv(gym.Env):
 
     # ------------------------------------------------------------ gym API
 
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[Any, dict[str, Any]]:
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         """Start an episode in the sim. ``seed`` is forwarded and reseeds the sim's RNG."""
         super().reset(seed=seed)
         restarted: dict[str, Any] = {}

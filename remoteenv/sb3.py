@@ -101,8 +101,9 @@ class SB3VecEnv(VecEnv):
         seeds = None if all(s is None for s in self._seeds) else list(self._seeds)
         options = self._options[0] if self._options and self._options[0] else None
         if any(o != self._options[0] for o in self._options):
-            raise ValueError("SB3VecEnv passes one options map to the vector env's reset; "
-                             "set the same options for every env")
+            raise ValueError(
+                "SB3VecEnv passes one options map to the vector env's reset; set the same options for every env"
+            )
         obs, infos = self.venv.reset(seed=cast(Any, seeds), options=options)  # one seed per world
         self.reset_infos = split_infos(infos, self.num_envs)
         self._reset_seeds()
@@ -178,8 +179,9 @@ class SB3VecEnv(VecEnv):
             raise NotImplementedError("SB3VecEnv sets attributes on all envs at once")
         setter(attr_name, value)
 
-    def env_method(self, method_name: str, *method_args: Any, indices: VecEnvIndices = None,
-                   **method_kwargs: Any) -> list[Any]:
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
+    ) -> list[Any]:
         caller = getattr(self.venv, "call", None)
         if caller is None:
             raise AttributeError(f"{type(self.venv).__name__} cannot call per-env methods")

@@ -107,8 +107,12 @@ def launch_publishers(
     if items_per_instance is not None:
         extra += ["--items", str(int(items_per_instance))]
     launcher = Launcher(
-        publisher.__file__, num_instances, seed=seed, env_kwargs=env_kwargs,
-        startup_timeout=startup_timeout, extra_args=extra,
+        publisher.__file__,
+        num_instances,
+        seed=seed,
+        env_kwargs=env_kwargs,
+        startup_timeout=startup_timeout,
+        extra_args=extra,
     )
     return Publishers(launcher, items_per_instance)
 
@@ -188,9 +192,7 @@ class RemoteIterableDataset(torch.utils.data.IterableDataset):
                 sockets[sock] = i
             received = {i: 0 for i in mine}
             last_item = last_check = time.monotonic()
-            while self.items_per_publisher is None or any(
-                n < self.items_per_publisher for n in received.values()
-            ):
+            while self.items_per_publisher is None or any(n < self.items_per_publisher for n in received.values()):
                 ready = dict(poller.poll(_POLL_MS))
                 now = time.monotonic()
                 if now - last_check >= _POLL_MS / 1000:
@@ -222,17 +224,20 @@ class RemoteIterableDataset(torch.utils.data.IterableDataset):
         try:
             item = protocol.unpack(frame)
         except protocol.ProtocolError as exc:
-            raise RemoteEnvError(f"publisher {i} ({self.endpoints[i]}) sent an undecodable item: {exc}",
-                                 kind="protocol", instance=i) from None
+            raise RemoteEnvError(
+                f"publisher {i} ({self.endpoints[i]}) sent an undecodable item: {exc}", kind="protocol", instance=i
+            ) from None
         if not isinstance(item, dict) or "frame" not in item or "index" not in item:
-            raise RemoteEnvError(f"publisher {i} ({self.endpoints[i]}) sent an item that is not a "
-                                 "frame map", kind="protocol", instance=i)
+            raise RemoteEnvError(
+                f"publisher {i} ({self.endpoints[i]}) sent an item that is not a frame map", kind="protocol", instance=i
+            )
         if item["index"] != expected:
             raise RemoteEnvError(
                 f"publisher {i} ({self.endpoints[i]}) sent item {item['index']} where {expected} was "
                 "due: items were lost or another reader is connected to it (connect exactly one "
                 "RemoteIterableDataset per publisher)",
-                kind="protocol", instance=i,
+                kind="protocol",
+                instance=i,
             )
         return item
 
@@ -243,13 +248,12 @@ class RemoteIterableDataset(torch.utils.data.IterableDataset):
         for i, count in received.items():
             if i in skip:
                 continue
-            if (self.items_per_publisher is None or count < self.items_per_publisher) and not pid_alive(
-                self.pids[i]
-            ):
+            if (self.items_per_publisher is None or count < self.items_per_publisher) and not pid_alive(self.pids[i]):
                 due = "" if self.items_per_publisher is None else f" of {self.items_per_publisher}"
                 raise RemoteEnvError(
                     f"frame publisher {i} (pid {self.pids[i]}, {self.endpoints[i]}) vanished after "
                     f"{count}{due} items; its process is gone. Relaunch the publishers "
                     "(see the launcher's log for why it exited).",
-                    kind="died", instance=i,
+                    kind="died",
+                    instance=i,
                 )

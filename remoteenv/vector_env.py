@@ -153,8 +153,10 @@ class RemoteVectorEnv(VectorEnv):
         if layout is not None:  # e.g. attached sims: drive them as they are
             envs_per_process, real_time = layout.worlds_per_instance, layout.real_time
             if num_envs != layout.num_worlds:
-                raise ValueError(f"{layout.source} serves {layout.num_worlds} worlds; "
-                                 f"pass num_envs={layout.num_worlds} (got {num_envs})")
+                raise ValueError(
+                    f"{layout.source} serves {layout.num_worlds} worlds; "
+                    f"pass num_envs={layout.num_worlds} (got {num_envs})"
+                )
         if envs_per_process is None:
             envs_per_process = 1 if real_time else default_envs_per_process(num_envs)
         if envs_per_process < 1:
@@ -178,23 +180,41 @@ class RemoteVectorEnv(VectorEnv):
         k = self.envs_per_process
         num_procs = -(-self.num_envs // k)
         #: ``(first, end)`` world indices of each process.
-        self.slices: list[tuple[int, int]] = [
-            (p * k, min((p + 1) * k, self.num_envs)) for p in range(num_procs)
-        ]
-        spec = None if layout is not None else LaunchSpec(
-            self.scene, num_procs, k, seed=seed, env_kwargs=scene_kwargs, render_mode=render_mode,
-            real_time=real_time, real_time_factor=real_time_factor, action_delay=action_delay,
-            startup_timeout=startup_timeout,
+        self.slices: list[tuple[int, int]] = [(p * k, min((p + 1) * k, self.num_envs)) for p in range(num_procs)]
+        spec = (
+            None
+            if layout is not None
+            else LaunchSpec(
+                self.scene,
+                num_procs,
+                k,
+                seed=seed,
+                env_kwargs=scene_kwargs,
+                render_mode=render_mode,
+                real_time=real_time,
+                real_time_factor=real_time_factor,
+                action_delay=action_delay,
+                startup_timeout=startup_timeout,
+            )
         )
         self._session = SimSession(
-            group, spec, timeout=timeout, call_timeouts=call_timeouts, startup_timeout=startup_timeout,
-            restart_on_failure=restart_on_failure, max_restarts=max_restarts,
+            group,
+            spec,
+            timeout=timeout,
+            call_timeouts=call_timeouts,
+            startup_timeout=startup_timeout,
+            restart_on_failure=restart_on_failure,
+            max_restarts=max_restarts,
             label=scene_label(type(self).__name__, self.scene),
         )
         self._session.open()
         self._set_spaces(self._session.handshake)
-        self._requests = VectorRequests(self._session, self.slices, real_time=self.real_time,
-                                        same_step=self.autoreset_mode == AutoresetMode.SAME_STEP)
+        self._requests = VectorRequests(
+            self._session,
+            self.slices,
+            real_time=self.real_time,
+            same_step=self.autoreset_mode == AutoresetMode.SAME_STEP,
+        )
         self.latency_stats = LatencyStats()
         n = self.num_envs
         self._elapsed = np.zeros(n, dtype=np.int64)

@@ -35,10 +35,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from remoteenv.agent.connection import SimConnection, connect_sim
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.processes import pid_alive
+from remoteenv.agent.sim_connection import SimConnection
 from remoteenv.agent.sim_group import LaunchSpec, SimLayout
+from remoteenv.agent.zmq_connection import ZmqConnection
 from remoteenv.wire.keys import KeyPair, load_keypair
 
 FORMAT = "remoteenv-launch/1"
@@ -73,8 +74,10 @@ class AttachedSim:
         if not self.local or self.pid is None:
             return None
         if not pid_alive(self.pid):
-            return (f"pid {self.pid} is gone; the sims of a launch-info file live as long as "
-                    "the launch command that started them")
+            return (
+                f"pid {self.pid} is gone; the sims of a launch-info file live as long as "
+                "the launch command that started them"
+            )
         return None
 
 
@@ -104,11 +107,18 @@ class LaunchInfo:
             "launcher_pid": self.launcher_pid,
             "worlds_per_instance": self.worlds_per_instance,
             "render_mode": self.render_mode,
-            "stepping": {"real_time": self.real_time, "real_time_factor": self.real_time_factor,
-                         "action_delay": self.action_delay},
+            "stepping": {
+                "real_time": self.real_time,
+                "real_time_factor": self.real_time_factor,
+                "action_delay": self.action_delay,
+            },
             "instances": [
-                {"instance": s.instance, "endpoint": s.endpoint, "pid": s.pid,
-                 "curve_server_key": None if s.curve_server_key is None else s.curve_server_key.decode()}
+                {
+                    "instance": s.instance,
+                    "endpoint": s.endpoint,
+                    "pid": s.pid,
+                    "curve_server_key": None if s.curve_server_key is None else s.curve_server_key.decode(),
+                }
                 for s in self.instances
             ],
             "curve_client_secret_key_file": self.curve_client_secret_key_file,
@@ -159,8 +169,7 @@ def read_launch_info(path: str | os.PathLike[str]) -> LaunchInfo:
         raise RemoteEnvError(f"cannot read launch-info file {path}: {exc}", kind="launch") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
-        raise RemoteEnvError(f"{path} is not a launch-info file of format {FORMAT!r} (found {found!r})",
-                             kind="launch")
+        raise RemoteEnvError(f"{path} is not a launch-info file of format {FORMAT!r} (found {found!r})", kind="launch")
     try:
         host = str(doc.get("host") or socket.gethostname())
         local = host == socket.gethostname()
@@ -191,8 +200,9 @@ def read_launch_info(path: str | os.PathLike[str]) -> LaunchInfo:
             path=path,
         )
     except (KeyError, TypeError, ValueError) as exc:
-        raise RemoteEnvError(f"launch-info file {path} is malformed: {type(exc).__name__}: {exc}",
-                             kind="launch") from None
+        raise RemoteEnvError(
+            f"launch-info file {path} is malformed: {type(exc).__name__}: {exc}", kind="launch"
+        ) from None
     if not instances:
         raise RemoteEnvError(f"launch-info file {path} names no sim instances", kind="launch")
     return info
@@ -233,8 +243,12 @@ class AttachedSims:
     @property
     def layout(self) -> SimLayout:
         """As the file says (the instances chosen, its worlds per instance and stepping)."""
-        return SimLayout(self.num_instances, self.worlds_per_instance, self.info.real_time,
-                         source=f"launch-info file {self.info.path}")
+        return SimLayout(
+            self.num_instances,
+            self.worlds_per_instance,
+            self.info.real_time,
+            source=f"launch-info file {self.info.path}",
+        )
 
     @property
     def scene(self) -> str:
@@ -255,12 +269,23 @@ class AttachedSims:
 
     def start(self, spec: LaunchSpec) -> None:
         """Attached sims are running already; there is nothing to start."""
-        raise RuntimeError(f"the sims of launch-info file {self.info.path} are running already; "
-                           "an env drives them as its layout says, without start()")
+        raise RuntimeError(
+            f"the sims of launch-info file {self.info.path} are running already; "
+            "an env drives them as its layout says, without start()"
+        )
 
     def connect(self, index: int, timeout: float | None) -> SimConnection:
-        """A ZeroMQ connection to ``sims[index]`` (with CURVE when the file names keys)."""
-        return connect_sim(self.sims[index], timeout=timeout, curve_client_keypair=self.curve_client_keypair)
+        """A ZeroMQ connection to ``sims[index]`` (attached sims have no local
+        pipe), with CURVE when the file names keys."""
+        sim, keys = self.sims[index], self.curve_client_keypair
+        return ZmqConnection(
+            sim.endpoint,
+            instance=sim.instance,
+            timeout=timeout,
+            death_check=sim.death,
+            curve_server_key=sim.curve_server_key,
+            curve_client_keypair=None if keys is None else (keys.public, keys.secret),
+        )
 
     def restart(self, index: int) -> AttachedSim:
         raise RemoteEnvError(

@@ -41,15 +41,19 @@ def connect_sim(
     death_check = getattr(sim, "death", None)
     pipe = getattr(sim, "pipe", None)
     if pipe is not None:
-        return PipeConnection(pipe, endpoint=sim.endpoint or "", instance=sim.instance,
-                              timeout=timeout, death_check=death_check)
+        return PipeConnection(
+            pipe, endpoint=sim.endpoint or "", instance=sim.instance, timeout=timeout, death_check=death_check
+        )
     return ZmqConnection(
-        sim.endpoint or "", instance=sim.instance, timeout=timeout, death_check=death_check,
+        sim.endpoint or "",
+        instance=sim.instance,
+        timeout=timeout,
+        death_check=death_check,
         curve_server_key=getattr(sim, "curve_server_key", None),
-        curve_client_keypair=None if curve_client_keypair is None
+        curve_client_keypair=None
+        if curve_client_keypair is None
         else (curve_client_keypair.public, curve_client_keypair.secret),
     )
 
 
-__all__ = ["LIVENESS_CHECK_S", "Connection", "PipeConnection", "SimConnection", "ZmqConnection",
-           "connect_sim"]
+__all__ = ["LIVENESS_CHECK_S", "Connection", "PipeConnection", "SimConnection", "ZmqConnection", "connect_sim"]

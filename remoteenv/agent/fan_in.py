@@ -98,8 +98,9 @@ class FanIn:
     # ------------------------------------------------------------ internals
 
     @staticmethod
-    def _take(conns: Sequence[SimConnection], p: int, pending: dict[int, int], what: str,
-              replies: dict[int, dict[str, Any]]) -> bool:
+    def _take(
+        conns: Sequence[SimConnection], p: int, pending: dict[int, int], what: str, replies: dict[int, dict[str, Any]]
+    ) -> bool:
         """Read what connection ``p`` has; True if its awaited reply came."""
         seq = pending.get(p)
         if seq is None:
@@ -115,8 +116,9 @@ class FanIn:
         del pending[p]
         return True
 
-    def _time_out(self, conns: Sequence[SimConnection], pending: dict[int, int], what: str,
-                  timeout: float | None) -> None:
+    def _time_out(
+        self, conns: Sequence[SimConnection], pending: dict[int, int], what: str, timeout: float | None
+    ) -> None:
         p = next(iter(pending))
         for q in pending:
             conns[q].reconnect()

@@ -120,19 +120,23 @@ class LatencyStats:
         """A few human-readable lines (milliseconds and ticks)."""
 
         def ms(s: dict[str, float | int]) -> str:
-            return (f"mean {1e3 * s['mean']:.2f}  p50 {1e3 * s['p50']:.2f}  "
-                    f"p99 {1e3 * s['p99']:.2f}  max {1e3 * s['max']:.2f} ms")
+            return (
+                f"mean {1e3 * s['mean']:.2f}  p50 {1e3 * s['p50']:.2f}  "
+                f"p99 {1e3 * s['p99']:.2f}  max {1e3 * s['max']:.2f} ms"
+            )
 
         t = self.latency_ticks.summary()
-        return "\n".join([
-            f"steps {self.steps}",
-            f"action latency    {ms(self.latency_s.summary())} (sim time)",
-            f"                  mean {t['mean']:.2f}  p50 {t['p50']:.2f}  p99 {t['p99']:.2f}  "
-            f"max {t['max']:.2f} ticks",
-            f"wall round trip   {ms(self.round_trip_s.summary())}",
-            f"late actions {self.late_actions}  never applied {self.never_applied}  "
-            f"pacing overruns {self.pacing_overruns}",
-        ])
+        return "\n".join(
+            [
+                f"steps {self.steps}",
+                f"action latency    {ms(self.latency_s.summary())} (sim time)",
+                f"                  mean {t['mean']:.2f}  p50 {t['p50']:.2f}  p99 {t['p99']:.2f}  "
+                f"max {t['max']:.2f} ticks",
+                f"wall round trip   {ms(self.round_trip_s.summary())}",
+                f"late actions {self.late_actions}  never applied {self.never_applied}  "
+                f"pacing overruns {self.pacing_overruns}",
+            ]
+        )
 
     def __repr__(self) -> str:
         return f"LatencyStats({self.summary()!r})"

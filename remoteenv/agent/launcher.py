@@ -36,8 +36,14 @@ from remoteenv.wire.keys import KeyPair, generate_keypair, write_public_keys, wr
 #: The launch arguments of :class:`Launcher` and their defaults (a Launcher
 #: made without a scene must leave them alone: :meth:`Launcher.start` gets them).
 _LAUNCH_DEFAULTS: dict[str, Any] = {
-    "num_instances": 1, "seed": None, "worlds_per_instance": 1, "env_kwargs": None,
-    "render_mode": None, "startup_timeout": 60.0, "real_time": False, "real_time_factor": 1.0,
+    "num_instances": 1,
+    "seed": None,
+    "worlds_per_instance": 1,
+    "env_kwargs": None,
+    "render_mode": None,
+    "startup_timeout": 60.0,
+    "real_time": False,
+    "real_time_factor": 1.0,
     "action_delay": 0,
 }
 
@@ -93,24 +99,39 @@ class Launcher:
         curve: bool | None = None,
     ) -> None:
         launch = {
-            "num_instances": num_instances, "seed": seed, "worlds_per_instance": worlds_per_instance,
-            "env_kwargs": env_kwargs, "render_mode": render_mode, "startup_timeout": startup_timeout,
-            "real_time": real_time, "real_time_factor": real_time_factor, "action_delay": action_delay,
+            "num_instances": num_instances,
+            "seed": seed,
+            "worlds_per_instance": worlds_per_instance,
+            "env_kwargs": env_kwargs,
+            "render_mode": render_mode,
+            "startup_timeout": startup_timeout,
+            "real_time": real_time,
+            "real_time_factor": real_time_factor,
+            "action_delay": action_delay,
         }
         spec = None
         if scene is not None:
             spec = LaunchSpec(
-                os.path.abspath(os.fspath(scene)), num_instances, worlds_per_instance, seed=seed,
-                env_kwargs=env_kwargs or {}, render_mode=render_mode, real_time=real_time,
-                real_time_factor=real_time_factor, action_delay=action_delay, startup_timeout=startup_timeout,
+                os.path.abspath(os.fspath(scene)),
+                num_instances,
+                worlds_per_instance,
+                seed=seed,
+                env_kwargs=env_kwargs or {},
+                render_mode=render_mode,
+                real_time=real_time,
+                real_time_factor=real_time_factor,
+                action_delay=action_delay,
+                startup_timeout=startup_timeout,
             )
             if not os.path.isfile(spec.scene):
                 raise FileNotFoundError(f"scene script {spec.scene!r} does not exist")
         else:
             given = sorted(k for k, v in launch.items() if v != _LAUNCH_DEFAULTS[k])
             if given:
-                raise TypeError(f"Launcher() without a scene takes no launch arguments (got {', '.join(given)}): "
-                                "pass them to start() as a LaunchSpec, or give the scene")
+                raise TypeError(
+                    f"Launcher() without a scene takes no launch arguments (got {', '.join(given)}): "
+                    "pass them to start() as a LaunchSpec, or give the scene"
+                )
         self.transport = zmq_transport(transport)  # raises for an unknown transport
         #: Whether each sim gets a local pipe to this process.
         self.local_pipe = transport == "pipe"
@@ -121,14 +142,10 @@ class Launcher:
             self.bind_address = f"tcp://{bind_host}:*"
         remote = self.bind_address is not None and not is_loopback(self.bind_address)
         if remote and curve is False:
-            raise ValueError(
-                f"binding {bind_host!r} (beyond loopback) requires CURVE; drop curve=False"
-            )
+            raise ValueError(f"binding {bind_host!r} (beyond loopback) requires CURVE; drop curve=False")
         self.remote = remote
         #: The client key pair the sims admit, when CURVE is on.
-        self.curve_client_keypair: KeyPair | None = (
-            generate_keypair() if (remote or bool(curve)) else None
-        )
+        self.curve_client_keypair: KeyPair | None = generate_keypair() if (remote or bool(curve)) else None
         #: What was started (None until :meth:`start`).
         self.spec: LaunchSpec | None = None
         self._state: LaunchState | None = None
@@ -169,8 +186,12 @@ class Launcher:
         """The layout of the started sims; None before :meth:`start`."""
         if self.spec is None:
             return None
-        return SimLayout(self.spec.num_instances, self.spec.worlds_per_instance, self.spec.real_time,
-                         source=f"the launcher of {os.path.basename(self.spec.scene)}")
+        return SimLayout(
+            self.spec.num_instances,
+            self.spec.worlds_per_instance,
+            self.spec.real_time,
+            source=f"the launcher of {os.path.basename(self.spec.scene)}",
+        )
 
     def connect(self, index: int, timeout: float | None) -> SimConnection:
         """A connection to sim ``index``: its local pipe if it has one, else ZeroMQ."""
@@ -267,14 +288,22 @@ class Launcher:
             if path and os.path.exists(path):
                 os.unlink(path)
         cmd = [
-            sys.executable, spec.scene,
-            "--address", address,
-            "--instance", str(instance),
-            "--worlds", str(spec.worlds_per_instance),
-            "--env-kwargs", json.dumps(dict(spec.env_kwargs)),
-            "--parent-pid", str(os.getpid()),
-            "--ready-file", ready_file,
-            "--private-dir", workdir,
+            sys.executable,
+            spec.scene,
+            "--address",
+            address,
+            "--instance",
+            str(instance),
+            "--worlds",
+            str(spec.worlds_per_instance),
+            "--env-kwargs",
+            json.dumps(dict(spec.env_kwargs)),
+            "--parent-pid",
+            str(os.getpid()),
+            "--ready-file",
+            ready_file,
+            "--private-dir",
+            workdir,
         ]
         server_key = None
         if self.curve_client_keypair is not None:
@@ -311,7 +340,11 @@ class Launcher:
             with open(log_path, "ab") as log:
                 log_offset = log.tell()
                 proc = subprocess.Popen(
-                    cmd, stdin=subprocess.DEVNULL, stderr=log, env=env, start_new_session=True,
+                    cmd,
+                    stdin=subprocess.DEVNULL,
+                    stderr=log,
+                    env=env,
+                    start_new_session=True,
                     pass_fds=() if theirs is None else (theirs.fileno(),),
                 )
         except BaseException:
@@ -321,8 +354,15 @@ class Launcher:
         finally:
             if theirs is not None:
                 theirs.close()
-        return SimProcess(instance=instance, proc=proc, log_path=log_path, ready_file=ready_file,
-                          curve_server_key=server_key, log_offset=log_offset, pipe=ours)
+        return SimProcess(
+            instance=instance,
+            proc=proc,
+            log_path=log_path,
+            ready_file=ready_file,
+            curve_server_key=server_key,
+            log_offset=log_offset,
+            pipe=ours,
+        )
 
     def _wait_ready(self, sim: SimProcess) -> None:
         spec = self._spec()

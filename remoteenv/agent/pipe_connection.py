@@ -47,8 +47,9 @@ class PipeConnection(SimConnection):
         timeout: float | None = 60.0,
         death_check: Callable[[], str | None] | None = None,
     ) -> None:
-        super().__init__(endpoint or f"pipe fd {pipe.fileno()}", instance=instance,
-                         timeout=timeout, death_check=death_check)
+        super().__init__(
+            endpoint or f"pipe fd {pipe.fileno()}", instance=instance, timeout=timeout, death_check=death_check
+        )
         self.pipe = pipe
         self._decoder = protocol.StreamDecoder()
         self._frames: deque[bytes] = deque()
@@ -88,8 +89,9 @@ class PipeConnection(SimConnection):
         try:
             self._frames.extend(self._decoder.feed(data))
         except protocol.ProtocolError as exc:
-            raise RemoteEnvError(f"sim instance {self.instance} broke the pipe framing: {exc}",
-                                 kind="protocol", instance=self.instance) from None
+            raise RemoteEnvError(
+                f"sim instance {self.instance} broke the pipe framing: {exc}", kind="protocol", instance=self.instance
+            ) from None
 
     def _recv_frame(self) -> bytes | None:
         if not self._frames and self._hot.worth_it():

@@ -48,8 +48,7 @@ class RestartBudget:
         Returns the number of restarts spent so far, this one included."""
         if self.count >= self.max_restarts:
             raise type(err)(
-                f"giving up after {self.count} restart(s) (max_restarts={self.max_restarts}); "
-                f"last failure: {err}",
+                f"giving up after {self.count} restart(s) (max_restarts={self.max_restarts}); last failure: {err}",
                 kind=err.kind,
                 instance=err.instance,
             ) from err

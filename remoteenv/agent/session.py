@@ -90,8 +90,9 @@ class SimSession:
     ) -> None:
         self.restarts = RestartBudget(restart_on_failure, max_restarts)
         if restart_on_failure and not group.owns_sims:
-            raise ValueError("restart_on_failure needs sims this env launched; attached sims "
-                             "belong to the launch command")
+            raise ValueError(
+                "restart_on_failure needs sims this env launched; attached sims belong to the launch command"
+            )
         if spec is None and group.layout is None:
             raise ValueError(f"{label}: a group that is not started yet needs a LaunchSpec")
         self.group = group
@@ -119,8 +120,9 @@ class SimSession:
                 self.conns.append(self.group.connect(index, self.timeout))
             timeout = self.timeout_for("handshake")
             seqs = [conn.send("handshake", **handshake_request()) for conn in self.conns]
-            self.handshakes = [self._parse(conn, conn.receive(seq, timeout, what="'handshake'"))
-                               for conn, seq in zip(self.conns, seqs)]
+            self.handshakes = [
+                self._parse(conn, conn.receive(seq, timeout, what="'handshake'")) for conn, seq in zip(self.conns, seqs)
+            ]
         except BaseException:
             self.close()
             raise
@@ -208,9 +210,11 @@ class SimSession:
         try:
             return parse_handshake(reply)
         except ProtocolError as exc:
-            raise RemoteEnvError(f"sim instance {conn.instance} at {conn.endpoint} gave {self.label} "
-                                 f"a handshake it cannot use: {exc}", kind="protocol",
-                                 instance=conn.instance) from None
+            raise RemoteEnvError(
+                f"sim instance {conn.instance} at {conn.endpoint} gave {self.label} a handshake it cannot use: {exc}",
+                kind="protocol",
+                instance=conn.instance,
+            ) from None
 
 
 def scene_label(cls_name: str, scene: str | os.PathLike[str]) -> str:

@@ -88,8 +88,9 @@ class SimConnection:
         args["seq"] = self._seq
         args["cmd"] = cmd
         if self.closed:
-            raise RemoteEnvError(f"connection to sim instance {self.instance} is closed",
-                                 kind="state", instance=self.instance)
+            raise RemoteEnvError(
+                f"connection to sim instance {self.instance} is closed", kind="state", instance=self.instance
+            )
         self._send_frame(protocol.pack(args))
         return self._seq
 

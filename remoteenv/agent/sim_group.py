@@ -32,7 +32,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
-from remoteenv.agent.connection import SimConnection
+from remoteenv.agent.sim_connection import SimConnection
 from remoteenv.wire.keys import KeyPair
 
 

@@ -37,8 +37,9 @@ class VectorRequests:
             worlds start their new episodes within the failed step).
     """
 
-    def __init__(self, session: SimSession, slices: Sequence[tuple[int, int]], *, real_time: bool,
-                 same_step: bool) -> None:
+    def __init__(
+        self, session: SimSession, slices: Sequence[tuple[int, int]], *, real_time: bool, same_step: bool
+    ) -> None:
         self.session = session
         self.slices = list(slices)
         self.real_time = real_time
@@ -47,9 +48,9 @@ class VectorRequests:
         self.same_step = same_step
         self.fan_in = FanIn()
 
-    def gather(self, pending: dict[int, int], cmd: str,
-               resend: Callable[[int], int] | None = None
-               ) -> tuple[dict[int, dict[str, Any]], dict[int, RemoteEnvError]]:
+    def gather(
+        self, pending: dict[int, int], cmd: str, resend: Callable[[int], int] | None = None
+    ) -> tuple[dict[int, dict[str, Any]], dict[int, RemoteEnvError]]:
         """Replies to ``pending`` (``{process: seq}`` of ``cmd`` requests),
         relaunching processes lost to a covered failure; see
         :func:`~remoteenv.agent.restart.gather_restarting`."""
@@ -67,9 +68,9 @@ class VectorRequests:
 
     # ------------------------------------------------------------ reset
 
-    def reset(self, worlds_of: dict[int, list[int]], seeds: Sequence[int | None],
-              options: dict[str, Any] | None
-              ) -> tuple[dict[int, dict[str, Any]], dict[int, RemoteEnvError]]:
+    def reset(
+        self, worlds_of: dict[int, list[int]], seeds: Sequence[int | None], options: dict[str, Any] | None
+    ) -> tuple[dict[int, dict[str, Any]], dict[int, RemoteEnvError]]:
         """Reset worlds ``worlds_of[p]`` (indices within process ``p``) with
         ``seeds`` (one per world of the vector). Returns each process's reply in
         ``reset_batch`` form and ``{process: error}`` of those relaunched."""
@@ -79,8 +80,7 @@ class VectorRequests:
             lo, worlds = self.slices[p][0], worlds_of[p]
             if self.real_time:
                 return conns[p].send("reset", seed=seeds[lo], options=options)
-            return conns[p].send("reset_batch", worlds=worlds, seeds=[seeds[lo + w] for w in worlds],
-                                 options=options)
+            return conns[p].send("reset_batch", worlds=worlds, seeds=[seeds[lo + w] for w in worlds], options=options)
 
         pending = {p: send_reset(p) for p in worlds_of}
         replies, restarted = self.gather(pending, "reset", resend=send_reset)
@@ -98,15 +98,18 @@ class VectorRequests:
             return self._step_single_worlds(ops, actions, last_obs, obs_batch)
         conns = self.session.conns
         ops_list = ops.tolist()
-        pending = {p: conns[p].send("step_batch", ops=ops_list[lo:hi], actions=actions[lo:hi])
-                   for p, (lo, hi) in enumerate(self.slices)}
+        pending = {
+            p: conns[p].send("step_batch", ops=ops_list[lo:hi], actions=actions[lo:hi])
+            for p, (lo, hi) in enumerate(self.slices)
+        }
         results, failed = self.gather(pending, "step_batch")
         for p, err in failed.items():
             results[p] = self._restarted_results(p, err, last_obs, obs_batch)
         return results
 
-    def _step_single_worlds(self, ops: np.ndarray, actions: Any, last_obs: Any,
-                            obs_batch: ObsBatch) -> dict[int, dict[str, Any]]:
+    def _step_single_worlds(
+        self, ops: np.ndarray, actions: Any, last_obs: Any, obs_batch: ObsBatch
+    ) -> dict[int, dict[str, Any]]:
         """One world per process: plain ``step``/``reset`` requests, then a
         ``reset`` for each world whose op asks for one after its step."""
         conns = self.session.conns
@@ -137,8 +140,7 @@ class VectorRequests:
             res["info"] = {"maps": [r["info"]]}
         return results
 
-    def _restarted_results(self, p: int, err: RemoteEnvError, last_obs: Any,
-                           obs_batch: ObsBatch) -> dict[str, Any]:
+    def _restarted_results(self, p: int, err: RemoteEnvError, last_obs: Any, obs_batch: ObsBatch) -> dict[str, Any]:
         """``step_batch``-form results for the worlds of relaunched process ``p``:
         truncated at their last observation, reward 0, the restart in their info
         (with ``SAME_STEP``: new episodes already started, the ended ones final)."""
@@ -147,15 +149,20 @@ class VectorRequests:
         info = restarted_info(err, self.session.restarts.count)
         last = obs_batch.rows(last_obs, lo, hi)
         result: dict[str, Any] = {
-            "obs": last, "reward": [0.0] * k, "terminated": [False] * k, "truncated": [True] * k,
-            "info": {"maps": [dict(info) for _ in range(k)]}, "final": [],
+            "obs": last,
+            "reward": [0.0] * k,
+            "terminated": [False] * k,
+            "truncated": [True] * k,
+            "info": {"maps": [dict(info) for _ in range(k)]},
+            "final": [],
         }
         if self.same_step:
             if self.real_time:
                 fresh = [self.session.request(p, "reset", seed=None, options=None)["obs"]]
             else:
-                fresh = self.session.request(p, "reset_batch", worlds=list(range(k)), seeds=[None] * k,
-                                             options=None)["obs"]
+                fresh = self.session.request(p, "reset_batch", worlds=list(range(k)), seeds=[None] * k, options=None)[
+                    "obs"
+                ]
             result["obs"] = fresh
             result["final"] = [[w, last[w], dict(info)] for w in range(k)]
         return result

@@ -68,8 +68,14 @@ class ObsBatch:
 
 def step_reply_as_batch(reply: dict[str, Any]) -> dict[str, Any]:
     """A plain ``step`` reply (one world) in ``step_batch`` form."""
-    return {"obs": [reply["obs"]], "reward": [reply["reward"]], "terminated": [reply["terminated"]],
-            "truncated": [reply["truncated"]], "info": {"maps": [reply["info"]]}, "final": []}
+    return {
+        "obs": [reply["obs"]],
+        "reward": [reply["reward"]],
+        "terminated": [reply["terminated"]],
+        "truncated": [reply["truncated"]],
+        "info": {"maps": [reply["info"]]},
+        "final": [],
+    }
 
 
 def reset_reply_as_batch(reply: dict[str, Any], as_step: bool = False) -> dict[str, Any]:
@@ -100,8 +106,13 @@ def assemble(
         for w, fobs, finfo in r["final"]:
             add_info(infos, {"final_obs": fobs, "final_info": finfo}, w)
         merge_infos(infos, r["info"], idx, n, add_info)
-        return (r["obs"], np.asarray(r["reward"], dtype=np.float64), np.asarray(r["terminated"], dtype=np.bool_),
-                np.asarray(r["truncated"], dtype=np.bool_), infos)
+        return (
+            r["obs"],
+            np.asarray(r["reward"], dtype=np.float64),
+            np.asarray(r["terminated"], dtype=np.bool_),
+            np.asarray(r["truncated"], dtype=np.bool_),
+            infos,
+        )
     obs = obs_batch.fresh(None, full=True)
     rewards = np.empty(n, dtype=np.float64)
     terminated = np.empty(n, dtype=np.bool_)

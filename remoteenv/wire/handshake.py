@@ -102,8 +102,9 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
         raise ProtocolError(f"a handshake reply must be a map, got {type(reply).__name__}")
     version = _need(reply, "protocol", int, "")
     if version != expected_version:
-        raise ProtocolError(f"the sim answered the handshake with protocol version {version}; "
-                            f"this client speaks {expected_version}")
+        raise ProtocolError(
+            f"the sim answered the handshake with protocol version {version}; this client speaks {expected_version}"
+        )
     meta = _need(reply, "metadata", dict, "")
     stepping = _typed(reply, "stepping", dict, "") or {}
     try:

@@ -51,8 +51,14 @@ def test_a_missing_scene_is_named():
 
 
 def test_attached_sims_have_a_fixed_layout_and_cannot_restart(tmp_path):
-    info = LaunchInfo(scene="s.py", worlds_per_instance=2, real_time=False, path=str(tmp_path / "l.json"),
-                      launcher_pid=5, instances=[AttachedSim(0, "ipc:///a", None), AttachedSim(3, "ipc:///b", None)])
+    info = LaunchInfo(
+        scene="s.py",
+        worlds_per_instance=2,
+        real_time=False,
+        path=str(tmp_path / "l.json"),
+        launcher_pid=5,
+        instances=[AttachedSim(0, "ipc:///a", None), AttachedSim(3, "ipc:///b", None)],
+    )
     sims = AttachedSims(info)
     assert sims.layout == SimLayout(2, 2, False, f"launch-info file {tmp_path / 'l.json'}")
     assert not sims.owns_sims and sims.sims[1].node is None and sims.sims[1].pipe is None

@@ -17,8 +17,15 @@ OBS = gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
 ACT = gym.spaces.Discrete(2)
 
 REPLY = {
-    "seq": 1, "ok": True, "protocol": PROTOCOL_VERSION, "env_id": "x/Y-v0", "instance": 2, "pid": 77,
-    "num_worlds": 4, "observation_space": space_to_wire(OBS), "action_space": space_to_wire(ACT),
+    "seq": 1,
+    "ok": True,
+    "protocol": PROTOCOL_VERSION,
+    "env_id": "x/Y-v0",
+    "instance": 2,
+    "pid": 77,
+    "num_worlds": 4,
+    "observation_space": space_to_wire(OBS),
+    "action_space": space_to_wire(ACT),
     "metadata": {"render_modes": ["rgb_array"], "render_fps": 50, "dt": 0.02, "timestep": 0.01, "frame_skip": 2},
     "stepping": {"mode": "real_time", "real_time_factor": 2.0, "action_delay": 0},
 }
@@ -49,16 +56,19 @@ def test_an_action_delay_makes_steps_timed():
     assert not hs.real_time and hs.timed_steps and hs.action_delay == 3
 
 
-@pytest.mark.parametrize("change, message", [
-    (lambda r: r.pop("action_space"), "lacks 'action_space'"),
-    (lambda r: r["metadata"].pop("dt"), "lacks metadata 'dt'"),
-    (lambda r: r.update(protocol=99), "protocol version 99; this client speaks"),
-    (lambda r: r.update(protocol=True), "'protocol' must not be a bool"),
-    (lambda r: r.update(instance="two"), "'instance' has the wrong type"),
-    (lambda r: r["metadata"].update(render_modes=["a", 3]), "must be strings"),
-    (lambda r: r.update(observation_space={"type": "Torus"}), "unknown space type"),
-    (lambda r: r.update(action_space={"type": "Discrete"}), "malformed space"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda r: r.pop("action_space"), "lacks 'action_space'"),
+        (lambda r: r["metadata"].pop("dt"), "lacks metadata 'dt'"),
+        (lambda r: r.update(protocol=99), "protocol version 99; this client speaks"),
+        (lambda r: r.update(protocol=True), "'protocol' must not be a bool"),
+        (lambda r: r.update(instance="two"), "'instance' has the wrong type"),
+        (lambda r: r["metadata"].update(render_modes=["a", 3]), "must be strings"),
+        (lambda r: r.update(observation_space={"type": "Torus"}), "unknown space type"),
+        (lambda r: r.update(action_space={"type": "Discrete"}), "malformed space"),
+    ],
+)
 def test_a_bad_reply_is_a_protocol_error_naming_the_field(change, message):
     reply = copy.deepcopy(REPLY)
     change(reply)

@@ -63,11 +63,14 @@ def test_columns_round_trip_like_gymnasium(name):
     assert_same(merged, gymnasium_merge(plain, idx.tolist(), n))
 
 
-@pytest.mark.parametrize("per_world", [
-    [{"a": 1}, {"a": 1.5}],  # one key, two types
-    [{"name": "x"}, {"name": "y"}],  # not a scalar
-    [{"nested": {"a": 1}}],
-])
+@pytest.mark.parametrize(
+    "per_world",
+    [
+        [{"a": 1}, {"a": 1.5}],  # one key, two types
+        [{"name": "x"}, {"name": "y"}],  # not a scalar
+        [{"nested": {"a": 1}}],
+    ],
+)
 def test_anything_else_travels_as_maps_and_merges_like_gymnasium(per_world):
     packed = columnar_infos(per_world)
     assert packed == {"maps": per_world}

@@ -65,8 +65,9 @@ class Script:
 
 def test_gather_restarting_relaunches_and_resends():
     script = Script(died(1))
-    replies, failed = gather_restarting(script.gather, script.relaunch, RestartBudget(True, 3),
-                                        {0: 10, 1: 11}, resend=lambda p: 100 + p)
+    replies, failed = gather_restarting(
+        script.gather, script.relaunch, RestartBudget(True, 3), {0: 10, 1: 11}, resend=lambda p: 100 + p
+    )
     assert script.relaunched == [1] and list(failed) == [1]
     assert replies == {0: {"seq": 10}, 1: {"seq": 101}}
 

@@ -54,7 +54,8 @@ def test_after_step_counts_steps_and_applies_the_time_limit():
 def test_after_step_in_same_step_mode_restarts_the_count_of_ended_worlds():
     ops = np.array([OP_STEP_AUTORESET, OP_STEP_RESET, OP_STEP_AUTORESET])
     trunc, elapsed, needs_reset = after_step(
-        SAME, ops, flags(True, False, False), flags(False, False, False), counts(2, 4, 1), max_episode_steps=5)
+        SAME, ops, flags(True, False, False), flags(False, False, False), counts(2, 4, 1), max_episode_steps=5
+    )
     assert trunc.tolist() == [False, True, False]
     assert elapsed.tolist() == [0, 0, 2] and not needs_reset.any()
 
@@ -80,8 +81,13 @@ def test_a_whole_episode_with_a_time_limit_in_each_mode():
         if mode == NEXT:
             assert seen == [(OP_STEP, False), (OP_STEP, True), (OP_RESET, False), (OP_STEP, False), (OP_STEP, True)]
         else:
-            assert seen == [(OP_STEP_AUTORESET, False), (OP_STEP_RESET, True), (OP_STEP_AUTORESET, False),
-                            (OP_STEP_RESET, True), (OP_STEP_AUTORESET, False)]
+            assert seen == [
+                (OP_STEP_AUTORESET, False),
+                (OP_STEP_RESET, True),
+                (OP_STEP_AUTORESET, False),
+                (OP_STEP_RESET, True),
+                (OP_STEP_AUTORESET, False),
+            ]
 
 
 # ------------------------------------------------------------ reset arguments

@@ -95,14 +95,28 @@ class FakeSim:
         return protocol.pack({"seq": msg["seq"], "ok": True, **result})
 
     def _handshake(self, msg: dict[str, Any]) -> dict[str, Any]:
-        stepping = ({"mode": "real_time", "real_time_factor": 1.0, "action_delay": 0} if self.real_time
-                    else {"mode": "lock_step", "action_delay": self.action_delay})
-        return {"protocol": protocol.PROTOCOL_VERSION, "env_id": "fake/Walker-v0", "instance": self.instance,
-                "pid": self.pid, "num_worlds": len(self.worlds), "observation_space": space_to_wire(OBS_SPACE),
-                "action_space": space_to_wire(ACT_SPACE),
-                "metadata": {"render_modes": ["rgb_array"], "render_fps": 50, "dt": 0.02, "timestep": 0.01,
-                             "frame_skip": 2},
-                "stepping": stepping}
+        stepping = (
+            {"mode": "real_time", "real_time_factor": 1.0, "action_delay": 0}
+            if self.real_time
+            else {"mode": "lock_step", "action_delay": self.action_delay}
+        )
+        return {
+            "protocol": protocol.PROTOCOL_VERSION,
+            "env_id": "fake/Walker-v0",
+            "instance": self.instance,
+            "pid": self.pid,
+            "num_worlds": len(self.worlds),
+            "observation_space": space_to_wire(OBS_SPACE),
+            "action_space": space_to_wire(ACT_SPACE),
+            "metadata": {
+                "render_modes": ["rgb_array"],
+                "render_fps": 50,
+                "dt": 0.02,
+                "timestep": 0.01,
+                "frame_skip": 2,
+            },
+            "stepping": stepping,
+        }
 
     def _world(self, msg: dict[str, Any]) -> Walker:
         return self.worlds[msg.get("world", 0)]
@@ -142,8 +156,14 @@ class FakeSim:
                 final.append([w, o, i])
                 o, i = walker.reset(None)
             obs.append(o), rewards.append(r), terms.append(t), infos.append(i)
-        return {"obs": stack(obs), "reward": rewards, "terminated": terms, "truncated": [False] * len(obs),
-                "info": columnar_infos(infos), "final": final}
+        return {
+            "obs": stack(obs),
+            "reward": rewards,
+            "terminated": terms,
+            "truncated": [False] * len(obs),
+            "info": columnar_infos(infos),
+            "final": final,
+        }
 
 
 class InProcessConnection(SimConnection):
@@ -182,8 +202,9 @@ class FakeGroup:
         self.restarted: list[int] = []
         self.retired: list[FakeSim] = []
         if layout is not None:
-            self.sims = [FakeSim(i, layout.worlds_per_instance, layout.real_time, 0)
-                         for i in range(layout.num_instances)]
+            self.sims = [
+                FakeSim(i, layout.worlds_per_instance, layout.real_time, 0) for i in range(layout.num_instances)
+            ]
 
     @property
     def layout(self) -> SimLayout | None:
@@ -193,8 +214,9 @@ class FakeGroup:
 
     def start(self, spec: LaunchSpec) -> None:
         self.spec = spec
-        self.sims = [FakeSim(i, spec.worlds_per_instance, spec.real_time, spec.action_delay)
-                     for i in range(spec.num_instances)]
+        self.sims = [
+            FakeSim(i, spec.worlds_per_instance, spec.real_time, spec.action_delay) for i in range(spec.num_instances)
+        ]
 
     def connect(self, index: int, timeout: float | None) -> SimConnection:
         return InProcessConnection(self.sims[index], timeout)
@@ -402,8 +424,11 @@ def test_vector_env_matches_sync_vector_env_of_single_envs(mode, k):
         ended = r[2] | r[3]
         ends += int(ended.sum())
         if mode == AutoresetMode.DISABLED and ended.any():
-            assert_same(remote.reset(options={"reset_mask": ended})[0],
-                        ref.reset(options={"reset_mask": ended.copy()})[0], f"step {t} masked reset")
+            assert_same(
+                remote.reset(options={"reset_mask": ended})[0],
+                ref.reset(options={"reset_mask": ended.copy()})[0],
+                f"step {t} masked reset",
+            )
     assert ends >= 3
     assert any("step_batch" in s.commands for s in group.sims) == (k > 1)
     remote.close()
@@ -443,8 +468,7 @@ def test_vector_reset_is_sent_again_to_a_relaunched_process():
 
 def test_vector_same_step_restart_starts_new_episodes_at_once():
     group = FakeGroup()
-    venv = make_vector(2, group, envs_per_process=1, restart_on_failure=True,
-                       autoreset_mode=AutoresetMode.SAME_STEP)
+    venv = make_vector(2, group, envs_per_process=1, restart_on_failure=True, autoreset_mode=AutoresetMode.SAME_STEP)
     venv.reset(seed=3)
     before, *_ = venv.step(np.array([1, 1]))
     group.sims[0].killed = True
