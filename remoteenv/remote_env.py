@@ -2,7 +2,11 @@
 
 Runs in the agent process. ``reset``/``step``/``render`` become requests to
 the sim (see :mod:`remoteenv.protocol`); spaces and metadata come from the
-sim's handshake, so they are declared once, in the scene.
+sim's handshake, so they are declared once, in the scene. Where the sim runs
+is a :class:`~remoteenv.agent.sim_group.SimGroup` (``launcher=``/``attach=``);
+its lifecycle (start or attach, handshake, restarts, close) is the
+:class:`~remoteenv.agent.session.SimSession` this env shares with
+:class:`remoteenv.RemoteVectorEnv`.
 """
 
 from __future__ import annotations

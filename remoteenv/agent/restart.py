@@ -1,5 +1,6 @@
-"""Restart bookkeeping for ``restart_on_failure``: which failures a relaunch
-cures, how many relaunches an env may spend, and what the agent is told.
+"""Restart policy for ``restart_on_failure``: which failures a relaunch cures,
+how many relaunches an env may spend, which instances a failure costs, how a
+gather goes on around relaunches, and what the agent is told.
 
 Runs in the agent process; used by the single and the vector env (through
 :class:`remoteenv.agent.session.SimSession`, which relaunches).
