@@ -144,7 +144,6 @@ class RemoteVectorEnv(VectorEnv):
         attach: Any = None,
         **scene_kwargs: Any,
     ) -> None:
-        RestartBudget(restart_on_failure, max_restarts)  # argument check before anything starts
         self.startup_timeout = startup_timeout
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
