@@ -31,7 +31,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, iterate
 
 from remoteenv.agent.autoreset import after_reset, after_step, plan_ops
-from remoteenv.agent.errors import StateError
+from remoteenv.agent.errors import RemoteEnvError, StateError
 from remoteenv.agent.latency import LatencyStats
 from remoteenv.agent.reset_args import is_int_seed, split_reset_mask, world_seeds
 from remoteenv.agent.restart import RestartBudget, restarted_info
@@ -207,7 +207,12 @@ class RemoteVectorEnv(VectorEnv):
             label=scene_label(type(self).__name__, self.scene),
         )
         self._session.open()
-        self._set_spaces(self._session.handshake)
+        try:
+            self._set_spaces(self._session.handshake)
+            self._check_sims(self._session.handshakes)
+        except BaseException:
+            self._session.close()
+            raise
         self._requests = VectorRequests(
             self._session,
             self.slices,
@@ -235,6 +240,24 @@ class RemoteVectorEnv(VectorEnv):
         self.dt: float = hs.dt
         self._obs_batch = ObsBatch(self.single_observation_space, self.num_envs)
         self._box_act = isinstance(self.single_action_space, gym.spaces.Box)
+
+    def _check_sims(self, handshakes: Sequence[Handshake]) -> None:
+        """Refuse sims that cannot serve this env's slices (e.g. a server other
+        than the reference one, named in a launch-info file)."""
+        batches = not (self.real_time or self.envs_per_process == 1)
+        for hs, (lo, hi) in zip(handshakes, self.slices):
+            if hi - lo > hs.num_worlds:
+                problem = f"hosts {hs.num_worlds} world(s), not {hi - lo}"
+            elif batches and not hs.offers("step_batch"):
+                problem = "does not answer step_batch, which drives several worlds per process"
+            else:
+                continue
+            raise RemoteEnvError(
+                f"sim instance {hs.instance} {problem}; drive it with envs_per_process=1 "
+                f"or with sims that host {hi - lo} worlds each",
+                kind="protocol",
+                instance=hs.instance,
+            )
 
     @classmethod
     def attach(cls, launch_info: str | os.PathLike[str], **kwargs: Any) -> RemoteVectorEnv:

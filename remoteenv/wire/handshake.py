@@ -6,7 +6,8 @@ compliance checker alike), so a server's reply is judged by one set of rules:
 the fields an env needs (``protocol``, both spaces, ``metadata`` with
 ``render_modes``, ``render_fps`` and ``dt``) must be present and well typed;
 the others default when absent (``env_id``/``pid`` nil, ``instance`` 0,
-``num_worlds`` 1, ``stepping`` lock-step without delay).
+``num_worlds`` 1, ``stepping`` lock-step without delay, ``commands`` as the
+spec says a client should assume, see :meth:`Handshake.offers`).
 """
 
 from __future__ import annotations
@@ -25,6 +26,12 @@ from remoteenv.wire.spaces import space_from_wire
 LOCK_STEP = "lock_step"
 #: ``stepping["mode"]`` of a sim that runs on a paced wall clock.
 REAL_TIME = "real_time"
+#: Commands every server answers.
+CORE_COMMANDS = frozenset({"handshake", "reset", "step", "render", "close"})
+#: Commands a server without a ``commands`` list answers in lock-step only...
+LOCK_STEP_COMMANDS = frozenset({"reset_batch", "step_batch"})
+#: ... and in real time only.
+REAL_TIME_COMMANDS = frozenset({"timing"})
 
 
 def handshake_request(version: int = PROTOCOL_VERSION) -> dict[str, Any]:
@@ -62,6 +69,8 @@ class Handshake:
     action_delay: int = 0
     #: Real time: simulated seconds per wall-clock second (None in lock-step).
     real_time_factor: float | None = None
+    #: Every command the server answers, if its reply lists them.
+    commands: frozenset[str] | None = None
     #: The reply map as received.
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
@@ -73,6 +82,16 @@ class Handshake:
     def timed_steps(self) -> bool:
         """True when step replies carry timing keys (real time, or an action delay)."""
         return self.real_time or self.action_delay > 0
+
+    def offers(self, cmd: str) -> bool:
+        """Whether the server answers ``cmd``: as its ``commands`` list says, or
+        without one, the core commands plus the batch commands in lock-step and
+        ``timing`` in real time."""
+        if self.commands is not None:
+            return cmd in self.commands
+        if cmd in CORE_COMMANDS:
+            return True
+        return cmd in (REAL_TIME_COMMANDS if self.real_time else LOCK_STEP_COMMANDS)
 
     def __getitem__(self, key: str) -> Any:
         return self.raw[key]
@@ -120,6 +139,9 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
     fps = _typed(meta, "render_fps", (int, float), "metadata ")
     timestep = _typed(meta, "timestep", (int, float), "metadata ")
     rtf = _typed(stepping, "real_time_factor", (int, float), "stepping ")
+    commands = _typed(reply, "commands", list, "")
+    if commands is not None and not all(isinstance(c, str) for c in commands):
+        raise ProtocolError(f"handshake 'commands' must be strings: {short_repr(commands)}")
     return Handshake(
         protocol=version,
         observation_space=obs_space,
@@ -136,8 +158,18 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
         stepping_mode=_typed(stepping, "mode", str, "stepping ") or LOCK_STEP,
         action_delay=_typed(stepping, "action_delay", int, "stepping ") or 0,
         real_time_factor=None if rtf is None else float(rtf),
+        commands=None if commands is None else frozenset(commands),
         raw=reply,
     )
 
 
-__all__ = ["LOCK_STEP", "REAL_TIME", "Handshake", "handshake_request", "parse_handshake"]
+__all__ = [
+    "CORE_COMMANDS",
+    "LOCK_STEP",
+    "LOCK_STEP_COMMANDS",
+    "REAL_TIME",
+    "REAL_TIME_COMMANDS",
+    "Handshake",
+    "handshake_request",
+    "parse_handshake",
+]

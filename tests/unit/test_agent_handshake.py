@@ -83,3 +83,16 @@ def test_not_a_map():
 
 def test_the_request():
     assert handshake_request() == {"protocol": PROTOCOL_VERSION}
+
+
+def test_offered_commands_from_the_list_or_the_stepping_mode():
+    listed = parse_handshake({**REPLY, "commands": ["handshake", "reset", "step"]})
+    assert listed.commands == frozenset({"handshake", "reset", "step"})
+    assert listed.offers("step") and not listed.offers("render") and not listed.offers("timing")
+    real_time = parse_handshake(REPLY)
+    assert real_time.commands is None
+    assert real_time.offers("render") and real_time.offers("timing") and not real_time.offers("step_batch")
+    lock_step = parse_handshake({**REPLY, "stepping": {"mode": "lock_step", "action_delay": 0}})
+    assert lock_step.offers("step_batch") and lock_step.offers("reset_batch") and not lock_step.offers("timing")
+    with pytest.raises(ProtocolError, match="'commands' must be strings"):
+        parse_handshake({**REPLY, "commands": ["reset", 5]})

@@ -18,7 +18,7 @@ import pytest
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from remoteenv import OpenAIRemoteEnv, RemoteVectorEnv
-from remoteenv.agent.errors import RemoteEnvTimeout, SimDiedError, StateError
+from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout, SimDiedError, StateError
 from remoteenv.agent.restart import INFO_RESTARTED, INFO_RESTARTS
 from remoteenv.agent.sim_connection import SimConnection
 from remoteenv.agent.sim_group import LaunchSpec, SimGroup, SimHandle, SimLayout
@@ -79,6 +79,8 @@ class FakeSim:
         self.action_delay = action_delay
         self.killed = False
         self.stuck = False
+        #: The handshake's "commands" list (None: the field is left out).
+        self.offered: list[str] | None = None
         self.commands: list[str] = []
 
     def death(self) -> str | None:
@@ -116,6 +118,7 @@ class FakeSim:
                 "frame_skip": 2,
             },
             "stepping": stepping,
+            **({} if self.offered is None else {"commands": self.offered}),
         }
 
     def _world(self, msg: dict[str, Any]) -> Walker:
@@ -537,3 +540,15 @@ def test_vector_env_step_before_reset_and_bad_actions():
     with pytest.raises(ValueError, match="world 1"):
         venv.step(np.array([0, 5]))
     venv.close()
+
+
+def test_vector_env_refuses_sims_that_cannot_host_its_worlds():
+    group = FakeGroup(SimLayout(1, 2, False, "fake file"), owns_sims=False)
+    group.sims[0].offered = ["handshake", "reset", "step", "render", "close"]
+    with pytest.raises(RemoteEnvError, match="does not answer step_batch"):
+        make_vector(2, group)
+    assert group.closed
+    group = FakeGroup(SimLayout(1, 3, False, "fake file"), owns_sims=False)
+    group.sims[0].worlds = group.sims[0].worlds[:2]
+    with pytest.raises(RemoteEnvError, match=r"hosts 2 world\(s\), not 3"):
+        make_vector(3, group)
