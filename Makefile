@@ -24,7 +24,7 @@ demo: install
 	$(PY) -m remoteenv demo cartpole --continuous --episodes 3
 	$(PY) -m remoteenv demo reacher --episodes 3
 
-test: install
+test: install lint
 	$(VENV)/bin/pytest tests/unit
 	$(VENV)/bin/pytest tests/integration
 

@@ -36,11 +36,11 @@ import gymnasium as gym
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-import remoteenv  # noqa: E402,F401  (registers remoteenv/CartPole-v0)
-from remoteenv.controllers import cartpole_continuous  # noqa: E402
+import remoteenv  # noqa: F401  (registers remoteenv/CartPole-v0)
+from remoteenv.controllers import cartpole_continuous
 
 ENV_ID = "remoteenv/CartPole-v0"
 NO_LIMIT = 10**9  # steps: episodes are cut by simulated time here, not by step count
@@ -48,8 +48,9 @@ NO_LIMIT = 10**9  # steps: episodes are cut by simulated time here, not by step 
 
 def run_real_time(think_ms: float, args: argparse.Namespace) -> dict[str, float]:
     """Episodes under real_time=True with ``think_ms`` of sleep before each action."""
-    env = gym.make(ENV_ID, continuous=True, real_time=True, real_time_factor=args.real_time_factor,
-                   max_episode_steps=NO_LIMIT)
+    env = gym.make(
+        ENV_ID, continuous=True, real_time=True, real_time_factor=args.real_time_factor, max_episode_steps=NO_LIMIT
+    )
     lengths = []
     try:
         for episode in range(args.episodes):
@@ -98,13 +99,26 @@ def run_action_delay(k: int, args: argparse.Namespace, hold: int = 1) -> dict[st
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--think-ms", type=float, nargs="+", default=[0, 5, 10, 20, 40, 60, 80],
-                   help="agent think times to sweep, ms (default 0 5 10 20 40 60 80)")
+    p.add_argument(
+        "--think-ms",
+        type=float,
+        nargs="+",
+        default=[0, 5, 10, 20, 40, 60, 80],
+        help="agent think times to sweep, ms (default 0 5 10 20 40 60 80)",
+    )
     p.add_argument("--episodes", type=int, default=2, help="episodes per setting (default 2)")
-    p.add_argument("--max-seconds", type=float, default=10.0,
-                   help="cap on an episode's simulated length, s (default 10 = 500 ticks)")
-    p.add_argument("--real-time-factor", type=float, default=1.0,
-                   help="simulated seconds per wall second in the real-time runs (default 1.0)")
+    p.add_argument(
+        "--max-seconds",
+        type=float,
+        default=10.0,
+        help="cap on an episode's simulated length, s (default 10 = 500 ticks)",
+    )
+    p.add_argument(
+        "--real-time-factor",
+        type=float,
+        default=1.0,
+        help="simulated seconds per wall second in the real-time runs (default 1.0)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
     p.add_argument("--out", default="latency_experiment.png", help="where to save the plot")
     args = p.parse_args()
@@ -122,32 +136,51 @@ def main() -> None:
             held_results[k] = run_action_delay(k, args, hold=k + 1)
         rows.append((think, rt, k, delay_results[k]))
 
-    print(f"continuous CartPole, LQR controller, {args.episodes} episodes per setting, "
-          f"episodes capped at {args.max_seconds:g} s sim, real_time_factor {args.real_time_factor:g}")
-    print(f"{'think':>6} | {'real time: latency':>18} {'late':>5} {'episode':>8} | "
-          f"{'action_delay: k':>15} {'latency':>8} {'episode':>8} | {'held k+1: episode':>17}")
-    print(f"{'ms':>6} | {'ms (ticks)':>18} {'%':>5} {'s':>8} | {'ticks':>15} {'ms':>8} {'s':>8} | "
-          f"{'s':>17}")
+    print(
+        f"continuous CartPole, LQR controller, {args.episodes} episodes per setting, "
+        f"episodes capped at {args.max_seconds:g} s sim, real_time_factor {args.real_time_factor:g}"
+    )
+    print(
+        f"{'think':>6} | {'real time: latency':>18} {'late':>5} {'episode':>8} | "
+        f"{'action_delay: k':>15} {'latency':>8} {'episode':>8} | {'held k+1: episode':>17}"
+    )
+    print(f"{'ms':>6} | {'ms (ticks)':>18} {'%':>5} {'s':>8} | {'ticks':>15} {'ms':>8} {'s':>8} | {'s':>17}")
     for think, rt, k, ad in rows:
         lat = f"{rt['latency_ms']:.1f} ({rt['latency_ms'] / (1e3 * dt):.2f})"
-        print(f"{think:6g} | {lat:>18} {rt['late_pct']:5.0f} {rt['episode_s']:8.2f} | "
-              f"{k:15d} {ad['latency_ms']:8.1f} {ad['episode_s']:8.2f} | "
-              f"{held_results[k]['episode_s']:17.2f}")
+        print(
+            f"{think:6g} | {lat:>18} {rt['late_pct']:5.0f} {rt['episode_s']:8.2f} | "
+            f"{k:15d} {ad['latency_ms']:8.1f} {ad['episode_s']:8.2f} | "
+            f"{held_results[k]['episode_s']:17.2f}"
+        )
     overruns = sum(rt["overruns"] for _, rt, _, _ in rows)
-    print(f"sim pacing overruns over all real-time runs: {overruns}; "
-          f"total wall time {time.monotonic() - started:.0f} s")
+    print(
+        f"sim pacing overruns over all real-time runs: {overruns}; total wall time {time.monotonic() - started:.0f} s"
+    )
 
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    ax.plot([rt["latency_ms"] for _, rt, _, _ in rows], [rt["episode_s"] for _, rt, _, _ in rows],
-            "o-", label="real_time=True (think time slept)")
+    ax.plot(
+        [rt["latency_ms"] for _, rt, _, _ in rows],
+        [rt["episode_s"] for _, rt, _, _ in rows],
+        "o-",
+        label="real_time=True (think time slept)",
+    )
     for think, rt, _, _ in rows:
-        ax.annotate(f"{think:g} ms", (rt["latency_ms"], rt["episode_s"]), textcoords="offset points",
-                    xytext=(4, 4), fontsize=8)
+        ax.annotate(
+            f"{think:g} ms", (rt["latency_ms"], rt["episode_s"]), textcoords="offset points", xytext=(4, 4), fontsize=8
+        )
     ks = sorted(delay_results)
-    ax.plot([delay_results[k]["latency_ms"] for k in ks], [delay_results[k]["episode_s"] for k in ks],
-            "s--", label="action_delay=k (lock-step), decide every tick")
-    ax.plot([held_results[k]["latency_ms"] for k in ks], [held_results[k]["episode_s"] for k in ks],
-            "^:", label="action_delay=k, decision held k+1 ticks")
+    ax.plot(
+        [delay_results[k]["latency_ms"] for k in ks],
+        [delay_results[k]["episode_s"] for k in ks],
+        "s--",
+        label="action_delay=k (lock-step), decide every tick",
+    )
+    ax.plot(
+        [held_results[k]["latency_ms"] for k in ks],
+        [held_results[k]["episode_s"] for k in ks],
+        "^:",
+        label="action_delay=k, decision held k+1 ticks",
+    )
     ax.set_xlabel("mean action latency (ms of sim time, obs -> action in force)")
     ax.set_ylabel(f"mean episode length (s sim, cap {args.max_seconds:g})")
     ax.set_title("Continuous CartPole, LQR: episode length vs latency")

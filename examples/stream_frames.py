@@ -22,10 +22,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from torch.utils.data import DataLoader  # noqa: E402
+import matplotlib.pyplot as plt
+from torch.utils.data import DataLoader
 
-from remoteenv.torch import RemoteIterableDataset, launch_publishers  # noqa: E402
+from remoteenv.torch import RemoteIterableDataset, launch_publishers
 
 
 def main() -> None:
@@ -39,23 +39,31 @@ def main() -> None:
     args = parser.parse_args()
 
     start = time.perf_counter()
-    with launch_publishers("cartpole", num_instances=args.instances, items_per_instance=args.items,
-                           seed=0, episode_steps=40, width=args.width, height=args.height) as pubs:
+    with launch_publishers(
+        "cartpole",
+        num_instances=args.instances,
+        items_per_instance=args.items,
+        seed=0,
+        episode_steps=40,
+        width=args.width,
+        height=args.height,
+    ) as pubs:
         launched = time.perf_counter()
-        loader = DataLoader(RemoteIterableDataset.from_publishers(pubs), batch_size=8,
-                            num_workers=args.workers)
+        loader = DataLoader(RemoteIterableDataset.from_publishers(pubs), batch_size=8, num_workers=args.workers)
         frames, titles, keys = [], [], []
         for batch in loader:
-            for frame, instance, index, obs in zip(batch["frame"], batch["instance"],
-                                                   batch["index"], batch["labels"]["obs"]):
+            for frame, instance, index, obs in zip(
+                batch["frame"], batch["instance"], batch["index"], batch["labels"]["obs"]
+            ):
                 frames.append(frame.numpy())
                 keys.append((int(instance), int(index)))
-                titles.append(f"sim {int(instance)} #{int(index)}\n"
-                              f"theta {math.degrees(float(obs[2])):+.1f} deg")
+                titles.append(f"sim {int(instance)} #{int(index)}\ntheta {math.degrees(float(obs[2])):+.1f} deg")
         elapsed = time.perf_counter() - launched
-    print(f"{len(frames)} frames of {args.height}x{args.width} from {args.instances} publishers "
-          f"via {args.workers} workers: launch {launched - start:.2f} s, "
-          f"streaming {elapsed:.2f} s ({len(frames) / elapsed:.0f} frames/s)")
+    print(
+        f"{len(frames)} frames of {args.height}x{args.width} from {args.instances} publishers "
+        f"via {args.workers} workers: launch {launched - start:.2f} s, "
+        f"streaming {elapsed:.2f} s ({len(frames) / elapsed:.0f} frames/s)"
+    )
 
     order = sorted(range(len(frames)), key=lambda k: keys[k])  # workers interleave batches
     cols = 8

@@ -75,8 +75,7 @@ class ActorCritic(nn.Module):
 
 def train(args: argparse.Namespace) -> tuple[ActorCritic, bool]:
     if args.vectorization == "remote":  # RemoteVectorEnv, the id's vector entry point
-        envs = gym.make_vec(ENV_ID, num_envs=args.num_envs, vectorization_mode="vector_entry_point",
-                            seed=args.seed)
+        envs = gym.make_vec(ENV_ID, num_envs=args.num_envs, vectorization_mode="vector_entry_point", seed=args.seed)
     else:  # Gymnasium's SyncVectorEnv over single remote envs, for comparison
         envs = gym.make_vec(ENV_ID, num_envs=args.num_envs, vectorization_mode="sync")
     try:
@@ -93,8 +92,9 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
     optim = torch.optim.Adam(model.parameters(), lr=args.lr, eps=1e-5)
     # NEXT_STEP autoreset: the step after a done only resets that env; that
     # sample is no transition and is left out of the loss.
-    next_step = envs.metadata.get("autoreset_mode", gym.vector.AutoresetMode.NEXT_STEP) \
-        == gym.vector.AutoresetMode.NEXT_STEP
+    next_step = (
+        envs.metadata.get("autoreset_mode", gym.vector.AutoresetMode.NEXT_STEP) == gym.vector.AutoresetMode.NEXT_STEP
+    )
 
     buf_obs = torch.zeros(T, n, obs_dim)
     buf_act = torch.zeros(T, n, dtype=torch.long)
@@ -178,15 +178,19 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
         elapsed = time.perf_counter() - start
         bar.set_postfix(episodes=episodes, mean20=f"{mean20:.1f}")
         if update % args.log_every == 0:
-            tqdm.write(f"update {update:4d}  steps {steps:7d}  episodes {episodes:5d}  "
-                       f"mean return (last 20) {mean20:6.1f}  {steps / elapsed:6.0f} steps/s")
+            tqdm.write(
+                f"update {update:4d}  steps {steps:7d}  episodes {episodes:5d}  "
+                f"mean return (last 20) {mean20:6.1f}  {steps / elapsed:6.0f} steps/s"
+            )
         solved = len(recent) == 20 and mean20 >= SOLVED
     bar.close()
     elapsed = time.perf_counter() - start
     mean20 = float(np.mean(recent)) if recent else 0.0
     verdict = "solved" if solved else f"NOT solved within the budget of {args.budget} steps"
-    print(f"{verdict}: mean return of the last 20 episodes {mean20:.1f} after {steps} steps, "
-          f"{episodes} episodes, {elapsed:.1f} s wall ({steps / elapsed:.0f} steps/s)")
+    print(
+        f"{verdict}: mean return of the last 20 episodes {mean20:.1f} after {steps} steps, "
+        f"{episodes} episodes, {elapsed:.1f} s wall ({steps / elapsed:.0f} steps/s)"
+    )
     return model, solved
 
 
@@ -200,10 +204,14 @@ def evaluate_real_time(model: ActorCritic, think_times_ms: list[float], episodes
     the previous reply, so the return counts the ticks (0.02 s each) the pole
     stayed up, while the 500-step time limit counts the agent's steps: a slow
     agent that still balances collects more than 500."""
-    print(f"\nreal-time evaluation, {episodes} episode(s) per think time "
-          "(control tick 20 ms; the sim does not wait for the agent):")
-    print(f"{'think ms':>9} {'return (ticks up)':>18} {'agent steps':>12} {'fell':>5} "
-          f"{'latency ticks':>14} {'late steps':>11}")
+    print(
+        f"\nreal-time evaluation, {episodes} episode(s) per think time "
+        "(control tick 20 ms; the sim does not wait for the agent):"
+    )
+    print(
+        f"{'think ms':>9} {'return (ticks up)':>18} {'agent steps':>12} {'fell':>5} "
+        f"{'latency ticks':>14} {'late steps':>11}"
+    )
     env = gym.make(ENV_ID, real_time=True)
     try:
         for think in think_times_ms:
@@ -226,8 +234,11 @@ def evaluate_real_time(model: ActorCritic, think_times_ms: list[float], episodes
                 lengths.append(steps)
                 fell += bool(terminated)
             lat = f"{np.mean(latencies):.2f}" if latencies else "n/a"
-            print(f"{think:9.0f} {np.mean(returns):18.1f} {np.mean(lengths):12.1f} "
-                  f"{fell:2d}/{episodes:<2d} {lat:>14} {100 * late / max(sum(lengths), 1):10.0f}%", flush=True)
+            print(
+                f"{think:9.0f} {np.mean(returns):18.1f} {np.mean(lengths):12.1f} "
+                f"{fell:2d}/{episodes:<2d} {lat:>14} {100 * late / max(sum(lengths), 1):10.0f}%",
+                flush=True,
+            )
     finally:
         env.close()
 
@@ -235,8 +246,12 @@ def evaluate_real_time(model: ActorCritic, think_times_ms: list[float], episodes
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--num-envs", type=int, default=8)
-    p.add_argument("--vectorization", choices=["remote", "sync"], default="remote",
-                   help="remote: RemoteVectorEnv (default); sync: gymnasium SyncVectorEnv of remote envs")
+    p.add_argument(
+        "--vectorization",
+        choices=["remote", "sync"],
+        default="remote",
+        help="remote: RemoteVectorEnv (default); sync: gymnasium SyncVectorEnv of remote envs",
+    )
     p.add_argument("--budget", type=int, default=500_000, help="env steps before giving up")
     p.add_argument("--rollout-steps", type=int, default=128, help="steps per env per update")
     p.add_argument("--epochs", type=int, default=4)

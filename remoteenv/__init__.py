@@ -45,10 +45,22 @@ _LAZY = {
     "SimDiedError": "remoteenv.agent.errors",
 }
 #: Submodules reachable as attributes (``remoteenv.protocol``, ...), loaded on first access.
-_SUBMODULES = frozenset({
-    "protocol", "remote_env", "vector_env", "controllers", "sim", "wire", "agent", "cli",
-    "benchmarks", "compliance", "delays", "wrappers",
-})
+_SUBMODULES = frozenset(
+    {
+        "protocol",
+        "remote_env",
+        "vector_env",
+        "controllers",
+        "sim",
+        "wire",
+        "agent",
+        "cli",
+        "benchmarks",
+        "compliance",
+        "delays",
+        "wrappers",
+    }
+)
 
 if TYPE_CHECKING:
     from remoteenv.agent.errors import (
@@ -83,15 +95,9 @@ def __dir__() -> list[str]:
 
 
 ensure_scenes_package()
-import remoteenv.scenes.cartpole  # noqa: E402  (registers the id)
-import remoteenv.scenes.hexapod  # noqa: E402
-import remoteenv.scenes.reacher  # noqa: E402
-
-#: Gymnasium id of each shipped scene, by scene name.
-SHIPPED_SCENES = {
-    "cartpole": remoteenv.scenes.cartpole.ENV_ID,
-    "reacher": remoteenv.scenes.reacher.ENV_ID,
-    "hexapod": remoteenv.scenes.hexapod.ENV_ID,
+#: Gymnasium id of each shipped scene, by scene name (importing a scene package registers its id).
+SHIPPED_SCENES: dict[str, str] = {
+    name: importlib.import_module(f"remoteenv.scenes.{name}").ENV_ID for name in ("cartpole", "reacher", "hexapod")
 }
 
 __all__ = [

@@ -18,6 +18,7 @@ def ensure_scenes_package() -> None:
     """Import ``remoteenv.scenes``, from ``<checkout>/scenes`` if it is not installed."""
     try:
         import remoteenv.scenes  # noqa: F401
+
         return
     except ModuleNotFoundError as exc:
         if exc.name != "remoteenv.scenes":
@@ -30,11 +31,9 @@ def ensure_scenes_package() -> None:
             "checkout that has the scenes/ folder",
             name="remoteenv.scenes",
         )
-    spec = importlib.util.spec_from_file_location(
-        "remoteenv.scenes", init, submodule_search_locations=[folder]
-    )
+    spec = importlib.util.spec_from_file_location("remoteenv.scenes", init, submodule_search_locations=[folder])
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     sys.modules["remoteenv.scenes"] = module
     spec.loader.exec_module(module)
-    sys.modules["remoteenv"].scenes = module  # as a normal import would bind it
+    sys.modules["remoteenv"].scenes = module  # type: ignore[attr-defined]  # as a normal import would bind it

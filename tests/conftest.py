@@ -10,8 +10,8 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-import remoteenv  # noqa: E402  (registers the scene ids)
-from remoteenv.agent.launcher import pid_alive  # noqa: E402
+import remoteenv
+from remoteenv.agent.launcher import pid_alive
 
 
 def wait_gone(pid: int, timeout: float = 5.0) -> bool:

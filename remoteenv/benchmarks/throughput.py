@@ -18,7 +18,8 @@ import subprocess
 import sys
 import tempfile
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import gymnasium as gym
 import msgpack
@@ -36,16 +37,34 @@ DEFAULT_NUM_ENVS = (1, 2, 4, 8, 16)
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("throughput benchmark (default mode)")
-    g.add_argument("--scenes", default="reacher,cartpole",
-                   help=f"comma-separated scenes to measure, from {sorted(SCENES)} (default: both)")
-    g.add_argument("--num-envs", default=",".join(map(str, DEFAULT_NUM_ENVS)),
-                   help="comma-separated vector sizes N (default 1,2,4,8,16)")
-    g.add_argument("--duration", type=float, default=1.0,
-                   help="seconds each contender is timed (default 1.0; the default run takes ~3 min)")
-    g.add_argument("--envs-per-process", type=int, default=None,
-                   help="K of the batched RemoteVectorEnv rows (default: RemoteVectorEnv's own, max(8, ceil(N / cpus)) capped at N)")
-    g.add_argument("--json", default=None, metavar="PATH",
-                   help="also write the results as JSON to PATH ('-' for stdout, replacing the table)")
+    g.add_argument(
+        "--scenes",
+        default="reacher,cartpole",
+        help=f"comma-separated scenes to measure, from {sorted(SCENES)} (default: both)",
+    )
+    g.add_argument(
+        "--num-envs",
+        default=",".join(map(str, DEFAULT_NUM_ENVS)),
+        help="comma-separated vector sizes N (default 1,2,4,8,16)",
+    )
+    g.add_argument(
+        "--duration",
+        type=float,
+        default=1.0,
+        help="seconds each contender is timed (default 1.0; the default run takes ~3 min)",
+    )
+    g.add_argument(
+        "--envs-per-process",
+        type=int,
+        default=None,
+        help="K of the batched RemoteVectorEnv rows (default: RemoteVectorEnv's own, max(8, ceil(N / cpus)) capped at N)",
+    )
+    g.add_argument(
+        "--json",
+        default=None,
+        metavar="PATH",
+        help="also write the results as JSON to PATH ('-' for stdout, replacing the table)",
+    )
 
 
 # ---------------------------------------------------------------- timing
@@ -108,10 +127,15 @@ def _measure(make: Callable[[], Any], rate: Callable[[Any, float], float], durat
 
 def _echo_server(address: str) -> None:
     """Child process of :func:`zmq_floor`: answer each msgpack request with a step-sized reply."""
-    sock = zmq.Context.instance().socket(zmq.ROUTER)
+    sock: zmq.Socket[bytes] = zmq.Context.instance().socket(zmq.ROUTER)
     sock.bind(address)
-    reply_body = {"obs": b"\0" * 80, "reward": 0.5, "terminated": False, "truncated": False,
-                  "info": {"reward_dist": 0.1, "reward_ctrl": 0.2}}
+    reply_body = {
+        "obs": b"\0" * 80,
+        "reward": 0.5,
+        "terminated": False,
+        "truncated": False,
+        "info": {"reward_dist": 0.1, "reward_ctrl": 0.2},
+    }
     while True:
         ident, frame = sock.recv_multipart()
         msg = msgpack.unpackb(frame)
@@ -127,12 +151,14 @@ def zmq_floor(duration: float) -> float:
     messages the size of a Reacher step: what any request/reply env costs at least."""
     workdir = tempfile.mkdtemp(prefix="remoteenv-bench-")
     address = f"ipc://{os.path.join(workdir, 'echo.sock')}"
-    proc = subprocess.Popen([sys.executable, "-c",
-                             f"from remoteenv.benchmarks.throughput import _echo_server; _echo_server({address!r})"])
-    sock = zmq.Context.instance().socket(zmq.DEALER)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", f"from remoteenv.benchmarks.throughput import _echo_server; _echo_server({address!r})"]
+    )
+    sock: zmq.Socket[bytes] = zmq.Context.instance().socket(zmq.DEALER)
     sock.setsockopt(zmq.LINGER, 0)
     sock.connect(address)
     try:
+
         def step(i: int) -> None:
             sock.send(msgpack.packb({"seq": i, "cmd": "step", "action": b"\0" * 8}))
             msgpack.unpackb(sock.recv())
@@ -159,8 +185,13 @@ def _pipe_echo_server(fd: int) -> None:
     import socket
 
     sock = socket.socket(fileno=fd)
-    reply_body = {"obs": b"\0" * 80, "reward": 0.5, "terminated": False, "truncated": False,
-                  "info": {"reward_dist": 0.1, "reward_ctrl": 0.2}}
+    reply_body = {
+        "obs": b"\0" * 80,
+        "reward": 0.5,
+        "terminated": False,
+        "truncated": False,
+        "info": {"reward_dist": 0.1, "reward_ctrl": 0.2},
+    }
     while True:
         frame = sock.recv(65536)
         if not frame:
@@ -177,11 +208,16 @@ def pipe_floor(duration: float) -> float:
 
     ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
     proc = subprocess.Popen(
-        [sys.executable, "-c",
-         f"from remoteenv.benchmarks.throughput import _pipe_echo_server; _pipe_echo_server({theirs.fileno()})"],
-        pass_fds=(theirs.fileno(),))
+        [
+            sys.executable,
+            "-c",
+            f"from remoteenv.benchmarks.throughput import _pipe_echo_server; _pipe_echo_server({theirs.fileno()})",
+        ],
+        pass_fds=(theirs.fileno(),),
+    )
     theirs.close()
     try:
+
         def step(i: int) -> None:
             ours.sendall(msgpack.packb({"seq": i, "cmd": "step", "action": b"\0" * 8}))
             msgpack.unpackb(ours.recv(65536))
@@ -209,8 +245,13 @@ def _parse_ints(text: str, what: str) -> list[int]:
     return values
 
 
-def measure(scenes: list[str], num_envs: list[int], duration: float,
-            envs_per_process: int | None = None, log: Callable[[str], None] = print) -> dict[str, Any]:
+def measure(
+    scenes: list[str],
+    num_envs: list[int],
+    duration: float,
+    envs_per_process: int | None = None,
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
     """Run every contender; returns ``{"machine", "floor", "rows", "ratios"}``."""
     import remoteenv  # noqa: F401  (registers the ids)
     from remoteenv.vector_env import default_envs_per_process
@@ -218,8 +259,7 @@ def measure(scenes: list[str], num_envs: list[int], duration: float,
     rows: list[dict[str, Any]] = []
 
     def record(scene: str, name: str, n: int, rate: float | None, k: int | None = None) -> None:
-        rows.append({"scene": scene, "name": name, "num_envs": n, "envs_per_process": k,
-                     "steps_per_s": rate})
+        rows.append({"scene": scene, "name": name, "num_envs": n, "envs_per_process": k, "steps_per_s": rate})
         shown = "skipped" if rate is None else f"{rate:10.0f} steps/s"
         log(f"  {scene:9s} {name:28s} N={n:<3d}{'' if k is None else f' K={k:<3d}'} {shown}")
 
@@ -230,28 +270,62 @@ def measure(scenes: list[str], num_envs: list[int], duration: float,
     log(f"  raw socketpair+msgpack round trip: {1e6 / pfloor:.0f} us ({pfloor:.0f}/s)")
     for scene in scenes:
         remote_id, gym_id = SCENES[scene]
-        record(scene, "gymnasium in-process", 1,
-               _measure(lambda: gym.make(gym_id), _single_rate, duration))
-        record(scene, "remoteenv single", 1,
-               _measure(lambda: gym.make(remote_id), _single_rate, duration))
-        record(scene, "remoteenv single, zmq ipc", 1,
-               _measure(lambda: gym.make(remote_id, transport="ipc"), _single_rate, duration))
+        record(scene, "gymnasium in-process", 1, _measure(lambda: gym.make(gym_id), _single_rate, duration))
+        record(scene, "remoteenv single", 1, _measure(lambda: gym.make(remote_id), _single_rate, duration))
+        record(
+            scene,
+            "remoteenv single, zmq ipc",
+            1,
+            _measure(lambda: gym.make(remote_id, transport="ipc"), _single_rate, duration),
+        )
         for n in num_envs:
-            record(scene, "gymnasium SyncVectorEnv", n, _measure(
-                lambda: gym.make_vec(gym_id, num_envs=n, vectorization_mode="sync"), _vector_rate, duration))
-            record(scene, "gymnasium AsyncVectorEnv", n, _measure(
-                lambda: gym.make_vec(gym_id, num_envs=n, vectorization_mode="async"), _vector_rate, duration))
-            record(scene, "RemoteVectorEnv K=1", n, _measure(
-                lambda: gym.make_vec(remote_id, num_envs=n, vectorization_mode="vector_entry_point",
-                                     envs_per_process=1), _vector_rate, duration), 1)
+            record(
+                scene,
+                "gymnasium SyncVectorEnv",
+                n,
+                _measure(lambda: gym.make_vec(gym_id, num_envs=n, vectorization_mode="sync"), _vector_rate, duration),
+            )
+            record(
+                scene,
+                "gymnasium AsyncVectorEnv",
+                n,
+                _measure(lambda: gym.make_vec(gym_id, num_envs=n, vectorization_mode="async"), _vector_rate, duration),
+            )
+            record(
+                scene,
+                "RemoteVectorEnv K=1",
+                n,
+                _measure(
+                    lambda: gym.make_vec(
+                        remote_id, num_envs=n, vectorization_mode="vector_entry_point", envs_per_process=1
+                    ),
+                    _vector_rate,
+                    duration,
+                ),
+                1,
+            )
             k = min(envs_per_process or default_envs_per_process(n), n)
             if k > 1:
-                record(scene, "RemoteVectorEnv batched", n, _measure(
-                    lambda: gym.make_vec(remote_id, num_envs=n, vectorization_mode="vector_entry_point",
-                                         envs_per_process=k), _vector_rate, duration), k)
+                record(
+                    scene,
+                    "RemoteVectorEnv batched",
+                    n,
+                    _measure(
+                        lambda: gym.make_vec(
+                            remote_id, num_envs=n, vectorization_mode="vector_entry_point", envs_per_process=k
+                        ),
+                        _vector_rate,
+                        duration,
+                    ),
+                    k,
+                )
     return {
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version(), "load_avg_at_end": list(os.getloadavg())},
+        "machine": {
+            "cpus": os.cpu_count(),
+            "platform": platform.platform(),
+            "python": platform.python_version(),
+            "load_avg_at_end": list(os.getloadavg()),
+        },
         "duration_s": duration,
         "floor_round_trips_per_s": floor,
         "pipe_floor_round_trips_per_s": pfloor,
@@ -262,6 +336,7 @@ def measure(scenes: list[str], num_envs: list[int], duration: float,
 
 def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The side-by-side ratios the project targets."""
+
     def rate(scene: str, name: str, n: int) -> float | None:
         for r in rows:
             if r["scene"] == scene and r["name"] == name and r["num_envs"] == n:
@@ -275,29 +350,61 @@ def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             out.append({"scene": scene, "ratio": what, "value": num / den, "target": target})
 
     for scene in sorted({r["scene"] for r in rows}):
-        add(scene, "remoteenv single / AsyncVectorEnv(1)",
-            rate(scene, "remoteenv single", 1), rate(scene, "gymnasium AsyncVectorEnv", 1), 2.0)
-        add(scene, "remoteenv single / in-process",
-            rate(scene, "remoteenv single", 1), rate(scene, "gymnasium in-process", 1), None)
-        add(scene, "remoteenv single / the same over zmq ipc",
-            rate(scene, "remoteenv single", 1), rate(scene, "remoteenv single, zmq ipc", 1), None)
+        add(
+            scene,
+            "remoteenv single / AsyncVectorEnv(1)",
+            rate(scene, "remoteenv single", 1),
+            rate(scene, "gymnasium AsyncVectorEnv", 1),
+            2.0,
+        )
+        add(
+            scene,
+            "remoteenv single / in-process",
+            rate(scene, "remoteenv single", 1),
+            rate(scene, "gymnasium in-process", 1),
+            None,
+        )
+        add(
+            scene,
+            "remoteenv single / the same over zmq ipc",
+            rate(scene, "remoteenv single", 1),
+            rate(scene, "remoteenv single, zmq ipc", 1),
+            None,
+        )
         for n in sorted({r["num_envs"] for r in rows if r["scene"] == scene}):
-            add(scene, f"RemoteVectorEnv K=1 / AsyncVectorEnv, N={n}",
-                rate(scene, "RemoteVectorEnv K=1", n), rate(scene, "gymnasium AsyncVectorEnv", n), 1.3)
-            add(scene, f"RemoteVectorEnv batched / AsyncVectorEnv, N={n}",
-                rate(scene, "RemoteVectorEnv batched", n), rate(scene, "gymnasium AsyncVectorEnv", n), None)
-            add(scene, f"RemoteVectorEnv batched / SyncVectorEnv, N={n}",
-                rate(scene, "RemoteVectorEnv batched", n), rate(scene, "gymnasium SyncVectorEnv", n),
-                1.0 if n == 16 else None)
+            add(
+                scene,
+                f"RemoteVectorEnv K=1 / AsyncVectorEnv, N={n}",
+                rate(scene, "RemoteVectorEnv K=1", n),
+                rate(scene, "gymnasium AsyncVectorEnv", n),
+                1.3,
+            )
+            add(
+                scene,
+                f"RemoteVectorEnv batched / AsyncVectorEnv, N={n}",
+                rate(scene, "RemoteVectorEnv batched", n),
+                rate(scene, "gymnasium AsyncVectorEnv", n),
+                None,
+            )
+            add(
+                scene,
+                f"RemoteVectorEnv batched / SyncVectorEnv, N={n}",
+                rate(scene, "RemoteVectorEnv batched", n),
+                rate(scene, "gymnasium SyncVectorEnv", n),
+                1.0 if n == 16 else None,
+            )
     return out
 
 
 def format_table(result: dict[str, Any]) -> str:
-    lines = [f"raw pyzmq + msgpack round trip (ipc): {1e6 / result['floor_round_trips_per_s']:.0f} us "
-             f"= {result['floor_round_trips_per_s']:.0f} round trips/s",
-             f"raw socketpair + msgpack round trip (blocking reads): "
-             f"{1e6 / result['pipe_floor_round_trips_per_s']:.0f} us "
-             f"= {result['pipe_floor_round_trips_per_s']:.0f} round trips/s", ""]
+    lines = [
+        f"raw pyzmq + msgpack round trip (ipc): {1e6 / result['floor_round_trips_per_s']:.0f} us "
+        f"= {result['floor_round_trips_per_s']:.0f} round trips/s",
+        f"raw socketpair + msgpack round trip (blocking reads): "
+        f"{1e6 / result['pipe_floor_round_trips_per_s']:.0f} us "
+        f"= {result['pipe_floor_round_trips_per_s']:.0f} round trips/s",
+        "",
+    ]
     lines.append(f"{'scene':9s} {'contender':26s} {'N':>3s} {'K':>3s} {'steps/s':>10s}")
     for r in result["rows"]:
         k = "" if r["envs_per_process"] is None else str(r["envs_per_process"])
@@ -306,13 +413,14 @@ def format_table(result: dict[str, Any]) -> str:
     lines.append("")
     lines.append(f"{'scene':9s} {'ratio':52s} {'value':>6s} {'target':>7s}")
     for r in result["ratios"]:
-        target = "" if r["target"] is None else (
-            f">={r['target']:.1f} {'ok' if r['value'] >= r['target'] else 'MISS'}")
+        target = "" if r["target"] is None else (f">={r['target']:.1f} {'ok' if r['value'] >= r['target'] else 'MISS'}")
         lines.append(f"{r['scene']:9s} {r['ratio']:52s} {r['value']:6.2f} {target:>7s}")
     m = result["machine"]
     lines.append("")
-    lines.append(f"machine: {m['cpus']} CPUs, {m['platform']}, Python {m['python']}; "
-                 f"load average at end {m['load_avg_at_end'][0]:.2f}; {result['duration_s']:g} s per contender")
+    lines.append(
+        f"machine: {m['cpus']} CPUs, {m['platform']}, Python {m['python']}; "
+        f"load average at end {m['load_avg_at_end'][0]:.2f}; {result['duration_s']:g} s per contender"
+    )
     return "\n".join(lines)
 
 

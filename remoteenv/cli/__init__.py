@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from typing import Sequence
+from collections.abc import Sequence
 
 #: Command name -> module in remoteenv.cli, in the order ``--help`` lists them.
 COMMANDS = {"demo": "demo", "bench": "bench", "keys": "keys_command", "launch": "launch", "check": "check"}

@@ -22,8 +22,7 @@ def add_parser(sub: Any) -> None:
     mode = p.add_mutually_exclusive_group()
     for name, flag in BENCHMARKS.items():
         if flag:
-            mode.add_argument(flag, dest="mode", action="store_const", const=name,
-                              help=f"run the {name} benchmark")
+            mode.add_argument(flag, dest="mode", action="store_const", const=name, help=f"run the {name} benchmark")
     p.set_defaults(mode="throughput", run=run)
     for name in BENCHMARKS:
         try:

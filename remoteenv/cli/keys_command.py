@@ -20,8 +20,12 @@ def add_parser(sub: Any) -> None:
         "overwritten.",
     )
     p.add_argument("directory", help="where to write the key files (created if missing)")
-    p.add_argument("--name", action="append", default=None,
-                   help="base name of a key pair; repeat for several (default: server and client)")
+    p.add_argument(
+        "--name",
+        action="append",
+        default=None,
+        help="base name of a key pair; repeat for several (default: server and client)",
+    )
     p.set_defaults(run=run)
 
 
@@ -32,6 +36,8 @@ def run(args: argparse.Namespace) -> int:
             public_path, secret_path = keys.save_keypair(args.directory, name)
         except FileExistsError as exc:
             raise SystemExit(f"not overwriting {exc.filename}; choose another --name or directory") from None
-        print(f"{name}: public key {public_path}  secret key {secret_path} (mode "
-              f"{oct(os.stat(secret_path).st_mode & 0o777)})")
+        print(
+            f"{name}: public key {public_path}  secret key {secret_path} (mode "
+            f"{oct(os.stat(secret_path).st_mode & 0o777)})"
+        )
     return 0

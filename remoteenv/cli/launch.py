@@ -36,21 +36,28 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--out", default="launch.json", help="launch-info file to write (default launch.json)")
     p.add_argument("--seed", type=int, default=None, help="RNG seed; instance i uses seed + i * worlds")
     p.add_argument("--env-kwargs", default="{}", help="JSON map of keyword arguments for the scene's env")
-    p.add_argument("--render-mode", default=None, choices=["rgb_array", "human"],
-                   help="render mode of the sims")
-    p.add_argument("--transport", choices=["ipc", "tcp"], default="ipc",
-                   help="ipc socket in a private dir (default) or tcp on 127.0.0.1")
-    p.add_argument("--bind-host", default=None,
-                   help="bind tcp on this interface; beyond loopback this turns CURVE on")
-    p.add_argument("--public-host", default=None,
-                   help="host name other machines reach the sims by, written into the file "
-                   "(default: --bind-host, or this machine's name for 0.0.0.0)")
+    p.add_argument("--render-mode", default=None, choices=["rgb_array", "human"], help="render mode of the sims")
+    p.add_argument(
+        "--transport",
+        choices=["ipc", "tcp"],
+        default="ipc",
+        help="ipc socket in a private dir (default) or tcp on 127.0.0.1",
+    )
+    p.add_argument("--bind-host", default=None, help="bind tcp on this interface; beyond loopback this turns CURVE on")
+    p.add_argument(
+        "--public-host",
+        default=None,
+        help="host name other machines reach the sims by, written into the file "
+        "(default: --bind-host, or this machine's name for 0.0.0.0)",
+    )
     p.add_argument("--curve", action="store_true", help="encrypt with ZMQ CURVE even on loopback")
     p.add_argument("--real-time", action="store_true", help="run the sims on a paced wall clock")
-    p.add_argument("--real-time-factor", type=float, default=1.0,
-                   help="simulated seconds per wall-clock second in real-time mode")
-    p.add_argument("--action-delay", type=int, default=0,
-                   help="lock-step: an action takes effect this many ticks later")
+    p.add_argument(
+        "--real-time-factor", type=float, default=1.0, help="simulated seconds per wall-clock second in real-time mode"
+    )
+    p.add_argument(
+        "--action-delay", type=int, default=0, help="lock-step: an action takes effect this many ticks later"
+    )
     p.set_defaults(run=run)
 
 
@@ -91,10 +98,18 @@ def run(args: argparse.Namespace) -> int:
     written: list[str] = []
     try:
         launcher = Launcher(
-            _scene_script(args.scene), args.instances, seed=args.seed,
-            worlds_per_instance=args.worlds, env_kwargs=env_kwargs, render_mode=args.render_mode,
-            transport=args.transport, real_time=args.real_time, real_time_factor=args.real_time_factor,
-            action_delay=args.action_delay, bind_host=args.bind_host, curve=True if args.curve else None,
+            _scene_script(args.scene),
+            args.instances,
+            seed=args.seed,
+            worlds_per_instance=args.worlds,
+            env_kwargs=env_kwargs,
+            render_mode=args.render_mode,
+            transport=args.transport,
+            real_time=args.real_time,
+            real_time_factor=args.real_time_factor,
+            action_delay=args.action_delay,
+            bind_host=args.bind_host,
+            curve=True if args.curve else None,
         )
     except (RemoteEnvError, FileNotFoundError, ValueError) as exc:
         print(f"launch failed: {exc}", file=sys.stderr)
@@ -112,13 +127,23 @@ def run(args: argparse.Namespace) -> int:
             write_secret_key(key_file, keys.secret)
             written.append(key_file)
         info = LaunchInfo(
-            scene=launcher.scene, env_id=env_id, host=socket.gethostname(), launcher_pid=os.getpid(),
-            worlds_per_instance=args.worlds, render_mode=args.render_mode, real_time=args.real_time,
-            real_time_factor=args.real_time_factor, action_delay=args.action_delay,
+            scene=launcher.scene,
+            env_id=env_id,
+            host=socket.gethostname(),
+            launcher_pid=os.getpid(),
+            worlds_per_instance=args.worlds,
+            render_mode=args.render_mode,
+            real_time=args.real_time,
+            real_time_factor=args.real_time_factor,
+            action_delay=args.action_delay,
             curve_client_secret_key_file=None if keys is None else os.path.basename(key_file),
             instances=[
-                AttachedSim(instance=s.instance, endpoint=_advertised(s.endpoint or "", args),
-                            pid=s.pid, curve_server_key=s.curve_server_key)
+                AttachedSim(
+                    instance=s.instance,
+                    endpoint=_advertised(s.endpoint or "", args),
+                    pid=s.pid,
+                    curve_server_key=s.curve_server_key,
+                )
                 for s in launcher.sims
             ],
         )
@@ -126,14 +151,16 @@ def run(args: argparse.Namespace) -> int:
         written.append(out)
         for s in info.instances:
             print(f"instance {s.instance}: pid {s.pid} at {s.endpoint}")
-        print(f"{env_id}: {args.instances} sim(s) running; wrote {out}. "
-              "Attach with OpenAIRemoteEnv.attach(FILE); Ctrl-C or SIGTERM stops them.", flush=True)
+        print(
+            f"{env_id}: {args.instances} sim(s) running; wrote {out}. "
+            "Attach with OpenAIRemoteEnv.attach(FILE); Ctrl-C or SIGTERM stops them.",
+            flush=True,
+        )
         while True:
             for sim in launcher.sims:
                 why = sim.death()
                 if why is not None:
-                    print(f"sim instance {sim.instance} stopped: {why}; stopping the others",
-                          file=sys.stderr)
+                    print(f"sim instance {sim.instance} stopped: {why}; stopping the others", file=sys.stderr)
                     return 1
             time.sleep(_WATCH_S)
     except KeyboardInterrupt:

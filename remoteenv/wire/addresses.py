@@ -25,7 +25,7 @@ def tcp_loopback_address() -> str:
 
 def ipc_path(endpoint: str) -> str | None:
     """The socket file of an ipc endpoint, or None for other transports."""
-    return endpoint[len("ipc://"):] if endpoint.startswith("ipc://") else None
+    return endpoint[len("ipc://") :] if endpoint.startswith("ipc://") else None
 
 
 #: What an env's ``transport=`` may be: the local pipe (the sim still binds

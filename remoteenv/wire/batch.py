@@ -8,13 +8,16 @@ layout with :func:`merge_infos`.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 _SCALAR_TYPES: dict[type, tuple[type, str]] = {
-    bool: (bool, "|b1"), np.bool_: (bool, "|b1"),
-    int: (int, "<i8"), float: (float, "<f8"),
+    bool: (bool, "|b1"),
+    np.bool_: (bool, "|b1"),
+    int: (int, "<i8"),
+    float: (float, "<f8"),
 }
 
 
@@ -92,8 +95,8 @@ def merge_infos(
             arr = infos[key] = np.zeros(n, dtype=values.dtype)
             infos[f"_{key}"] = np.zeros(n, dtype=np.bool_)
         elif not (isinstance(arr, np.ndarray) and arr.shape == (n,) and arr.dtype != object):
-            for j in np.flatnonzero(present):
-                add_info(infos, {key: values[j].item()}, int(idx[j]))
+            for w in np.flatnonzero(present):
+                add_info(infos, {key: values[w].item()}, int(idx[w]))
             continue
         where = idx[present]
         arr[where] = values[present]

@@ -14,8 +14,8 @@ overwritten. A file of allowed client keys holds one public key per line.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 import zmq
 from zmq.utils import z85

@@ -136,9 +136,18 @@ _EXT_NDARRAY = 1
 ARRAY_DTYPES = frozenset(
     np.dtype(t).newbyteorder("<").str if np.dtype(t).itemsize > 1 else np.dtype(t).str
     for t in (
-        np.bool_, np.int8, np.int16, np.int32, np.int64,
-        np.uint8, np.uint16, np.uint32, np.uint64,
-        np.float16, np.float32, np.float64,
+        np.bool_,
+        np.int8,
+        np.int16,
+        np.int32,
+        np.int64,
+        np.uint8,
+        np.uint16,
+        np.uint32,
+        np.uint64,
+        np.float16,
+        np.float32,
+        np.float64,
     )
 )
 _MAX_NDIM = 32
@@ -207,7 +216,7 @@ def _ext_hook(code: int, data: bytes) -> Any:
         raise ProtocolError(f"unknown msgpack extension type {code}")
     try:
         n = data[0]
-        dtype = data[1:1 + n].decode("ascii")
+        dtype = data[1 : 1 + n].decode("ascii")
         ndim = data[1 + n]
         offset = 2 + n
         shape = _SHAPE_FORMATS[ndim].unpack_from(data, offset)
@@ -237,9 +246,7 @@ def unpack(frame: bytes) -> Any:
     if len(frame) > MAX_MESSAGE_BYTES:
         raise ProtocolError(f"frame of {len(frame)} bytes exceeds {MAX_MESSAGE_BYTES}")
     try:
-        return msgpack.unpackb(
-            frame, raw=False, ext_hook=_ext_hook, strict_map_key=True, use_list=True
-        )
+        return msgpack.unpackb(frame, raw=False, ext_hook=_ext_hook, strict_map_key=True, use_list=True)
     except ProtocolError:
         raise
     except Exception as exc:  # msgpack raises several types for bad input
@@ -290,7 +297,7 @@ class StreamDecoder:
             end = start + 4 + length
             if len(buf) < end:
                 break
-            frames.append(bytes(buf[start + 4:end]))
+            frames.append(bytes(buf[start + 4 : end]))
             start = end
         if start:
             del buf[:start]
@@ -300,9 +307,22 @@ class StreamDecoder:
 def error_reply(seq: int, kind: str, message: str, traceback: str = "") -> dict[str, Any]:
     return {"seq": seq, "ok": False, "error": {"kind": kind, "message": message, "traceback": traceback}}
 
+
 __all__ = [
-    "ARRAY_DTYPES", "MAX_MESSAGE_BYTES", "OPS", "OP_RESET", "OP_STEP", "OP_STEP_AUTORESET",
-    "OP_STEP_RESET", "PROTOCOL_VERSION", "ProtocolError", "StreamDecoder", "decode_request",
-    "error_reply", "pack", "stream_frame", "unpack",
+    "ARRAY_DTYPES",
+    "MAX_MESSAGE_BYTES",
+    "OPS",
+    "OP_RESET",
+    "OP_STEP",
+    "OP_STEP_AUTORESET",
+    "OP_STEP_RESET",
+    "PROTOCOL_VERSION",
+    "ProtocolError",
+    "StreamDecoder",
+    "decode_request",
+    "error_reply",
+    "pack",
+    "stream_frame",
+    "unpack",
     "wire_dtype",
 ]

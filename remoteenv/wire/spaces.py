@@ -20,7 +20,6 @@ def _wire_dtype(dtype: Any) -> str:
     return wire_dtype(np.dtype(dtype))
 
 
-
 def space_to_wire(space: Any) -> dict[str, Any]:
     """Describe a Gymnasium space as a msgpack-able map."""
     if isinstance(space, spaces.Box):
@@ -28,8 +27,7 @@ def space_to_wire(space: Any) -> dict[str, Any]:
     if isinstance(space, spaces.Discrete):
         return {"type": "Discrete", "n": int(space.n), "start": int(space.start)}
     if isinstance(space, spaces.MultiDiscrete):
-        return {"type": "MultiDiscrete", "nvec": space.nvec, "start": space.start,
-                "dtype": _wire_dtype(space.dtype)}
+        return {"type": "MultiDiscrete", "nvec": space.nvec, "start": space.start, "dtype": _wire_dtype(space.dtype)}
     if isinstance(space, spaces.MultiBinary):
         return {"type": "MultiBinary", "n": list(np.atleast_1d(space.n).tolist())}
     if isinstance(space, spaces.Dict):

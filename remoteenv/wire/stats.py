@@ -62,5 +62,4 @@ class RunningStats:
             nan = float("nan")
             return {"count": self.count, "mean": nan, "p50": nan, "p99": nan, "max": nan}
         p50, p99 = np.percentile(self._recent, [50, 99])
-        return {"count": self.count, "mean": self.mean, "p50": float(p50), "p99": float(p99),
-                "max": float(self.max)}
+        return {"count": self.count, "mean": self.mean, "p50": float(p50), "p99": float(p99), "max": float(self.max)}

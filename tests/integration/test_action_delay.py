@@ -74,7 +74,7 @@ def test_cartpole_discrete_default_is_zero_force_for_the_first_k_ticks():
     delay = 2
     remote, _ = run_remote("remoteenv/CartPole-v0", delay, 0, actions)
     local, _ = run_local(CartPoleEnv(), delay, 0, actions)
-    for (obs, reward, _), expected in zip(remote, local):
+    for (obs, _reward, _), expected in zip(remote, local):
         np.testing.assert_array_equal(obs, expected)
     # With zero force for two ticks the cart velocity barely moves; a +10 N push would.
     assert abs(remote[2][0][1] - remote[0][0][1]) < 0.01

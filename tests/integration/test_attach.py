@@ -21,7 +21,9 @@ def _start_launch(tmp_path, *extra):
     out = tmp_path / "launch.json"
     proc = subprocess.Popen(
         [sys.executable, "-m", "remoteenv", "launch", "cartpole", "--out", str(out), *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
         env={**os.environ, "MUJOCO_GL": "egl"},
     )
     while not out.exists():
@@ -55,8 +57,14 @@ def launched(tmp_path, wait_gone):
 
 
 def test_launch_info_round_trip(tmp_path):
-    info = LaunchInfo(scene="/x/scene.py", env_id="e/v0", launcher_pid=5, worlds_per_instance=2,
-                      real_time=True, instances=[AttachedSim(0, "ipc:///a", 11), AttachedSim(1, "tcp://h:5", None)])
+    info = LaunchInfo(
+        scene="/x/scene.py",
+        env_id="e/v0",
+        launcher_pid=5,
+        worlds_per_instance=2,
+        real_time=True,
+        instances=[AttachedSim(0, "ipc:///a", 11), AttachedSim(1, "tcp://h:5", None)],
+    )
     write_launch_info(tmp_path / "l.json", info)
     back = read_launch_info(tmp_path / "l.json")
     assert back.to_json() == info.to_json()
@@ -131,7 +139,7 @@ def test_sims_stop_with_the_launch_command(tmp_path, wait_gone):
     finally:
         env.close()
     assert "sims stopped" in proc.stdout.read()
-    assert not os.path.exists(os.path.dirname(info.instances[0].endpoint[len("ipc://"):]))
+    assert not os.path.exists(os.path.dirname(info.instances[0].endpoint[len("ipc://") :]))
 
 
 def test_attach_with_curve_keys(tmp_path, wait_gone):

@@ -233,7 +233,7 @@ def test_close_leaves_no_process_and_no_socket_file(make, transport, pid_alive, 
     endpoint = env.unwrapped.launcher.endpoints[0]
     assert endpoint.startswith("tcp://127.0.0.1:" if transport == "tcp" else "ipc://")
     if transport != "tcp":
-        assert os.path.exists(endpoint[len("ipc://"):])
+        assert os.path.exists(endpoint[len("ipc://") :])
     assert pid_alive(pid)
     env.close()
     assert wait_gone(pid, timeout=5.0)
@@ -272,8 +272,12 @@ def test_record_video_writes_an_mp4(make, tmp_path):
     pytest.importorskip("moviepy")
     from gymnasium.wrappers import RecordVideo
 
-    env = RecordVideo(make("remoteenv/Reacher-v0", render_mode="rgb_array"), str(tmp_path),
-                      episode_trigger=lambda e: True, disable_logger=True)
+    env = RecordVideo(
+        make("remoteenv/Reacher-v0", render_mode="rgb_array"),
+        str(tmp_path),
+        episode_trigger=lambda e: True,
+        disable_logger=True,
+    )
     env.reset(seed=0)
     for _ in range(50):
         env.step(env.action_space.sample())
@@ -302,8 +306,7 @@ def test_package_imported_from_the_checkout_finds_its_scenes():
         "print(sorted(remoteenv.SHIPPED_SCENES.values())); "
         "print(all(i in gymnasium.registry for i in remoteenv.SHIPPED_SCENES.values()))"
     )
-    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True,
-                         timeout=120)
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     module_file, scenes_file, ids, registered = out.stdout.split("\n")[:4]
     assert module_file == os.path.join(root, "remoteenv", "__init__.py")

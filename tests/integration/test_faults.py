@@ -70,8 +70,7 @@ def test_the_dead_instance_is_named_among_several():
     from remoteenv.agent.connection import Connection
 
     with Launcher(FAULTY, 3, startup_timeout=120.0) as launcher:
-        conns = [Connection(s.endpoint, instance=s.instance, timeout=30.0, death_check=s.death)
-                 for s in launcher.sims]
+        conns = [Connection(s.endpoint, instance=s.instance, timeout=30.0, death_check=s.death) for s in launcher.sims]
         try:
             for conn in conns:
                 conn.request("handshake", protocol=protocol.PROTOCOL_VERSION)
@@ -138,8 +137,7 @@ def test_exception_while_scene_starts_is_a_launch_error_with_traceback():
 
 
 def test_stuck_sim_times_out_and_the_connection_recovers(make_env):
-    env = make_env(hang_after_steps=1, hang_seconds=2.0, timeout=0.5,
-                   call_timeouts={"reset": 60.0})
+    env = make_env(hang_after_steps=1, hang_seconds=2.0, timeout=0.5, call_timeouts={"reset": 60.0})
     env.reset(seed=0)
     start = time.monotonic()
     with pytest.raises(RemoteEnvTimeout) as info:
@@ -154,8 +152,7 @@ def test_stuck_sim_times_out_and_the_connection_recovers(make_env):
 
 
 def test_per_call_timeout_overrides_the_env_timeout(make_env):
-    env = make_env(hang_after_steps=1, hang_seconds=3.0, timeout=120.0,
-                   call_timeouts={"step": 0.3})
+    env = make_env(hang_after_steps=1, hang_seconds=3.0, timeout=120.0, call_timeouts={"step": 0.3})
     env.reset(seed=0)
     start = time.monotonic()
     with pytest.raises(RemoteEnvTimeout):
@@ -201,9 +198,14 @@ def test_restart_on_failure_retries_a_reset(make_env):
 
 
 def test_restart_on_failure_replaces_a_stuck_sim(make_env):
-    env = make_env(hang_after_steps=2, hang_seconds=60.0, timeout=0.5,
-                   call_timeouts={"reset": 60.0, "handshake": 120.0},
-                   restart_on_failure=True, max_restarts=1)
+    env = make_env(
+        hang_after_steps=2,
+        hang_seconds=60.0,
+        timeout=0.5,
+        call_timeouts={"reset": 60.0, "handshake": 120.0},
+        restart_on_failure=True,
+        max_restarts=1,
+    )
     env.reset(seed=0)
     stuck = env.pid
     env.step(0)
@@ -251,7 +253,9 @@ ORPHAN_EXIT_S = 4.0
 
 def test_sims_exit_and_clean_up_when_the_agent_is_sigkilled():
     agent = subprocess.Popen(
-        [sys.executable, "-c", AGENT, FAULTY], stdout=subprocess.PIPE, text=True,
+        [sys.executable, "-c", AGENT, FAULTY],
+        stdout=subprocess.PIPE,
+        text=True,
         env={**os.environ, "MUJOCO_GL": "egl"},
     )
     sims: list[list] = []
@@ -296,6 +300,7 @@ def test_a_reply_that_cannot_be_encoded_is_a_scene_error_and_the_sim_lives(make_
 
 
 # ------------------------------------------------------------ vector env
+
 
 @pytest.fixture
 def make_vec():
@@ -376,8 +381,17 @@ def test_vector_reset_is_retried_on_a_relaunched_process(make_vec):
 def test_vector_restart_replaces_stuck_processes():
     from remoteenv.vector_env import RemoteVectorEnv
 
-    venv = RemoteVectorEnv(FAULTY, num_envs=3, envs_per_process=1, hang_after_steps=2, hang_seconds=60.0,
-                           timeout=0.5, startup_timeout=120.0, restart_on_failure=True, max_restarts=3)
+    venv = RemoteVectorEnv(
+        FAULTY,
+        num_envs=3,
+        envs_per_process=1,
+        hang_after_steps=2,
+        hang_seconds=60.0,
+        timeout=0.5,
+        startup_timeout=120.0,
+        restart_on_failure=True,
+        max_restarts=3,
+    )
     try:
         venv.reset(seed=0)
         stuck = venv.pids

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import zmq
 
-from remoteenv.wire import protocol as wire_protocol
 from remoteenv import Launcher, protocol, scene_path
 from remoteenv.agent.connection import Connection
+from remoteenv.wire import protocol as wire_protocol
 
 N_FRAMES = 12_000
 BATCH = 100
@@ -90,16 +90,51 @@ def _garbage(rng: random.Random, valid: list[bytes]) -> bytes:
         frame = rng.choice(valid)
         return frame[: rng.randrange(0, len(frame))]
     if kind == 2:  # valid msgpack, wrong top-level or field types
-        return msgpack.packb(rng.choice([
-            None, 1, -5, 1.5, "step", b"step", [1, "step"], [], {},
-            {"seq": "1", "cmd": "step"}, {"seq": 1.0, "cmd": "step"}, {"seq": True, "cmd": "reset"},
-            {"seq": None, "cmd": "reset"}, {"seq": [1], "cmd": "reset"}, {"seq": 1, "cmd": 5},
-            {"seq": 1, "cmd": None}, {"seq": 1}, {"cmd": "reset"}, {"seq": 2**64 - 1, "cmd": b"reset"},
-            {"seq": -(2**63), "cmd": ["reset"]},
-        ]), use_bin_type=True)
+        return msgpack.packb(
+            rng.choice(
+                [
+                    None,
+                    1,
+                    -5,
+                    1.5,
+                    "step",
+                    b"step",
+                    [1, "step"],
+                    [],
+                    {},
+                    {"seq": "1", "cmd": "step"},
+                    {"seq": 1.0, "cmd": "step"},
+                    {"seq": True, "cmd": "reset"},
+                    {"seq": None, "cmd": "reset"},
+                    {"seq": [1], "cmd": "reset"},
+                    {"seq": 1, "cmd": 5},
+                    {"seq": 1, "cmd": None},
+                    {"seq": 1},
+                    {"cmd": "reset"},
+                    {"seq": 2**64 - 1, "cmd": b"reset"},
+                    {"seq": -(2**63), "cmd": ["reset"]},
+                ]
+            ),
+            use_bin_type=True,
+        )
     if kind == 3:  # unknown commands
-        cmd = rng.choice(["", "fly", "CLOSE", "close ", "Reset", "step\0", "__init__", "_close",
-                          "eval", "exec", "__class__", "handshake2", "x" * 1000])
+        cmd = rng.choice(
+            [
+                "",
+                "fly",
+                "CLOSE",
+                "close ",
+                "Reset",
+                "step\0",
+                "__init__",
+                "_close",
+                "eval",
+                "exec",
+                "__class__",
+                "handshake2",
+                "x" * 1000,
+            ]
+        )
         return _request(rng, cmd=cmd)
     if kind == 4:  # huge declared sizes, bare or inside a request
         header = rng.choice(_HUGE_HEADERS) + rng.randbytes(rng.randrange(0, 16))
@@ -110,11 +145,15 @@ def _garbage(rng: random.Random, valid: list[bytes]) -> bytes:
         version = rng.choice([0, 2, 99, -1, 2**63, "1", 1.0, None, [1], True])
         return _request(rng, cmd="handshake", protocol=version)
     if kind == 6 and rng.random() < 0.2:  # negative ext types, e.g. msgpack timestamps
-        return _with_raw_action(rng.choice([
-            _raw_ext(-1, rng.randbytes(rng.choice([3, 5, 7]))),  # malformed timestamp
-            _raw_ext(-1, struct.pack(">I", 1234)),  # a valid timestamp
-            _raw_ext(rng.randrange(-128, 0), rng.randbytes(rng.randrange(0, 20))),
-        ]))
+        return _with_raw_action(
+            rng.choice(
+                [
+                    _raw_ext(-1, rng.randbytes(rng.choice([3, 5, 7]))),  # malformed timestamp
+                    _raw_ext(-1, struct.pack(">I", 1234)),  # a valid timestamp
+                    _raw_ext(rng.randrange(-128, 0), rng.randbytes(rng.randrange(0, 20))),
+                ]
+            )
+        )
     if kind == 6:  # bad arrays as the action
         return _request(rng, cmd="step", action=rng.choice(_bad_arrays(rng)))
     if kind == 7:  # deep nesting
@@ -125,10 +164,29 @@ def _garbage(rng: random.Random, valid: list[bytes]) -> bytes:
     if kind == 9:  # ordinary commands with bad arguments
         cmd = rng.choice(["step", "reset", "render"])
         field = rng.choice(["action", "world", "seed", "options"])
-        value = rng.choice([None, -1, 2**63, 1.5, "x", b"x", [1, 2], {"a": [1]}, {"low": 1e308},
-                            {"low": "x"}, float("nan"), float("inf"), True, np.zeros(3, np.float32),
-                            np.full(1, np.nan, np.float32), np.zeros((1, 1), np.int8)])
-        return _request(rng, cmd=cmd, **{field: wire_protocol._default(value) if isinstance(value, np.ndarray) else value})
+        value = rng.choice(
+            [
+                None,
+                -1,
+                2**63,
+                1.5,
+                "x",
+                b"x",
+                [1, 2],
+                {"a": [1]},
+                {"low": 1e308},
+                {"low": "x"},
+                float("nan"),
+                float("inf"),
+                True,
+                np.zeros(3, np.float32),
+                np.full(1, np.nan, np.float32),
+                np.zeros((1, 1), np.int8),
+            ]
+        )
+        return _request(
+            rng, cmd=cmd, **{field: wire_protocol._default(value) if isinstance(value, np.ndarray) else value}
+        )
     if kind == 10:  # bit flips in a valid frame
         frame = bytearray(rng.choice(valid))
         for _ in range(rng.randrange(1, 4)):
@@ -213,8 +271,7 @@ def test_fuzzed_real_time_sim_survives_and_still_steps():
         protocol.pack({"seq": 1, "cmd": "step", "action": 1, "world": 0}),
         protocol.pack({"seq": 2, "cmd": "reset", "seed": 3}),
     ]
-    with Launcher(scene_path("cartpole"), real_time=True, real_time_factor=10.0,
-                  startup_timeout=120.0) as launcher:
+    with Launcher(scene_path("cartpole"), real_time=True, real_time_factor=10.0, startup_timeout=120.0) as launcher:
         sim = launcher.sims[0]
         sock = zmq.Context.instance().socket(zmq.DEALER)
         sock.setsockopt(zmq.LINGER, 0)

@@ -9,8 +9,15 @@ import sys
 
 import pytest
 
-AGENT_SIDE = ("remoteenv.agent", "remoteenv.remote_env", "remoteenv.vector_env", "remoteenv.sb3",
-              "remoteenv.torch", "remoteenv.cli", "remoteenv.benchmarks")
+AGENT_SIDE = (
+    "remoteenv.agent",
+    "remoteenv.remote_env",
+    "remoteenv.vector_env",
+    "remoteenv.sb3",
+    "remoteenv.torch",
+    "remoteenv.cli",
+    "remoteenv.benchmarks",
+)
 
 
 def _loaded_after(statement: str) -> list[str]:
@@ -23,12 +30,15 @@ def _loaded_after(statement: str) -> list[str]:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.parametrize("statement", [
-    "import remoteenv.sim",
-    "from remoteenv.sim import BaseEnv, RemoteControlledAgent, run_scene",
-    "import remoteenv.scenes.cartpole.cartpole_scene",
-    "import remoteenv.scenes.reacher.reacher_scene",
-])
+@pytest.mark.parametrize(
+    "statement",
+    [
+        "import remoteenv.sim",
+        "from remoteenv.sim import BaseEnv, RemoteControlledAgent, run_scene",
+        "import remoteenv.scenes.cartpole.cartpole_scene",
+        "import remoteenv.scenes.reacher.reacher_scene",
+    ],
+)
 def test_sim_side_loads_no_agent_module(statement: str) -> None:
     loaded = _loaded_after(statement)
     assert "remoteenv.sim" in loaded
@@ -38,9 +48,7 @@ def test_sim_side_loads_no_agent_module(statement: str) -> None:
 
 
 def test_import_remoteenv_registers_ids_and_loads_agent_classes_lazily() -> None:
-    loaded = _loaded_after(
-        "import remoteenv, gymnasium; assert 'remoteenv/CartPole-v0' in gymnasium.registry"
-    )
+    loaded = _loaded_after("import remoteenv, gymnasium; assert 'remoteenv/CartPole-v0' in gymnasium.registry")
     assert not [m for m in loaded if m.startswith(AGENT_SIDE)], loaded
     loaded = _loaded_after("import remoteenv; remoteenv.OpenAIRemoteEnv")
     assert "remoteenv.remote_env" in loaded

@@ -41,7 +41,10 @@ def test_four_agents_with_eight_envs_each_at_once():
     agents = [
         subprocess.Popen(
             [sys.executable, "-c", AGENT, str(a), str(ENVS_PER_AGENT), "ipc" if a % 2 == 0 else "tcp"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
         )
         for a in range(AGENTS)
     ]

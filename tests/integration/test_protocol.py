@@ -11,8 +11,20 @@ from gymnasium import spaces
 
 from remoteenv import protocol
 
-DTYPES = [np.bool_, np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16,
-          np.uint32, np.uint64, np.float16, np.float32, np.float64]
+DTYPES = [
+    np.bool_,
+    np.int8,
+    np.int16,
+    np.int32,
+    np.int64,
+    np.uint8,
+    np.uint16,
+    np.uint32,
+    np.uint64,
+    np.float16,
+    np.float32,
+    np.float64,
+]
 SHAPES = [(), (0,), (1,), (4,), (10,), (2, 3), (0, 5), (3, 0, 2), (480, 480, 3)]
 
 
@@ -55,9 +67,7 @@ def test_non_contiguous_and_big_endian_arrays():
 
 
 def test_numpy_scalars_become_python_values():
-    msg = protocol.unpack(protocol.pack(
-        {"f": np.float32(1.5), "b": np.bool_(True), "i": np.int64(-3), "t": (1, 2)}
-    ))
+    msg = protocol.unpack(protocol.pack({"f": np.float32(1.5), "b": np.bool_(True), "i": np.int64(-3), "t": (1, 2)}))
     assert msg == {"f": 1.5, "b": True, "i": -3, "t": [1, 2]}
     assert type(msg["f"]) is float and type(msg["b"]) is bool and type(msg["i"]) is int
 
@@ -112,7 +122,7 @@ def test_stream_framing_splits_frames_at_any_chunking():
         decoder = protocol.StreamDecoder()
         out = []
         for i in range(0, len(stream), chunk):
-            out += decoder.feed(stream[i:i + chunk])
+            out += decoder.feed(stream[i : i + chunk])
         assert out == frames
 
 
@@ -123,8 +133,7 @@ def test_stream_framing_refuses_oversized_frames():
 
 def test_decode_request_checks_seq_and_cmd():
     assert protocol.decode_request(protocol.pack({"seq": 1, "cmd": "reset"}))["cmd"] == "reset"
-    for bad in ({"cmd": "reset"}, {"seq": "1", "cmd": "reset"}, {"seq": True, "cmd": "x"},
-                {"seq": 1}, [1, "reset"]):
+    for bad in ({"cmd": "reset"}, {"seq": "1", "cmd": "reset"}, {"seq": True, "cmd": "x"}, {"seq": 1}, [1, "reset"]):
         with pytest.raises(protocol.ProtocolError):
             protocol.decode_request(protocol.pack(bad))
 

@@ -45,8 +45,9 @@ def make_env():
         env.close()
 
 
-def replay(scene: str, seed: int, switches: dict[int, Any], ticks: int,
-           options: dict | None = None) -> list[tuple[np.ndarray, float, bool]]:
+def replay(
+    scene: str, seed: int, switches: dict[int, Any], ticks: int, options: dict | None = None
+) -> list[tuple[np.ndarray, float, bool]]:
     """Run the scene in-process substep by substep, as the real-time sim does:
     the default action is held from the reset, ``switches[n] = action`` takes
     effect at substep ``n``. Returns ``(obs, reward, terminated)`` per tick."""
@@ -106,7 +107,7 @@ def test_held_actions_and_summed_rewards_match_an_exact_replay(make_env, scene):
     assert len(ticks) == last_tick
 
     prev_tick = 0
-    for action, obs, reward, info in replies:
+    for _action, obs, reward, info in replies:
         tick = tick_index(info["sim_time"], dt)
         applied = info["action_sim_time"]
         # The reply comes at the end of the first tick in which the action was in force.
@@ -213,8 +214,7 @@ def test_step_before_reset_and_bad_action_are_typed_errors(make_env):
 
 
 def test_several_worlds_share_the_clock_each_with_its_own_episode():
-    launcher = Launcher(remoteenv.scene_path("reacher"), 1, worlds_per_instance=2, seed=0,
-                        real_time=True)
+    launcher = Launcher(remoteenv.scene_path("reacher"), 1, worlds_per_instance=2, seed=0, real_time=True)
     conn = None
     try:
         conn = Connection(launcher.endpoints[0], death_check=launcher.sims[0].death)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("stable_baselines3")
-from stable_baselines3.common.env_checker import check_env  # noqa: E402
+from stable_baselines3.common.env_checker import check_env
 
 
 @pytest.mark.parametrize("env_id", ["remoteenv/CartPole-v0", "remoteenv/Reacher-v0"])
@@ -29,9 +29,13 @@ def test_sb3_check_env_passes(env_id):
 
 
 def _sync_venv(num_envs, autoreset_mode, max_episode_steps=500):
-    return gym.make_vec("remoteenv/CartPole-v0", num_envs=num_envs, vectorization_mode="sync",
-                        vector_kwargs={"autoreset_mode": autoreset_mode},
-                        max_episode_steps=max_episode_steps)
+    return gym.make_vec(
+        "remoteenv/CartPole-v0",
+        num_envs=num_envs,
+        vectorization_mode="sync",
+        vector_kwargs={"autoreset_mode": autoreset_mode},
+        max_episode_steps=max_episode_steps,
+    )
 
 
 def _check_sb3_done_semantics(venv, max_episode_steps):
@@ -83,8 +87,7 @@ def test_adapter_done_semantics_over_sync_vector_env(mode):
 def test_adapter_done_semantics_over_remote_vector_env(mode):
     from remoteenv.sb3 import make_sb3_vec_env
 
-    venv = make_sb3_vec_env("remoteenv/CartPole-v0", num_envs=3, autoreset_mode=mode,
-                            max_episode_steps=30, seed=0)
+    venv = make_sb3_vec_env("remoteenv/CartPole-v0", num_envs=3, autoreset_mode=mode, max_episode_steps=30, seed=0)
     try:
         venv.action_space.seed(1)
         _check_sb3_done_semantics(venv, 30)
@@ -95,9 +98,9 @@ def test_adapter_done_semantics_over_remote_vector_env(mode):
 def test_sb3_ppo_learns_on_the_remote_vector_env():
     from stable_baselines3 import PPO
 
+    import remoteenv
     from remoteenv.sb3 import SB3VecEnv
     from remoteenv.vector_env import RemoteVectorEnv
-    import remoteenv
 
     venv = SB3VecEnv(RemoteVectorEnv(remoteenv.scene_path("cartpole"), 4, max_episode_steps=500, seed=0))
     try:

@@ -19,8 +19,9 @@ W, H = 48, 32
 
 def test_two_publishers_two_workers_every_item_exactly_once():
     items = 12
-    with launch_publishers("cartpole", num_instances=2, items_per_instance=items, seed=5,
-                           episode_steps=5, width=W, height=H) as pubs:
+    with launch_publishers(
+        "cartpole", num_instances=2, items_per_instance=items, seed=5, episode_steps=5, width=W, height=H
+    ) as pubs:
         dataset = RemoteIterableDataset.from_publishers(pubs)
         assert len(dataset) == 2 * items
         loader = DataLoader(dataset, batch_size=4, num_workers=2)
@@ -29,8 +30,14 @@ def test_two_publishers_two_workers_every_item_exactly_once():
             assert batch["frame"].dtype == torch.uint8
             assert tuple(batch["frame"].shape[1:]) == (H, W, 3)
             assert batch["labels"]["obs"].shape[1:] == (4,)
-            seen += list(zip(batch["instance"].tolist(), batch["index"].tolist(),
-                             batch["episode"].tolist(), batch["step"].tolist()))
+            seen += list(
+                zip(
+                    batch["instance"].tolist(),
+                    batch["index"].tolist(),
+                    batch["episode"].tolist(),
+                    batch["step"].tolist(),
+                )
+            )
             assert batch["frame"].float().std() > 0  # a rendered picture, not a blank buffer
     assert len(seen) == 2 * items
     assert sorted((i, k) for i, k, _, _ in seen) == [(i, k) for i in range(2) for k in range(items)]
@@ -40,8 +47,7 @@ def test_two_publishers_two_workers_every_item_exactly_once():
 
 def test_labels_match_the_frame_state_and_seed_reproduces_the_stream():
     def stream(seed):
-        with launch_publishers("cartpole", num_instances=1, items_per_instance=6, seed=seed,
-                               width=W, height=H) as pubs:
+        with launch_publishers("cartpole", num_instances=1, items_per_instance=6, seed=seed, width=W, height=H) as pubs:
             return list(RemoteIterableDataset.from_publishers(pubs))
 
     a, b, c = stream(1), stream(1), stream(2)
@@ -55,8 +61,7 @@ def test_labels_match_the_frame_state_and_seed_reproduces_the_stream():
 
 
 def test_more_workers_than_publishers_still_reads_each_item_once():
-    with launch_publishers("cartpole", num_instances=1, items_per_instance=5, seed=0,
-                           width=W, height=H) as pubs:
+    with launch_publishers("cartpole", num_instances=1, items_per_instance=5, seed=0, width=W, height=H) as pubs:
         loader = DataLoader(RemoteIterableDataset.from_publishers(pubs), batch_size=None, num_workers=2)
         indices = [item["index"] for item in loader]
     assert sorted(indices) == list(range(5))

@@ -85,22 +85,32 @@ def run_side_by_side(remote, reference, steps, seed, action_seed, disabled=False
 @pytest.mark.parametrize("k", [1, 2, 3])
 def test_cartpole_matches_sync_vector_env_of_single_envs(closing, mode, k):
     # 3 worlds; K=2 leaves an unused world in the second process.
-    remote = gym.make_vec(CARTPOLE, num_envs=3, vectorization_mode="vector_entry_point",
-                          envs_per_process=k, autoreset_mode=mode, max_episode_steps=15)
+    remote = gym.make_vec(
+        CARTPOLE,
+        num_envs=3,
+        vectorization_mode="vector_entry_point",
+        envs_per_process=k,
+        autoreset_mode=mode,
+        max_episode_steps=15,
+    )
     closing(remote)
     reference = reference_vector(CARTPOLE, 3, 15, mode)
     closing(reference)
     assert remote.metadata["autoreset_mode"] == mode
     assert len(remote.unwrapped.slices) == -(-3 // k)
-    ends = run_side_by_side(remote, reference, 60, seed=7, action_seed=1,
-                            disabled=mode == AutoresetMode.DISABLED)
+    ends = run_side_by_side(remote, reference, 60, seed=7, action_seed=1, disabled=mode == AutoresetMode.DISABLED)
     assert ends >= 3  # terminations and 15-step truncations both happened
 
 
 @pytest.mark.parametrize("k", [1, 2])
 def test_reacher_matches_sync_vector_env_with_box_actions(closing, k):
-    remote = gym.make_vec(REACHER, num_envs=4, vectorization_mode="vector_entry_point",
-                          envs_per_process=k, autoreset_mode=AutoresetMode.SAME_STEP)
+    remote = gym.make_vec(
+        REACHER,
+        num_envs=4,
+        vectorization_mode="vector_entry_point",
+        envs_per_process=k,
+        autoreset_mode=AutoresetMode.SAME_STEP,
+    )
     closing(remote)
     assert remote.unwrapped.max_episode_steps == 50  # taken from the registry spec
     reference = reference_vector(REACHER, 4, 50, AutoresetMode.SAME_STEP)
@@ -134,8 +144,7 @@ def test_same_seeds_give_the_trajectories_of_single_envs(closing):
 
 
 def test_next_step_reset_step_ignores_the_action(closing):
-    kwargs = dict(num_envs=2, vectorization_mode="vector_entry_point", envs_per_process=2,
-                  max_episode_steps=3)
+    kwargs = dict(num_envs=2, vectorization_mode="vector_entry_point", envs_per_process=2, max_episode_steps=3)
     a = gym.make_vec(REACHER, **kwargs)
     b = gym.make_vec(REACHER, **kwargs)
     closing(a)
@@ -158,8 +167,9 @@ def test_next_step_reset_step_ignores_the_action(closing):
 
 
 def test_disabled_mode_requires_reset_mask(closing):
-    env = RemoteVectorEnv(remoteenv.scene_path("cartpole"), 2, envs_per_process=2,
-                          autoreset_mode="Disabled", max_episode_steps=2)
+    env = RemoteVectorEnv(
+        remoteenv.scene_path("cartpole"), 2, envs_per_process=2, autoreset_mode="Disabled", max_episode_steps=2
+    )
     closing(env)
     obs, _ = env.reset(seed=0)
     env.step(np.array([0, 1]))
@@ -194,8 +204,9 @@ def test_real_time_needs_one_world_per_process():
 
 
 def test_real_time_vector_env_steps(closing):
-    env = gym.make_vec(REACHER, num_envs=2, vectorization_mode="vector_entry_point",
-                       real_time=True, max_episode_steps=4)
+    env = gym.make_vec(
+        REACHER, num_envs=2, vectorization_mode="vector_entry_point", real_time=True, max_episode_steps=4
+    )
     closing(env)
     assert env.unwrapped.envs_per_process == 1
     obs, _ = env.reset(seed=0)
@@ -209,8 +220,9 @@ def test_real_time_vector_env_steps(closing):
 
 
 def test_render_returns_one_frame_per_world(closing):
-    env = RemoteVectorEnv(remoteenv.scene_path("reacher"), 3, envs_per_process=2,
-                          render_mode="rgb_array", width=64, height=48)
+    env = RemoteVectorEnv(
+        remoteenv.scene_path("reacher"), 3, envs_per_process=2, render_mode="rgb_array", width=64, height=48
+    )
     closing(env)
     env.reset(seed=0)
     frames = env.render()

@@ -40,8 +40,7 @@ def test_record_episode_statistics_counts_remote_rewards():
 def test_record_video_writes_one_mp4_per_episode(tmp_path):
     env = gym.make("remoteenv/Reacher-v0", render_mode="rgb_array", width=64, height=64)
     folder = tmp_path / "videos"
-    env = gym.wrappers.RecordVideo(env, str(folder), episode_trigger=lambda e: True,
-                                   name_prefix="reach")
+    env = gym.wrappers.RecordVideo(env, str(folder), episode_trigger=lambda e: True, name_prefix="reach")
     try:
         for episode in range(2):
             env.reset(seed=episode)

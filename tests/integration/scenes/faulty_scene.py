@@ -15,8 +15,16 @@ from remoteenv.sim import run_scene
 
 
 class FaultyCartPole(CartPoleEnv):
-    def __init__(self, crash_after_steps=None, crash_code=3, hang_after_steps=None,
-                 hang_seconds=30.0, fail_on_start=False, unsendable_info=False, **kwargs):
+    def __init__(
+        self,
+        crash_after_steps=None,
+        crash_code=3,
+        hang_after_steps=None,
+        hang_seconds=30.0,
+        fail_on_start=False,
+        unsendable_info=False,
+        **kwargs,
+    ):
         if fail_on_start:
             raise RuntimeError("faulty scene: refusing to start on purpose")
         super().__init__(**kwargs)
