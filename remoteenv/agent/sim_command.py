@@ -1,0 +1,118 @@
+"""The scene command line and the wait for a sim's ready file.
+
+Runs wherever sims are started for an agent: in the agent process (the local
+:class:`remoteenv.Launcher`) or in a Ray actor on a cluster node
+(:mod:`remoteenv.ray`). Both build the same command line here, so a sim
+started either way gets the same arguments (see
+:func:`remoteenv.sim.scene_main.scene_argument_parser` for their meaning).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from typing import Any, Protocol, Sequence
+
+from remoteenv.agent.errors import RemoteEnvError
+
+
+def scene_command(
+    scene: str,
+    address: str,
+    *,
+    instance: int,
+    worlds: int,
+    env_kwargs: dict[str, Any],
+    parent_pid: int,
+    ready_file: str,
+    private_dir: str,
+    seed: int | None = None,
+    render_mode: str | None = None,
+    real_time: bool = False,
+    real_time_factor: float = 1.0,
+    action_delay: int = 0,
+    curve_files: tuple[str, str] | None = None,
+    allow_remote: bool = False,
+    extra_args: Sequence[str] = (),
+    python: str = sys.executable,
+) -> list[str]:
+    """The argv that starts scene script ``scene`` as sim ``instance``, bound to ``address``.
+
+    ``curve_files`` is ``(server secret key file, allowed client keys file)``
+    to turn CURVE on; ``allow_remote`` permits an address beyond loopback
+    (which needs CURVE). ``python`` is the interpreter that runs the scene."""
+    cmd = [
+        python, scene,
+        "--address", address,
+        "--instance", str(instance),
+        "--worlds", str(worlds),
+        "--env-kwargs", json.dumps(env_kwargs),
+        "--parent-pid", str(parent_pid),
+        "--ready-file", ready_file,
+        "--private-dir", private_dir,
+    ]
+    if curve_files is not None:
+        cmd += ["--curve-secret-key-file", curve_files[0], "--curve-client-keys-file", curve_files[1]]
+        if allow_remote:
+            cmd += ["--allow-remote"]
+    if seed is not None:
+        cmd += ["--seed", str(seed)]
+    if render_mode is not None:
+        cmd += ["--render-mode", render_mode]
+    if real_time:
+        cmd += ["--real-time", "--real-time-factor", repr(float(real_time_factor))]
+    if action_delay:
+        cmd += ["--action-delay", str(int(action_delay))]
+    return cmd + list(extra_args)
+
+
+class StartingSim(Protocol):
+    """What :func:`wait_ready` needs of a sim that is starting."""
+
+    instance: int
+    ready_file: str
+    endpoint: str | None
+
+    @property
+    def pid(self) -> int: ...
+
+    def death(self) -> str | None: ...
+
+    def stderr_tail(self, lines: int = ...) -> str: ...
+
+
+def wait_ready(sim: StartingSim, timeout: float, what: str) -> None:
+    """Wait until ``sim`` has written its ready file and set ``sim.endpoint``.
+
+    Polls the file (2 ms, growing to 50 ms), never a fixed sleep. Raises
+    :class:`RemoteEnvError` (kind ``"launch"``) if the process exits first or
+    ``timeout`` seconds pass; ``what`` names the sim in the message (e.g. the
+    scene's file name)."""
+    deadline = time.monotonic() + timeout
+    delay = 0.002
+    while True:
+        try:
+            with open(sim.ready_file) as f:
+                info = json.load(f)
+            sim.endpoint = str(info["endpoint"]).replace("tcp://0.0.0.0:", "tcp://127.0.0.1:")
+            return
+        except (FileNotFoundError, json.JSONDecodeError, KeyError):
+            pass
+        why = sim.death()
+        if why is not None:
+            raise RemoteEnvError(
+                f"sim instance {sim.instance} of {what} failed to start: {why}",
+                kind="launch",
+                instance=sim.instance,
+            )
+        if time.monotonic() > deadline:
+            raise RemoteEnvError(
+                f"sim instance {sim.instance} (pid {sim.pid}) of {what} did not report ready within "
+                f"{timeout:g} s; raise startup_timeout= if the machine is busy. Its stderr so far:\n"
+                f"{sim.stderr_tail()}",
+                kind="launch",
+                instance=sim.instance,
+            )
+        time.sleep(delay)
+        delay = min(delay * 1.5, 0.05)
