@@ -152,6 +152,8 @@ class RayLauncher:
         self._finalizer: weakref.finalize | None = None
         self._closed = False
         self._actor_class: Any = None
+        #: Hex id of the placement group once reserved (it stays set after close).
+        self.placement_group_id: str | None = None
 
     # ------------------------------------------------------------ SimGroup
 
@@ -172,6 +174,7 @@ class RayLauncher:
         try:
             self._state.placement_group = create_placement_group(
                 self.placement, spec.num_instances, spec.startup_timeout)
+            self.placement_group_id = self._state.placement_group.id.hex()
             instances = list(range(spec.num_instances))
             self._state.sims.extend(self._start(instances, [self._new_actor(i) for i in instances]))
         except BaseException:
