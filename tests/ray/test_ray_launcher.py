@@ -170,3 +170,41 @@ def test_losing_a_node_mid_run(cluster, assert_nothing_left) -> None:
         b.close()
         cluster.restore()
     assert_nothing_left(surviving)
+
+
+_DRIVER = """
+import json, sys, time
+import gymnasium as gym, ray, remoteenv
+from remoteenv.ray import RayLauncher
+ray.init(address=sys.argv[1])
+launcher = RayLauncher(strategy="SPREAD", num_cpus_per_process=0.5)
+envs = gym.make_vec("remoteenv/CartPole-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                    envs_per_process=1, launcher=launcher)
+envs.reset(seed=0)
+print(json.dumps({"pids": launcher.pids, "actors": [s.actor._actor_id.hex() for s in launcher.sims],
+                  "group": launcher.placement_group_id}), flush=True)
+time.sleep(600)
+"""
+
+
+def test_a_killed_agent_leaves_nothing_on_the_cluster(cluster, assert_nothing_left) -> None:
+    import json
+    import signal
+    import subprocess
+    import sys
+    from types import SimpleNamespace
+
+    driver = subprocess.Popen([sys.executable, "-c", _DRIVER, cluster.cluster.address], stdout=subprocess.PIPE,
+                              text=True)
+    try:
+        line = driver.stdout.readline()
+        assert line, "the driver exited before starting its sims"
+        started = json.loads(line)
+    finally:
+        driver.send_signal(signal.SIGKILL)
+        driver.wait()
+        driver.stdout.close()
+    # What assert_nothing_left reads of a launcher, rebuilt from the dead driver's report.
+    sims = [SimpleNamespace(actor=SimpleNamespace(_actor_id=bytes.fromhex(a))) for a in started["actors"]]
+    gone = SimpleNamespace(sims=sims, pids=started["pids"], placement_group_id=started["group"])
+    assert_nothing_left(gone, timeout=30.0)
