@@ -44,14 +44,19 @@ def make_config(env_runners: int, envs_per_runner: int, seed: int) -> Any:
             gym_env_vectorize_mode="vector_entry_point",
         )
         .training(lr=3e-4, num_epochs=6, vf_loss_coeff=0.01, train_batch_size_per_learner=4000)
-        .rl_module(model_config=DefaultModelConfig(fcnet_hiddens=[32], fcnet_activation="linear",
-                                                   vf_share_layers=True))
+        .rl_module(model_config=DefaultModelConfig(fcnet_hiddens=[32], fcnet_activation="linear", vf_share_layers=True))
         .debugging(seed=seed)
     )
 
 
-def train(iterations: int, target: float = TARGET_RETURN, env_runners: int = 1, envs_per_runner: int = 4,
-          seed: int = 0, log: Any = print) -> list[dict[str, float]]:
+def train(
+    iterations: int,
+    target: float = TARGET_RETURN,
+    env_runners: int = 1,
+    envs_per_runner: int = 4,
+    seed: int = 0,
+    log: Any = print,
+) -> list[dict[str, float]]:
     """Train until the mean episode return reaches ``target`` or ``iterations`` are done.
 
     Connects to the Ray cluster this process is attached to (``ray.init``
@@ -67,13 +72,16 @@ def train(iterations: int, target: float = TARGET_RETURN, env_runners: int = 1, 
             row = {
                 "iteration": i,
                 "return_mean": float(runners.get("episode_return_mean", float("nan"))),
-                "env_steps": float(result.get("num_env_steps_sampled_lifetime",
-                                              runners.get("num_env_steps_sampled_lifetime", 0))),
+                "env_steps": float(
+                    result.get("num_env_steps_sampled_lifetime", runners.get("num_env_steps_sampled_lifetime", 0))
+                ),
                 "seconds": time.perf_counter() - start,
             }
             rows.append(row)
-            log(f"iter {i:3d}  return {row['return_mean']:6.1f}  env steps {row['env_steps']:8.0f}  "
-                f"{row['seconds']:6.1f} s")
+            log(
+                f"iter {i:3d}  return {row['return_mean']:6.1f}  env steps {row['env_steps']:8.0f}  "
+                f"{row['seconds']:6.1f} s"
+            )
             if row["return_mean"] >= target:
                 break
     finally:
@@ -97,9 +105,11 @@ def main(argv: list[str] | None = None) -> int:
     rows = train(args.iterations, args.target, args.env_runners, args.envs_per_runner, args.seed)
     last = rows[-1]
     reached = last["return_mean"] >= args.target
-    print(f"{'reached' if reached else 'did not reach'} mean return {args.target:g}: "
-          f"{last['return_mean']:.1f} after {int(last['iteration'])} iterations, "
-          f"{last['env_steps']:.0f} env steps, {last['seconds']:.0f} s")
+    print(
+        f"{'reached' if reached else 'did not reach'} mean return {args.target:g}: "
+        f"{last['return_mean']:.1f} after {int(last['iteration'])} iterations, "
+        f"{last['env_steps']:.0f} env steps, {last['seconds']:.0f} s"
+    )
     return 0 if reached else 1
 
 

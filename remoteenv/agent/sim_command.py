@@ -12,7 +12,8 @@ from __future__ import annotations
 import json
 import sys
 import time
-from typing import Any, Protocol, Sequence
+from collections.abc import Sequence
+from typing import Any, Protocol
 
 from remoteenv.agent.errors import RemoteEnvError
 
@@ -43,14 +44,22 @@ def scene_command(
     to turn CURVE on; ``allow_remote`` permits an address beyond loopback
     (which needs CURVE). ``python`` is the interpreter that runs the scene."""
     cmd = [
-        python, scene,
-        "--address", address,
-        "--instance", str(instance),
-        "--worlds", str(worlds),
-        "--env-kwargs", json.dumps(env_kwargs),
-        "--parent-pid", str(parent_pid),
-        "--ready-file", ready_file,
-        "--private-dir", private_dir,
+        python,
+        scene,
+        "--address",
+        address,
+        "--instance",
+        str(instance),
+        "--worlds",
+        str(worlds),
+        "--env-kwargs",
+        json.dumps(env_kwargs),
+        "--parent-pid",
+        str(parent_pid),
+        "--ready-file",
+        ready_file,
+        "--private-dir",
+        private_dir,
     ]
     if curve_files is not None:
         cmd += ["--curve-secret-key-file", curve_files[0], "--curve-client-keys-file", curve_files[1]]

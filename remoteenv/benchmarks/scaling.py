@@ -42,10 +42,16 @@ RATES_HZ = (10, 50, 200)
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("scaling benchmark")
-    g.add_argument("--processes", default=",".join(map(str, DEFAULT_PROCESSES)),
-                   help="comma-separated numbers of sim processes P (default 1,2,4,8,16,32)")
-    g.add_argument("--worlds", default=",".join(map(str, DEFAULT_WORLDS)),
-                   help="comma-separated worlds per process K (default 1,8)")
+    g.add_argument(
+        "--processes",
+        default=",".join(map(str, DEFAULT_PROCESSES)),
+        help="comma-separated numbers of sim processes P (default 1,2,4,8,16,32)",
+    )
+    g.add_argument(
+        "--worlds",
+        default=",".join(map(str, DEFAULT_WORLDS)),
+        help="comma-separated worlds per process K (default 1,8)",
+    )
     g.add_argument("--steps", type=int, default=400, help="timed vector steps per row (default 400)")
     g.add_argument("--json", default=None, metavar="PATH", help="also write the rows as JSON to PATH")
 
@@ -75,16 +81,23 @@ def _private_loopback() -> bool:
 
 def measure(processes: int, worlds: int, steps: int) -> dict[str, Any]:
     """One row: agent CPU and loopback bytes per vector step of P processes of K worlds."""
-    from remoteenv import SHIPPED_SCENES
-    from remoteenv.vector_env import RemoteVectorEnv
     import gymnasium as gym
 
+    from remoteenv import SHIPPED_SCENES
+    from remoteenv.vector_env import RemoteVectorEnv
+
     spec = gym.spec(SHIPPED_SCENES["reacher"])
-    envs = RemoteVectorEnv(spec.kwargs["scene"], processes * worlds, envs_per_process=worlds, transport="tcp",
-                           curve=True, max_episode_steps=spec.max_episode_steps)
+    envs = RemoteVectorEnv(
+        spec.kwargs["scene"],
+        processes * worlds,
+        envs_per_process=worlds,
+        transport="tcp",
+        curve=True,
+        max_episode_steps=spec.max_episode_steps,
+    )
     try:
         rng = np.random.default_rng(0)
-        actions = rng.uniform(-1, 1, size=(64, *envs.action_space.shape)).astype(np.float32)
+        actions = rng.uniform(-1, 1, size=(64, *(envs.action_space.shape or ()))).astype(np.float32)
         envs.reset(seed=0)
         for i in range(50):
             envs.step(actions[i % 64])
@@ -95,7 +108,9 @@ def measure(processes: int, worlds: int, steps: int) -> dict[str, Any]:
     finally:
         envs.close()
     row: dict[str, Any] = {
-        "processes": processes, "worlds_per_process": worlds, "steps": steps,
+        "processes": processes,
+        "worlds_per_process": worlds,
+        "steps": steps,
         "agent_cpu_us_per_step": 1e6 * cpu / steps,
         "agent_cpu_us_per_process_step": 1e6 * cpu / steps / processes,
         "vector_steps_per_s": steps / wall,
@@ -122,8 +137,10 @@ def fit(rows: list[dict[str, Any]]) -> dict[int, tuple[float, float]]:
 def run(args: argparse.Namespace) -> int:
     processes = [int(x) for x in args.processes.split(",")]
     worlds = [int(x) for x in args.worlds.split(",")]
-    print(f"# load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} CPUs; "
-          f"private loopback: {_private_loopback()}")
+    print(
+        f"# load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} CPUs; "
+        f"private loopback: {_private_loopback()}"
+    )
     print(f"{'P':>4} {'K':>3} {'agent CPU us/step':>18} {'us/process':>11} {'steps/s':>8} {'bytes/step':>11}")
     rows = []
     for k in worlds:
@@ -131,13 +148,18 @@ def run(args: argparse.Namespace) -> int:
             row = measure(p, k, args.steps)
             rows.append(row)
             net = row.get("bytes_per_step")
-            print(f"{p:4d} {k:3d} {row['agent_cpu_us_per_step']:18.0f} {row['agent_cpu_us_per_process_step']:11.1f} "
-                  f"{row['vector_steps_per_s']:8.0f} {'-' if net is None else f'{net:11.0f}'}", flush=True)
+            print(
+                f"{p:4d} {k:3d} {row['agent_cpu_us_per_step']:18.0f} {row['agent_cpu_us_per_process_step']:11.1f} "
+                f"{row['vector_steps_per_s']:8.0f} {'-' if net is None else f'{net:11.0f}'}",
+                flush=True,
+            )
     print(f"# load average after: {os.getloadavg()[0]:.2f}")
     for k, (a, b) in fit(rows).items():
         reach = ", ".join(f"{rate} Hz: {max(0, int((1e6 / rate - a) / b))}" for rate in RATES_HZ)
-        print(f"K={k}: agent CPU per vector step = {a:.0f} us + {b:.1f} us per process; "
-              f"processes one agent core drives at {reach}")
+        print(
+            f"K={k}: agent CPU per vector step = {a:.0f} us + {b:.1f} us per process; "
+            f"processes one agent core drives at {reach}"
+        )
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"rows": rows, "fit": {str(k): v for k, v in fit(rows).items()}}, f, indent=2)

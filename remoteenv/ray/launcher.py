@@ -18,13 +18,14 @@ from __future__ import annotations
 import os
 import time
 import weakref
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 from remoteenv.agent.connection import connect_sim
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.ray.placement import Placement, cluster_capacity, create_placement_group
-from remoteenv.ray.sim_actor import SimActor, SimSpec
+from remoteenv.ray.sim_actor import SimActor, SimSpec, shipped_scenes_dir
 from remoteenv.ray.sim_handle import RaySim, ray_reason
 from remoteenv.wire.keys import KeyPair, generate_keypair
 
@@ -41,9 +42,7 @@ def scene_on_nodes(scene: str) -> str:
     """What to ask the nodes for: a shipped scene's name when ``scene`` is the
     script of a shipped scene (the nodes have their own copy, wherever their
     remoteenv is installed), else ``scene`` unchanged."""
-    import remoteenv.scenes
-
-    folder = os.path.dirname(os.path.abspath(remoteenv.scenes.__file__))
+    folder = shipped_scenes_dir()
     path = os.path.abspath(scene)
     name = os.path.basename(os.path.dirname(path))
     if os.path.dirname(os.path.dirname(path)) == folder and os.path.basename(path) == f"{name}_scene.py":
@@ -139,8 +138,12 @@ class RayLauncher:
         address: str | None = None,
         extra_args: Sequence[str] = (),
     ) -> None:
-        self.placement = Placement(strategy, num_cpus_per_process, dict(resources_per_process or {}),
-                                   None if label_selector is None else dict(label_selector))
+        self.placement = Placement(
+            strategy,
+            num_cpus_per_process,
+            dict(resources_per_process or {}),
+            None if label_selector is None else dict(label_selector),
+        )
         self.runtime_env = None if runtime_env is None else dict(runtime_env)
         self.address = address
         self.extra_args = tuple(extra_args)
@@ -173,7 +176,8 @@ class RayLauncher:
         self._finalizer = weakref.finalize(self, _remove_all, self._state)
         try:
             self._state.placement_group = create_placement_group(
-                self.placement, spec.num_instances, spec.startup_timeout)
+                self.placement, spec.num_instances, spec.startup_timeout
+            )
             self.placement_group_id = self._state.placement_group.id.hex()
             instances = list(range(spec.num_instances))
             self._state.sims.extend(self._start(instances, [self._new_actor(i) for i in instances]))
@@ -192,8 +196,12 @@ class RayLauncher:
             return None
         from remoteenv.agent.sim_group import SimLayout
 
-        return SimLayout(self.spec.num_instances, self.spec.worlds_per_instance, self.spec.real_time,
-                         source=f"the RayLauncher of {os.path.basename(self.spec.scene)}")
+        return SimLayout(
+            self.spec.num_instances,
+            self.spec.worlds_per_instance,
+            self.spec.real_time,
+            source=f"the RayLauncher of {os.path.basename(self.spec.scene)}",
+        )
 
     def connect(self, index: int, timeout: float | None) -> Any:
         """A CURVE-encrypted ZeroMQ connection to sim ``index``."""
@@ -285,10 +293,17 @@ class RayLauncher:
 
         spec = self._spec()
         sim_spec = SimSpec(
-            scene=scene_on_nodes(spec.scene), instance=instance, worlds=spec.worlds_per_instance,
-            seed=spec.instance_seed(instance), env_kwargs=dict(spec.env_kwargs), render_mode=spec.render_mode,
-            real_time=spec.real_time, real_time_factor=spec.real_time_factor, action_delay=spec.action_delay,
-            extra_args=self.extra_args, startup_timeout=spec.startup_timeout,
+            scene=scene_on_nodes(spec.scene),
+            instance=instance,
+            worlds=spec.worlds_per_instance,
+            seed=spec.instance_seed(instance),
+            env_kwargs=dict(spec.env_kwargs),
+            render_mode=spec.render_mode,
+            real_time=spec.real_time,
+            real_time_factor=spec.real_time_factor,
+            action_delay=spec.action_delay,
+            extra_args=self.extra_args,
+            startup_timeout=spec.startup_timeout,
         )
         bundle = self.placement.bundle()
         options: dict[str, Any] = dict(
@@ -298,14 +313,16 @@ class RayLauncher:
             max_concurrency=ACTOR_CONCURRENCY,
             max_restarts=0,
             scheduling_strategy=PlacementGroupSchedulingStrategy(
-                self._state.placement_group, placement_group_bundle_index=instance),
+                self._state.placement_group, placement_group_bundle_index=instance
+            ),
         )
         if self.runtime_env is not None:
             options["runtime_env"] = self.runtime_env
         return self._actor_class.options(**options).remote(sim_spec)
 
-    def _start(self, instances: list[int], actors: list[Any], lost: RaySim | None = None,
-               deadline: float | None = None) -> list[RaySim]:
+    def _start(
+        self, instances: list[int], actors: list[Any], lost: RaySim | None = None, deadline: float | None = None
+    ) -> list[RaySim]:
         """Start the sims of ``instances`` on ``actors`` in parallel and wait until
         all are ready (until ``deadline``, default ``startup_timeout`` from now)."""
         import ray
@@ -322,30 +339,46 @@ class RayLauncher:
             try:
                 infos.append(ray.get(ref, timeout=max(0.0, deadline - time.monotonic())))
             except ray.exceptions.GetTimeoutError:
-                raise RemoteEnvError(self._no_start_message(instance, lost), kind="launch",
-                                     instance=instance) from None
+                raise RemoteEnvError(self._no_start_message(instance, lost), kind="launch", instance=instance) from None
             except ray.exceptions.RayActorError as exc:
-                raise RemoteEnvError(f"the Ray actor of sim instance {instance} of {scene} died while starting "
-                                     f"it: {ray_reason(exc)}", kind="launch", instance=instance) from exc
+                raise RemoteEnvError(
+                    f"the Ray actor of sim instance {instance} of {scene} died while starting it: {ray_reason(exc)}",
+                    kind="launch",
+                    instance=instance,
+                ) from exc
             except ray.exceptions.RayTaskError as exc:
                 inner = exc.cause if isinstance(getattr(exc, "cause", None), BaseException) else exc
                 text = str(inner) if isinstance(inner, RemoteEnvError) else f"{type(inner).__name__}: {inner}"
-                raise RemoteEnvError(f"sim instance {instance} of {scene} could not start on the cluster: {text}",
-                                     kind="launch", instance=instance) from None
+                raise RemoteEnvError(
+                    f"sim instance {instance} of {scene} could not start on the cluster: {text}",
+                    kind="launch",
+                    instance=instance,
+                ) from None
         sims = []
         for instance, actor, keys, info in zip(instances, actors, servers, infos):
-            sim = RaySim(instance=instance, actor=actor, endpoint=info["endpoint"], pid=info["pid"],
-                         node_id=info["node_id"], node_ip=info["node_ip"], host=info["host"],
-                         curve_server_key=keys.public, generation=info["generation"])
+            sim = RaySim(
+                instance=instance,
+                actor=actor,
+                endpoint=info["endpoint"],
+                pid=info["pid"],
+                node_id=info["node_id"],
+                node_ip=info["node_ip"],
+                host=info["host"],
+                curve_server_key=keys.public,
+                generation=info["generation"],
+            )
             sim.exit_ref = actor.wait_exit.remote(sim.generation)
             sims.append(sim)
         return sims
 
     def _no_start_message(self, instance: int, lost: RaySim | None) -> str:
         spec = self._spec()
-        text = (f"sim instance {instance} of {os.path.basename(spec.scene)} did not start within "
-                f"{spec.startup_timeout:g} s")
+        text = (
+            f"sim instance {instance} of {os.path.basename(spec.scene)} did not start within {spec.startup_timeout:g} s"
+        )
         if lost is not None and lost.actor_lost:
-            text += (f" after its node {lost.node} was lost: no surviving node could take its bundle "
-                     f"({self.placement.describe(1)})")
+            text += (
+                f" after its node {lost.node} was lost: no surviving node could take its bundle "
+                f"({self.placement.describe(1)})"
+            )
         return f"{text}. {cluster_capacity()}"

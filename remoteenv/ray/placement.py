@@ -9,8 +9,9 @@ Ray removes it, with the actors in it, when the driver exits.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 from remoteenv.agent.errors import RemoteEnvError
 
@@ -68,12 +69,14 @@ def create_placement_group(placement: Placement, count: int, timeout: float) -> 
 
     Raises :class:`RemoteEnvError` (kind ``"launch"``) naming what was asked
     and what the cluster has free when the reservation cannot be made in time."""
-    import ray
     from ray.util.placement_group import placement_group, remove_placement_group
 
+    import ray
+
     selector = None if placement.label_selector is None else [dict(placement.label_selector)] * count
-    group = placement_group([placement.bundle() for _ in range(count)], strategy=placement.strategy,
-                            bundle_label_selector=selector)
+    group = placement_group(
+        [placement.bundle() for _ in range(count)], strategy=placement.strategy, bundle_label_selector=selector
+    )
     ready, _ = ray.wait([group.ready()], timeout=timeout)
     if not ready:
         remove_placement_group(group)
@@ -91,10 +94,8 @@ def cluster_capacity() -> str:
 
     free = ray.available_resources()
     nodes = [n for n in ray.nodes() if n.get("Alive")]
-    parts = [f"{n['NodeManagerAddress']} ({n['NodeID'][:12]}): {n['Resources'].get('CPU', 0):g} CPUs"
-             for n in nodes]
-    return (f"The cluster has {len(nodes)} live node(s) [{'; '.join(parts)}] and "
-            f"{free.get('CPU', 0):g} CPUs unreserved.")
+    parts = [f"{n['NodeManagerAddress']} ({n['NodeID'][:12]}): {n['Resources'].get('CPU', 0):g} CPUs" for n in nodes]
+    return f"The cluster has {len(nodes)} live node(s) [{'; '.join(parts)}] and {free.get('CPU', 0):g} CPUs unreserved."
 
 
 def bundle_node(group: Any, index: int) -> str | None:

@@ -19,6 +19,7 @@ the class is wrapped with ``ray.remote`` by :mod:`remoteenv.ray.launcher`.
 
 from __future__ import annotations
 
+import importlib
 import os
 import shutil
 import signal
@@ -70,15 +71,27 @@ class SimSpec:
     startup_timeout: float = 60.0
 
 
+def shipped_scenes_dir() -> str:
+    """The folder of the scenes that ship with this remoteenv installation."""
+    # By name: the package lives in the repository's scenes/ folder, outside the
+    # tree the import contracts map, which would count this as importing remoteenv.
+    scenes = importlib.import_module("remoteenv.scenes")
+    return os.path.dirname(os.path.abspath(scenes.__file__ or ""))
+
+
 def resolve_scene(scene: str) -> str:
     """The scene script ``scene`` names on this node: a shipped scene's script,
     an existing path, or a file of that base name in the working dir (where
     Ray unpacks a runtime_env ``working_dir``). Raises FileNotFoundError
     saying what was tried."""
-    import remoteenv
-
     if os.sep not in scene and not scene.endswith(".py"):
-        return remoteenv.scene_path(scene)
+        path = os.path.join(shipped_scenes_dir(), scene, f"{scene}_scene.py")
+        if not os.path.isfile(path):
+            raise FileNotFoundError(
+                f"no shipped scene named {scene!r} on node {socket.gethostname()} "
+                f"(looked for {path}); is the same remoteenv installed there?"
+            )
+        return path
     if os.path.isfile(scene):
         return os.path.abspath(scene)
     local = os.path.abspath(os.path.basename(scene))
@@ -136,8 +149,14 @@ class SimActor:
                 self._stop_child()
             raise
         assert sim.endpoint is not None
-        return {"endpoint": sim.endpoint, "pid": sim.pid, "node_id": self.node_id, "node_ip": self.node_ip,
-                "host": socket.gethostname(), "generation": generation}
+        return {
+            "endpoint": sim.endpoint,
+            "pid": sim.pid,
+            "node_id": self.node_id,
+            "node_ip": self.node_ip,
+            "host": socket.gethostname(),
+            "generation": generation,
+        }
 
     def wait_exit(self, generation: int) -> str:
         """Block until child ``generation`` has exited; return why (exit code or
@@ -180,8 +199,10 @@ class SimActor:
     def _spawn(self, server_secret: bytes, client_public: bytes) -> SimProcess:
         spec = self.spec
         instance = spec.instance
-        names = {k: os.path.join(self.workdir, f"sim-{instance}.{k}") for k in
-                 ("ready.json", "log", "curve_secret", "curve_clients")}
+        names = {
+            k: os.path.join(self.workdir, f"sim-{instance}.{k}")
+            for k in ("ready.json", "log", "curve_secret", "curve_clients")
+        }
         for path in names.values():
             if os.path.exists(path):
                 os.unlink(path)
@@ -189,21 +210,33 @@ class SimActor:
         write_public_keys(names["curve_clients"], [client_public])
         address = f"tcp://{self.node_ip}:*"
         cmd = scene_command(
-            self.scene, address, instance=instance, worlds=spec.worlds, env_kwargs=spec.env_kwargs,
-            parent_pid=os.getpid(), ready_file=names["ready.json"], private_dir=self.workdir,
-            seed=spec.seed, render_mode=spec.render_mode, real_time=spec.real_time,
-            real_time_factor=spec.real_time_factor, action_delay=spec.action_delay,
+            self.scene,
+            address,
+            instance=instance,
+            worlds=spec.worlds,
+            env_kwargs=spec.env_kwargs,
+            parent_pid=os.getpid(),
+            ready_file=names["ready.json"],
+            private_dir=self.workdir,
+            seed=spec.seed,
+            render_mode=spec.render_mode,
+            real_time=spec.real_time,
+            real_time_factor=spec.real_time_factor,
+            action_delay=spec.action_delay,
             curve_files=(names["curve_secret"], names["curve_clients"]),
-            allow_remote=not is_loopback(address), extra_args=spec.extra_args,
+            allow_remote=not is_loopback(address),
+            extra_args=spec.extra_args,
         )
         env = dict(os.environ)
         env.setdefault("MUJOCO_GL", "egl")
         with open(names["log"], "ab") as log:
             offset = log.tell()
-            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log,
-                                    env=env, start_new_session=True)
-        return SimProcess(instance=instance, proc=proc, log_path=names["log"], ready_file=names["ready.json"],
-                          log_offset=offset)
+            proc = subprocess.Popen(
+                cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log, env=env, start_new_session=True
+            )
+        return SimProcess(
+            instance=instance, proc=proc, log_path=names["log"], ready_file=names["ready.json"], log_offset=offset
+        )
 
     def _stop_child(self) -> None:
         """Stop the current child, if any (caller holds the lock)."""

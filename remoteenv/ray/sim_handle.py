@@ -76,6 +76,5 @@ class RaySim:
             self._death = str(ray.get(ready[0]))
         except Exception as exc:  # the actor is gone: its worker or its node died
             self.actor_lost = True
-            self._death = (f"its Ray actor on node {self.node} is gone, and the sim with it: "
-                           f"{ray_reason(exc)}")
+            self._death = f"its Ray actor on node {self.node} is gone, and the sim with it: {ray_reason(exc)}"
         return self._death

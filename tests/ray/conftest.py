@@ -14,8 +14,9 @@ from typing import Any
 import pytest
 
 try:
-    import ray
     from ray.cluster_utils import Cluster
+
+    import ray
 except ImportError:  # the main test venv has no Ray: skip this folder
     collect_ignore_glob = ["test_*.py"]
     ray = None
@@ -90,8 +91,11 @@ def assert_nothing_left(launcher: Any, timeout: float = 10.0) -> None:
     group_id = launcher.placement_group_id
     deadline = time.monotonic() + timeout
     while True:
-        live = [a for a in list_actors(filters=[("class_name", "=", "SimActor")])
-                if a.actor_id in actor_ids and a.state != "DEAD"]
+        live = [
+            a
+            for a in list_actors(filters=[("class_name", "=", "SimActor")])
+            if a.actor_id in actor_ids and a.state != "DEAD"
+        ]
         running = [p for p in pids if os.path.exists(f"/proc/{p}") and _not_zombie(p)]
         group = placement_group_table().get(group_id, {}).get("state", "REMOVED")
         if not live and not running and group == "REMOVED":

@@ -30,8 +30,9 @@ def _rollout(envs, steps: int, seed: int) -> list[np.ndarray]:
 
 def test_spread_puts_each_sim_on_its_own_node(cluster, assert_nothing_left) -> None:
     launcher = RayLauncher(strategy="SPREAD", num_cpus_per_process=1)
-    envs = gym.make_vec(REACHER, num_envs=6, vectorization_mode="vector_entry_point", envs_per_process=2,
-                        launcher=launcher)
+    envs = gym.make_vec(
+        REACHER, num_envs=6, vectorization_mode="vector_entry_point", envs_per_process=2, launcher=launcher
+    )
     try:
         assert isinstance(envs.unwrapped, RemoteVectorEnv)
         assert len(launcher.sims) == 3
@@ -47,14 +48,18 @@ def test_spread_puts_each_sim_on_its_own_node(cluster, assert_nothing_left) -> N
 def test_strict_spread_beyond_the_node_count_is_refused_clearly(cluster) -> None:
     launcher = RayLauncher(strategy="STRICT_SPREAD", num_cpus_per_process=0.5)
     with pytest.raises(LaunchError, match=r"could not place 4 x .*STRICT_SPREAD.*3 live node"):
-        RemoteVectorEnv(remoteenv.scene_path("cartpole"), 4, envs_per_process=1, launcher=launcher,
-                        startup_timeout=3.0)
+        RemoteVectorEnv(remoteenv.scene_path("cartpole"), 4, envs_per_process=1, launcher=launcher, startup_timeout=3.0)
 
 
 def test_lock_step_trajectories_equal_a_local_launch(cluster) -> None:
     local = gym.make_vec(REACHER, num_envs=4, vectorization_mode="vector_entry_point", envs_per_process=2)
-    remote = gym.make_vec(REACHER, num_envs=4, vectorization_mode="vector_entry_point", envs_per_process=2,
-                          launcher=RayLauncher(strategy="SPREAD", num_cpus_per_process=0.5))
+    remote = gym.make_vec(
+        REACHER,
+        num_envs=4,
+        vectorization_mode="vector_entry_point",
+        envs_per_process=2,
+        launcher=RayLauncher(strategy="SPREAD", num_cpus_per_process=0.5),
+    )
     try:
         expected = _rollout(local, 60, seed=7)  # past the 50-step limit: autoreset included
         got = _rollout(remote, 60, seed=7)
@@ -84,8 +89,9 @@ def test_a_single_env_on_the_cluster_matches_a_local_one(cluster) -> None:
 
 
 def test_real_time_runs_on_the_cluster(cluster) -> None:
-    env = OpenAIRemoteEnv(remoteenv.scene_path("cartpole"), real_time=True,
-                          launcher=RayLauncher(num_cpus_per_process=0.5))
+    env = OpenAIRemoteEnv(
+        remoteenv.scene_path("cartpole"), real_time=True, launcher=RayLauncher(num_cpus_per_process=0.5)
+    )
     try:
         env.reset(seed=0)
         start = time.perf_counter()
@@ -104,8 +110,9 @@ def test_real_time_runs_on_the_cluster(cluster) -> None:
 
 def test_a_killed_sim_is_relaunched_with_restart_on_failure(cluster, assert_nothing_left) -> None:
     launcher = RayLauncher(num_cpus_per_process=0.5)
-    envs = RemoteVectorEnv(remoteenv.scene_path("cartpole"), 4, envs_per_process=2, launcher=launcher,
-                           restart_on_failure=True)
+    envs = RemoteVectorEnv(
+        remoteenv.scene_path("cartpole"), 4, envs_per_process=2, launcher=launcher, restart_on_failure=True
+    )
     try:
         envs.reset(seed=0)
         old = launcher.sims[1]
@@ -154,8 +161,10 @@ def test_losing_a_node_mid_run(cluster, assert_nothing_left) -> None:
         cluster.remove_worker(cluster.worker_node(victim))
         _, _, _, truncated, info = a.step(np.zeros(3, dtype=np.int64))
         recovered_s = time.perf_counter() - start
-        print(f"\nnode {lost_node} removed: sim {lost} relaunched on {surviving.sims[lost].node} "
-              f"and the step returned after {recovered_s:.1f} s")
+        print(
+            f"\nnode {lost_node} removed: sim {lost} relaunched on {surviving.sims[lost].node} "
+            f"and the step returned after {recovered_s:.1f} s"
+        )
         assert truncated[lost] and info["remoteenv_restarted"][lost]
         assert surviving.sims[lost].node_id != victim
         assert surviving.sims[lost].node_id in cluster.alive_node_ids()
@@ -194,8 +203,9 @@ def test_a_killed_agent_leaves_nothing_on_the_cluster(cluster, assert_nothing_le
     import sys
     from types import SimpleNamespace
 
-    driver = subprocess.Popen([sys.executable, "-c", _DRIVER, cluster.cluster.address], stdout=subprocess.PIPE,
-                              text=True)
+    driver = subprocess.Popen(
+        [sys.executable, "-c", _DRIVER, cluster.cluster.address], stdout=subprocess.PIPE, text=True
+    )
     try:
         line = driver.stdout.readline()
         assert line, "the driver exited before starting its sims"

@@ -66,10 +66,23 @@ def test_a_missing_scene_names_the_fix(tmp_path, monkeypatch) -> None:
 
 def test_the_scene_command_line_carries_every_launch_option() -> None:
     cmd = scene_command(
-        "/s/scene.py", "tcp://10.0.0.5:*", instance=3, worlds=8, env_kwargs={"a": 1}, parent_pid=42,
-        ready_file="/d/r.json", private_dir="/d", seed=24, render_mode="rgb_array", real_time=True,
-        real_time_factor=2.0, action_delay=1, curve_files=("/d/s", "/d/c"), allow_remote=True,
-        extra_args=["--x"], python="py",
+        "/s/scene.py",
+        "tcp://10.0.0.5:*",
+        instance=3,
+        worlds=8,
+        env_kwargs={"a": 1},
+        parent_pid=42,
+        ready_file="/d/r.json",
+        private_dir="/d",
+        seed=24,
+        render_mode="rgb_array",
+        real_time=True,
+        real_time_factor=2.0,
+        action_delay=1,
+        curve_files=("/d/s", "/d/c"),
+        allow_remote=True,
+        extra_args=["--x"],
+        python="py",
     )
     assert cmd[:2] == ["py", "/s/scene.py"]
     opts = dict(zip(cmd[2::1], cmd[3::1]))
@@ -82,6 +95,15 @@ def test_the_scene_command_line_carries_every_launch_option() -> None:
 
 
 def test_without_curve_a_sim_is_never_allowed_beyond_loopback() -> None:
-    cmd = scene_command("/s.py", "tcp://127.0.0.1:*", instance=0, worlds=1, env_kwargs={}, parent_pid=1,
-                        ready_file="r", private_dir="d", allow_remote=True)
+    cmd = scene_command(
+        "/s.py",
+        "tcp://127.0.0.1:*",
+        instance=0,
+        worlds=1,
+        env_kwargs={},
+        parent_pid=1,
+        ready_file="r",
+        private_dir="d",
+        allow_remote=True,
+    )
     assert "--allow-remote" not in cmd and "--curve-secret-key-file" not in cmd and "--seed" not in cmd
