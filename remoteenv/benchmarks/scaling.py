@@ -120,6 +120,35 @@ def measure(processes: int, worlds: int, steps: int) -> dict[str, Any]:
     return row
 
 
+def measure_render(steps: int) -> dict[str, Any] | None:
+    """Bytes on loopback per ``render()`` of one Reacher world (rgb_array), or None
+    outside a private network namespace."""
+    if not _private_loopback():
+        return None
+    import gymnasium as gym
+
+    from remoteenv import SHIPPED_SCENES
+    from remoteenv.remote_env import OpenAIRemoteEnv
+
+    spec = gym.spec(SHIPPED_SCENES["reacher"])
+    env = OpenAIRemoteEnv(spec.kwargs["scene"], render_mode="rgb_array", transport="tcp", curve=True)
+    try:
+        env.reset(seed=0)
+        frame = env.render()
+        net0 = _loopback_bytes()
+        for _ in range(steps):
+            env.render()
+        net = _loopback_bytes()
+    finally:
+        env.close()
+    assert frame is not None and net is not None and net0 is not None
+    return {
+        "frame_shape": list(frame.shape),
+        "frame_bytes": int(frame.nbytes),
+        "bytes_per_render": (net - net0) / steps,
+    }
+
+
 def fit(rows: list[dict[str, Any]]) -> dict[int, tuple[float, float]]:
     """Per K: ``(a, b)`` of the least-squares line ``cpu_us = a + b * P``."""
     lines = {}
@@ -153,6 +182,12 @@ def run(args: argparse.Namespace) -> int:
                 f"{row['vector_steps_per_s']:8.0f} {'-' if net is None else f'{net:11.0f}'}",
                 flush=True,
             )
+    render = measure_render(max(10, args.steps // 10))
+    if render is not None:
+        print(
+            f"render: one {'x'.join(map(str, render['frame_shape']))} frame ({render['frame_bytes']} bytes) "
+            f"costs {render['bytes_per_render']:.0f} bytes on the wire"
+        )
     print(f"# load average after: {os.getloadavg()[0]:.2f}")
     for k, (a, b) in fit(rows).items():
         reach = ", ".join(f"{rate} Hz: {max(0, int((1e6 / rate - a) / b))}" for rate in RATES_HZ)
@@ -162,7 +197,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"rows": rows, "fit": {str(k): v for k, v in fit(rows).items()}}, f, indent=2)
+            json.dump({"rows": rows, "fit": {str(k): v for k, v in fit(rows).items()}, "render": render}, f, indent=2)
     return 0
 
 
