@@ -13,21 +13,18 @@ and exits if the agent dies.
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import signal
 import socket
 import subprocess
-import sys
 import tempfile
-import time
 import weakref
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 from remoteenv.agent.connection import SimConnection, connect_sim
-from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.processes import pid_alive
+from remoteenv.agent.sim_command import scene_command, wait_ready
 from remoteenv.agent.sim_group import LaunchSpec, SimLayout
 from remoteenv.agent.sim_process import LaunchState, SimProcess, stop_all
 from remoteenv.wire.addresses import ipc_address, ipc_path, is_loopback, tcp_loopback_address, zmq_transport
@@ -287,48 +284,38 @@ class Launcher:
         for path in (ready_file, ipc_path(address)):
             if path and os.path.exists(path):
                 os.unlink(path)
-        cmd = [
-            sys.executable,
-            spec.scene,
-            "--address",
-            address,
-            "--instance",
-            str(instance),
-            "--worlds",
-            str(spec.worlds_per_instance),
-            "--env-kwargs",
-            json.dumps(dict(spec.env_kwargs)),
-            "--parent-pid",
-            str(os.getpid()),
-            "--ready-file",
-            ready_file,
-            "--private-dir",
-            workdir,
-        ]
+        curve_files = None
         server_key = None
         if self.curve_client_keypair is not None:
             server = generate_keypair()
             server_key = server.public
-            secret_file = os.path.join(workdir, f"sim-{instance}.curve_secret")
-            clients_file = os.path.join(workdir, f"sim-{instance}.curve_clients")
-            for path in (secret_file, clients_file):
+            curve_files = (
+                os.path.join(workdir, f"sim-{instance}.curve_secret"),
+                os.path.join(workdir, f"sim-{instance}.curve_clients"),
+            )
+            for path in curve_files:
                 if os.path.exists(path):
                     os.unlink(path)
-            write_secret_key(secret_file, server.secret)
-            write_public_keys(clients_file, [self.curve_client_keypair.public])
-            cmd += ["--curve-secret-key-file", secret_file, "--curve-client-keys-file", clients_file]
-            if self.remote:
-                cmd += ["--allow-remote"]
-        seed = spec.instance_seed(instance)
-        if seed is not None:
-            cmd += ["--seed", str(seed)]
-        if spec.render_mode is not None:
-            cmd += ["--render-mode", spec.render_mode]
-        if spec.real_time:
-            cmd += ["--real-time", "--real-time-factor", repr(float(spec.real_time_factor))]
-        if spec.action_delay:
-            cmd += ["--action-delay", str(int(spec.action_delay))]
-        cmd += self.extra_args
+            write_secret_key(curve_files[0], server.secret)
+            write_public_keys(curve_files[1], [self.curve_client_keypair.public])
+        cmd = scene_command(
+            spec.scene,
+            address,
+            instance=instance,
+            worlds=spec.worlds_per_instance,
+            env_kwargs=dict(spec.env_kwargs),
+            parent_pid=os.getpid(),
+            ready_file=ready_file,
+            private_dir=workdir,
+            seed=spec.instance_seed(instance),
+            render_mode=spec.render_mode,
+            real_time=spec.real_time,
+            real_time_factor=spec.real_time_factor,
+            action_delay=spec.action_delay,
+            curve_files=curve_files,
+            allow_remote=self.remote,
+            extra_args=self.extra_args,
+        )
         env = dict(os.environ)
         if spec.render_mode != "human":
             env.setdefault("MUJOCO_GL", "egl")
@@ -366,34 +353,7 @@ class Launcher:
 
     def _wait_ready(self, sim: SimProcess) -> None:
         spec = self._spec()
-        scene = os.path.basename(spec.scene)
-        deadline = time.monotonic() + spec.startup_timeout
-        delay = 0.002
-        while True:
-            try:
-                with open(sim.ready_file) as f:
-                    info = json.load(f)
-                sim.endpoint = str(info["endpoint"]).replace("tcp://0.0.0.0:", "tcp://127.0.0.1:")
-                return
-            except (FileNotFoundError, json.JSONDecodeError, KeyError):
-                pass
-            why = sim.death()
-            if why is not None:
-                raise RemoteEnvError(
-                    f"sim instance {sim.instance} of {scene} failed to start: {why}",
-                    kind="launch",
-                    instance=sim.instance,
-                )
-            if time.monotonic() > deadline:
-                raise RemoteEnvError(
-                    f"sim instance {sim.instance} (pid {sim.pid}) of {scene} did not report ready "
-                    f"within {spec.startup_timeout:g} s; raise startup_timeout= if the machine is "
-                    f"busy. Its stderr so far:\n{sim.stderr_tail()}",
-                    kind="launch",
-                    instance=sim.instance,
-                )
-            time.sleep(delay)
-            delay = min(delay * 1.5, 0.05)
+        wait_ready(sim, spec.startup_timeout, os.path.basename(spec.scene))
 
 
 __all__ = ["Launcher", "SimProcess", "pid_alive"]
