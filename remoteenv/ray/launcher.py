@@ -20,17 +20,15 @@ import time
 import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from remoteenv.agent.connection import connect_sim
+from remoteenv.agent.connection import SimConnection, connect_sim
 from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.agent.sim_group import LaunchSpec, SimLayout
 from remoteenv.ray.placement import Placement, cluster_capacity, create_placement_group
 from remoteenv.ray.sim_actor import SimActor, SimSpec, shipped_scenes_dir
 from remoteenv.ray.sim_handle import RaySim, ray_reason
 from remoteenv.wire.keys import KeyPair, generate_keypair
-
-if TYPE_CHECKING:
-    from remoteenv.agent.sim_group import LaunchSpec, SimLayout
 
 #: Threads of each actor: ``wait_exit`` holds one for as long as its sim runs.
 ACTOR_CONCURRENCY = 4
@@ -194,8 +192,6 @@ class RayLauncher:
         """The layout of the started sims; None before :meth:`start`."""
         if self.spec is None:
             return None
-        from remoteenv.agent.sim_group import SimLayout
-
         return SimLayout(
             self.spec.num_instances,
             self.spec.worlds_per_instance,
@@ -203,7 +199,7 @@ class RayLauncher:
             source=f"the RayLauncher of {os.path.basename(self.spec.scene)}",
         )
 
-    def connect(self, index: int, timeout: float | None) -> Any:
+    def connect(self, index: int, timeout: float | None) -> SimConnection:
         """A CURVE-encrypted ZeroMQ connection to sim ``index``."""
         return connect_sim(self.sims[index], timeout=timeout, curve_client_keypair=self.curve_client_keypair)
 
