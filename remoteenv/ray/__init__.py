@@ -4,3 +4,8 @@ cluster's nodes (``pip install "remoteenv[ray]"``; see docs/cluster.md).
 Agent side: imports :mod:`remoteenv.agent` and :mod:`remoteenv.wire`, never
 :mod:`remoteenv.sim` (the sims run as separate processes on the nodes).
 """
+
+from remoteenv.ray.launcher import RayLauncher
+from remoteenv.ray.placement import STRATEGIES
+
+__all__ = ["STRATEGIES", "RayLauncher"]

@@ -22,8 +22,8 @@ STAMP=$VENV/.deps
 if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ] || [ "$0" -nt "$STAMP" ]; then
     echo "tests/ray: setting up $VENV" >&2
     python3 -m venv "$VENV"
-    "$VENV/bin/pip" install --quiet torch==2.13.0
-    "$VENV/bin/pip" install --quiet "ray[default,rllib]==2.60.0"
+    "$VENV/bin/pip" install -qq torch==2.13.0
+    "$VENV/bin/pip" install -qq "ray[default,rllib]==2.60.0"
     # remoteenv's runtime and test dependencies, as pyproject.toml lists them.
     mapfile -t DEPS < <(python3 - "$ROOT/pyproject.toml" <<'EOF'
 import sys, tomllib
@@ -33,7 +33,7 @@ for req in project["dependencies"] + extras["test"]:
     print(req)
 EOF
 )
-    "$VENV/bin/pip" install --quiet "${DEPS[@]}"
+    "$VENV/bin/pip" install -qq "${DEPS[@]}"
     touch "$STAMP"
 fi
 

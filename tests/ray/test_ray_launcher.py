@@ -159,20 +159,26 @@ def test_losing_a_node_mid_run(cluster, assert_nothing_left) -> None:
         lost_node = surviving.sims[lost].node
         start = time.perf_counter()
         cluster.remove_worker(cluster.worker_node(victim))
-        _, _, _, truncated, info = a.step(np.zeros(3, dtype=np.int64))
+        # The sims on the lost node may answer a few more steps before Ray
+        # reports their actors gone (a crashed machine would answer none).
+        zeros = np.zeros(3, dtype=np.int64)
+        while time.perf_counter() - start < 60:
+            _, _, _, truncated, info = a.step(zeros)
+            if "remoteenv_restarted" in info and info["remoteenv_restarted"][lost]:
+                break
         recovered_s = time.perf_counter() - start
         print(
-            f"\nnode {lost_node} removed: sim {lost} relaunched on {surviving.sims[lost].node} "
-            f"and the step returned after {recovered_s:.1f} s"
+            f"\nnode {lost_node} removed: sim {lost} relaunched on {surviving.sims[lost].node}; "
+            f"the step that did it returned {recovered_s:.1f} s after the removal"
         )
         assert truncated[lost] and info["remoteenv_restarted"][lost]
         assert surviving.sims[lost].node_id != victim
         assert surviving.sims[lost].node_id in cluster.alive_node_ids()
         for _ in range(5):
-            a.step(np.zeros(3, dtype=np.int64))
+            a.step(zeros)
         with pytest.raises(SimDiedError, match=lost_node.split(" ")[0]) as caught:
-            for _ in range(50):
-                b.step(np.zeros(3, dtype=np.int64))
+            while time.perf_counter() - start < 60:
+                b.step(zeros)
         assert victim[:12] in str(caught.value)
     finally:
         a.close()
