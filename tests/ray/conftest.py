@@ -37,11 +37,15 @@ class TestCluster:
     """A head and two worker nodes on this machine, and the driver connected to it."""
 
     def __init__(self) -> None:
+        #: The ``pool`` label of each worker node, by node id.
+        self.pools: dict[str, str] = {}
         self.cluster = Cluster(
             initialize_head=True,
             head_node_args={"num_cpus": HEAD_CPUS, "_system_config": FAST_NODE_FAILURE},
         )
-        self.workers = [self.cluster.add_node(num_cpus=WORKER_CPUS) for _ in range(2)]
+        self.workers: list[Any] = []
+        while len(self.workers) < 2:
+            self.workers.append(self._add_worker())
         ray.init(address=self.cluster.address)
         self.cluster.wait_for_nodes()
 
@@ -64,8 +68,15 @@ class TestCluster:
     def restore(self) -> None:
         """Add worker nodes until there are two again."""
         while len(self.workers) < 2:
-            self.workers.append(self.cluster.add_node(num_cpus=WORKER_CPUS))
+            self.workers.append(self._add_worker())
         self.cluster.wait_for_nodes()
+
+    def _add_worker(self) -> Any:
+        """A worker node labelled ``pool=a``, or ``pool=b`` if an ``a`` node is up already."""
+        pool = "b" if "a" in {self.pools[n.node_id] for n in self.workers} else "a"
+        node = self.cluster.add_node(num_cpus=WORKER_CPUS, labels={"pool": pool})
+        self.pools[node.node_id] = pool
+        return node
 
     def shutdown(self) -> None:
         ray.shutdown()

@@ -51,6 +51,15 @@ def test_strict_spread_beyond_the_node_count_is_refused_clearly(cluster) -> None
         RemoteVectorEnv(remoteenv.scene_path("cartpole"), 4, envs_per_process=1, launcher=launcher, startup_timeout=3.0)
 
 
+def test_a_label_selector_keeps_sims_on_the_labelled_node(cluster) -> None:
+    launcher = RayLauncher(strategy="SPREAD", num_cpus_per_process=0.5, label_selector={"pool": "b"})
+    envs = RemoteVectorEnv(remoteenv.scene_path("cartpole"), 2, envs_per_process=1, launcher=launcher)
+    try:
+        assert [cluster.pools.get(n) for n in launcher.node_ids] == ["b", "b"]
+    finally:
+        envs.close()
+
+
 def test_lock_step_trajectories_equal_a_local_launch(cluster) -> None:
     local = gym.make_vec(REACHER, num_envs=4, vectorization_mode="vector_entry_point", envs_per_process=2)
     remote = gym.make_vec(

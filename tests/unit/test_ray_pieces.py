@@ -10,9 +10,12 @@ import pytest
 
 import remoteenv
 from remoteenv.agent.sim_command import scene_command
+from remoteenv.agent.sim_group import SimGroup, SimHandle
+from remoteenv.ray import RayLauncher
 from remoteenv.ray.launcher import scene_on_nodes
 from remoteenv.ray.placement import STRATEGIES, Placement
 from remoteenv.ray.sim_actor import resolve_scene
+from remoteenv.ray.sim_handle import RaySim
 
 
 @pytest.mark.parametrize("strategy", STRATEGIES)
@@ -107,3 +110,28 @@ def test_without_curve_a_sim_is_never_allowed_beyond_loopback() -> None:
         allow_remote=True,
     )
     assert "--allow-remote" not in cmd and "--curve-secret-key-file" not in cmd and "--seed" not in cmd
+
+
+def test_the_ray_launcher_has_the_sim_group_shape_and_starts_nothing_until_asked() -> None:
+    launcher = RayLauncher(strategy="SPREAD", num_cpus_per_process=2)
+    assert isinstance(launcher, SimGroup)
+    assert launcher.owns_sims and launcher.layout is None and launcher.sims == []
+    assert launcher.curve_client_keypair is not None  # CURVE is always on
+    launcher.close()
+    assert launcher.closed
+
+
+def test_a_cluster_sim_handle_names_its_node_and_has_no_pipe() -> None:
+    sim = RaySim(
+        instance=2,
+        actor=None,
+        endpoint="tcp://10.0.0.7:4000",
+        pid=99,
+        node_id="ab" * 28,
+        node_ip="10.0.0.7",
+        host="n7",
+        curve_server_key=b"k" * 40,
+        generation=1,
+    )
+    assert isinstance(sim, SimHandle)
+    assert sim.pipe is None and sim.node == "10.0.0.7 (Ray node abababababab)"
