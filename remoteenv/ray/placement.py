@@ -69,9 +69,8 @@ def create_placement_group(placement: Placement, count: int, timeout: float) -> 
 
     Raises :class:`RemoteEnvError` (kind ``"launch"``) naming what was asked
     and what the cluster has free when the reservation cannot be made in time."""
-    from ray.util.placement_group import placement_group, remove_placement_group
-
     import ray
+    from ray.util.placement_group import placement_group, remove_placement_group
 
     selector = None if placement.label_selector is None else [dict(placement.label_selector)] * count
     group = placement_group(

@@ -30,8 +30,8 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any
 
-from remoteenv.agent.sim_process import SimProcess
 from remoteenv.agent.sim_command import scene_command, wait_ready
+from remoteenv.agent.sim_process import SimProcess
 from remoteenv.wire.addresses import is_loopback
 from remoteenv.wire.keys import check_key, write_public_keys, write_secret_key
 

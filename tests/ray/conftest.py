@@ -14,9 +14,8 @@ from typing import Any
 import pytest
 
 try:
-    from ray.cluster_utils import Cluster
-
     import ray
+    from ray.cluster_utils import Cluster
 except ImportError:  # the main test venv has no Ray: skip this folder
     collect_ignore_glob = ["test_*.py"]
     ray = None
