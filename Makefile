@@ -6,7 +6,7 @@ PIP := $(PY) -m pip
 PYTHON3 ?= python3
 export MUJOCO_GL ?= egl
 
-.PHONY: demo test lint bench install deps clean
+.PHONY: demo test test-ray lint bench install deps clean
 
 $(VENV)/.deps: pyproject.toml
 	$(PYTHON3) -m venv $(VENV)
@@ -27,6 +27,11 @@ demo: install
 test: install lint
 	$(VENV)/bin/pytest tests/unit
 	$(VENV)/bin/pytest tests/integration
+	tests/ray/run.sh
+
+# Ray and RLlib tests alone: a venv of their own (.venv-ray), a private network namespace.
+test-ray:
+	tests/ray/run.sh
 
 # Lint, format, types and the layer contracts of the source tree (no processes started).
 lint: deps
@@ -39,4 +44,4 @@ bench: install
 	$(PY) -m remoteenv bench
 
 clean:
-	rm -rf $(VENV) build dist *.egg-info
+	rm -rf $(VENV) .venv-ray build dist *.egg-info
