@@ -23,6 +23,7 @@ install: deps
 demo: install
 	$(PY) -m remoteenv demo cartpole --continuous --episodes 3
 	$(PY) -m remoteenv demo reacher --episodes 3
+	$(PY) -m remoteenv demo hexapod --episodes 1
 
 test: install lint
 	$(VENV)/bin/pytest tests/unit
