@@ -21,16 +21,18 @@ import numpy as np
 
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.latency import LatencyStats
+from remoteenv.agent.pausing import Pausable, Pauser
 from remoteenv.agent.restart import RestartBudget, restarted_info
 from remoteenv.agent.session import SimSession, choose_group, scene_label
 from remoteenv.agent.sim_group import LaunchSpec, SimGroup
 from remoteenv.wire.actions import check_action
+from remoteenv.wire.delays import DelaySpec
 from remoteenv.wire.handshake import Handshake
 
 __all__ = ["OpenAIRemoteEnv", "check_action"]
 
 
-class OpenAIRemoteEnv(gym.Env):
+class OpenAIRemoteEnv(Pausable, gym.Env):
     """A Gymnasium env served by a sim process that this env launches.
 
     Usually created with ``gymnasium.make("remoteenv/CartPole-v0", ...)``;
@@ -42,7 +44,14 @@ class OpenAIRemoteEnv(gym.Env):
         render_mode: ``"rgb_array"`` renders offscreen in the sim process.
         real_time: run the sim on a paced wall clock (see README, real time).
         real_time_factor: simulated seconds per wall-clock second.
-        action_delay: lock-step; an action takes effect this many ticks later.
+        action_delay: lock-step; an action takes effect this many ticks later:
+            an int, or a :mod:`remoteenv.delays` spec in ticks (e.g.
+            ``Uniform(0, 3)``), drawn per step from a stream seeded by
+            ``reset(seed=...)`` (see ``docs/latency.md``).
+        obs_delay: lock-step; the step returns the newest observation that has
+            arrived, observations arriving this many ticks late (int or spec).
+        link_delay: real time; an emulated network's extra delay per action,
+            in wall seconds (a number, or a spec with ``unit="s"`` for jitter).
         seed: seed of the sim's RNG until the first ``reset(seed=...)``.
         transport: how this env talks to its sim: ``"pipe"`` (default: a Unix
             socketpair the launcher hands the sim; the fastest), or ZeroMQ over
@@ -76,6 +85,10 @@ class OpenAIRemoteEnv(gym.Env):
             :meth:`attach` for other instances). The launch options above are
             then ignored, and ``close`` leaves the sim running.
 
+    Real time: :meth:`pause`, :meth:`resume` and ``with env.unwrapped.paused():``
+    stop the sim's clock between steps (no-ops in lock-step; see
+    :mod:`remoteenv.agent.pausing`).
+
     Attributes:
         latency_stats: :class:`remoteenv.agent.latency.LatencyStats` of every step so
             far: action latency (mean/p50/p99/max, seconds and ticks), wall
@@ -94,7 +107,9 @@ class OpenAIRemoteEnv(gym.Env):
         *,
         real_time: bool = False,
         real_time_factor: float = 1.0,
-        action_delay: int = 0,
+        action_delay: int | DelaySpec = 0,
+        obs_delay: int | DelaySpec = 0,
+        link_delay: float | DelaySpec | None = None,
         seed: int | None = None,
         transport: str = "pipe",
         timeout: float | None = 60.0,
@@ -136,6 +151,8 @@ class OpenAIRemoteEnv(gym.Env):
                 real_time=real_time,
                 real_time_factor=real_time_factor,
                 action_delay=action_delay,
+                obs_delay=obs_delay,
+                link_delay=link_delay,
                 startup_timeout=startup_timeout,
             )
         )
@@ -157,6 +174,7 @@ class OpenAIRemoteEnv(gym.Env):
         #: Simulated seconds per step.
         self.dt: float = hs.dt
         self._timed_steps = hs.timed_steps
+        self._pauser = Pauser(self._session)
 
     @classmethod
     def attach(cls, launch_info: str | os.PathLike[str], instance: int = 0, **kwargs: Any) -> OpenAIRemoteEnv:

@@ -33,6 +33,7 @@ from gymnasium.vector.utils import batch_space, iterate
 from remoteenv.agent.autoreset import after_reset, after_step, plan_ops
 from remoteenv.agent.errors import RemoteEnvError, StateError
 from remoteenv.agent.latency import LatencyStats
+from remoteenv.agent.pausing import Pausable, Pauser
 from remoteenv.agent.reset_args import is_int_seed, split_reset_mask, world_seeds
 from remoteenv.agent.restart import RestartBudget, restarted_info
 from remoteenv.agent.session import SimSession, choose_group, scene_label
@@ -41,6 +42,7 @@ from remoteenv.agent.vector_requests import VectorRequests
 from remoteenv.agent.vector_results import ObsBatch, assemble
 from remoteenv.wire.actions import check_actions
 from remoteenv.wire.batch import merge_infos
+from remoteenv.wire.delays import DelaySpec
 from remoteenv.wire.handshake import Handshake
 
 
@@ -61,7 +63,7 @@ def default_envs_per_process(num_envs: int) -> int:
     return min(num_envs, max(8, per_cpu))
 
 
-class RemoteVectorEnv(VectorEnv):
+class RemoteVectorEnv(Pausable, VectorEnv):
     """``num_envs`` worlds of one scene in sim processes, with Gymnasium 1.x vector semantics.
 
     Usually created with ``gymnasium.make_vec("remoteenv/Reacher-v0",
@@ -87,10 +89,11 @@ class RemoteVectorEnv(VectorEnv):
         max_episode_steps: truncate an episode after this many steps (what
             ``TimeLimit`` does for single envs; ``make_vec`` passes the spec's).
         render_mode: ``"rgb_array"``: :meth:`render` returns one frame per world.
-        real_time, real_time_factor, action_delay, transport, timeout,
+        real_time, real_time_factor, action_delay, obs_delay, link_delay, transport, timeout,
         startup_timeout, call_timeouts, bind_host, curve: as for
             :class:`remoteenv.OpenAIRemoteEnv`; ``timeout`` (or the call's entry
-            in ``call_timeouts``) bounds the wait for all replies of one vector call.
+            in ``call_timeouts``) bounds the wait for all replies of one vector call;
+            each world draws its own delays. ``pause()``/``resume()``/``paused()`` likewise.
         seed: seeds world ``i``'s RNG with ``seed + i`` until the first
             ``reset(seed=...)``.
         restart_on_failure, max_restarts: relaunch a sim process that dies or
@@ -130,7 +133,9 @@ class RemoteVectorEnv(VectorEnv):
         render_mode: str | None = None,
         real_time: bool = False,
         real_time_factor: float = 1.0,
-        action_delay: int = 0,
+        action_delay: int | DelaySpec = 0,
+        obs_delay: int | DelaySpec = 0,
+        link_delay: float | DelaySpec | None = None,
         seed: int | None = None,
         transport: str = "pipe",
         timeout: float | None = 60.0,
@@ -193,6 +198,8 @@ class RemoteVectorEnv(VectorEnv):
                 real_time=real_time,
                 real_time_factor=real_time_factor,
                 action_delay=action_delay,
+                obs_delay=obs_delay,
+                link_delay=link_delay,
                 startup_timeout=startup_timeout,
             )
         )
@@ -220,6 +227,7 @@ class RemoteVectorEnv(VectorEnv):
             same_step=self.autoreset_mode == AutoresetMode.SAME_STEP,
         )
         self.latency_stats = LatencyStats()
+        self._pauser = Pauser(self._session)
         n = self.num_envs
         self._elapsed = np.zeros(n, dtype=np.int64)
         self._autoreset = np.zeros(n, dtype=np.bool_)

@@ -312,6 +312,8 @@ class Launcher:
             real_time=spec.real_time,
             real_time_factor=spec.real_time_factor,
             action_delay=spec.action_delay,
+            obs_delay=spec.obs_delay,
+            link_delay=spec.link_delay,
             curve_files=curve_files,
             allow_remote=self.remote,
             extra_args=self.extra_args,

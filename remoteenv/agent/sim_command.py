@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from typing import Any, Protocol
 
 from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.wire.delays import DelaySpec
 
 
 def scene_command(
@@ -32,7 +33,9 @@ def scene_command(
     render_mode: str | None = None,
     real_time: bool = False,
     real_time_factor: float = 1.0,
-    action_delay: int = 0,
+    action_delay: int | DelaySpec = 0,
+    obs_delay: int | DelaySpec = 0,
+    link_delay: float | DelaySpec | None = None,
     curve_files: tuple[str, str] | None = None,
     allow_remote: bool = False,
     extra_args: Sequence[str] = (),
@@ -71,9 +74,24 @@ def scene_command(
         cmd += ["--render-mode", render_mode]
     if real_time:
         cmd += ["--real-time", "--real-time-factor", repr(float(real_time_factor))]
-    if action_delay:
-        cmd += ["--action-delay", str(int(action_delay))]
+    cmd += delay_arguments(action_delay, obs_delay, link_delay)
     return cmd + list(extra_args)
+
+
+def delay_arguments(
+    action_delay: int | DelaySpec = 0, obs_delay: int | DelaySpec = 0, link_delay: float | DelaySpec | None = None
+) -> list[str]:
+    """The scene arguments of the delays: ``--action-delay``/``--obs-delay`` (ticks)
+    and ``--link-delay`` (seconds), a number as is and a spec as its wire form in
+    JSON (see :mod:`remoteenv.sim.scene_main`); none for a delay that is always 0."""
+    args: list[str] = []
+    for flag, value in (("--action-delay", action_delay), ("--obs-delay", obs_delay), ("--link-delay", link_delay)):
+        if isinstance(value, DelaySpec):
+            if not value.is_zero:
+                args += [flag, json.dumps(value.to_wire())]
+        elif value:
+            args += [flag, json.dumps(float(value) if flag == "--link-delay" else int(value))]
+    return args
 
 
 class StartingSim(Protocol):

@@ -32,7 +32,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
+from remoteenv.agent.sim_command import delay_arguments
 from remoteenv.agent.sim_connection import SimConnection
+from remoteenv.wire.delays import SECONDS, TICKS, DelaySpec, as_delay
 from remoteenv.wire.keys import KeyPair
 
 
@@ -51,7 +53,11 @@ class LaunchSpec:
         render_mode: passed to the scene's env.
         real_time: run each sim on a paced wall clock.
         real_time_factor: simulated seconds per wall-clock second.
-        action_delay: lock-step; an action takes effect this many ticks later.
+        action_delay: lock-step; an action takes effect this many ticks later
+            (an int, or a :mod:`remoteenv.delays` spec in ticks).
+        obs_delay: lock-step; observations arrive this many ticks late (the same).
+        link_delay: real time; emulated extra link delay per action in wall
+            seconds (a number, or a spec with ``unit="s"``); None: none.
         startup_timeout: seconds to wait for each sim to start (and, by
             default, to answer the handshake).
     """
@@ -64,7 +70,9 @@ class LaunchSpec:
     render_mode: str | None = None
     real_time: bool = False
     real_time_factor: float = 1.0
-    action_delay: int = 0
+    action_delay: int | DelaySpec = 0
+    obs_delay: int | DelaySpec = 0
+    link_delay: float | DelaySpec | None = None
     startup_timeout: float = 60.0
 
     def __post_init__(self) -> None:
@@ -72,10 +80,27 @@ class LaunchSpec:
         object.__setattr__(self, "env_kwargs", dict(self.env_kwargs))
         if self.num_instances < 1 or self.worlds_per_instance < 1:
             raise ValueError("num_instances and worlds_per_instance must be >= 1")
+        # Checked here so a bad delay fails in the agent, before any process starts.
+        lock_step_delayed = not (as_delay(self.action_delay, TICKS).is_zero and as_delay(self.obs_delay, TICKS).is_zero)
+        link_delayed = self.link_delay is not None and not as_delay(self.link_delay, SECONDS).is_zero
+        if self.real_time and lock_step_delayed:
+            raise ValueError(
+                "action_delay and obs_delay are lock-step's reproducible twin of real_time; use one or the "
+                "other (an emulated link in real time is link_delay)"
+            )
+        if link_delayed and not self.real_time:
+            raise ValueError(
+                "link_delay emulates a network in real time (real_time=True); in lock-step use action_delay/obs_delay"
+            )
         try:
             json.dumps(self.env_kwargs)
         except TypeError as exc:
             raise TypeError(f"env kwargs must be JSON-serializable to reach the scene: {exc}") from None
+
+    def delay_arguments(self) -> list[str]:
+        """The scene command-line arguments of the delays (ints as ints, specs as
+        their wire form in JSON); empty without delays."""
+        return delay_arguments(self.action_delay, self.obs_delay, self.link_delay)
 
     def instance_seed(self, instance: int) -> int | None:
         """The seed of sim ``instance`` (of its world 0), or None."""

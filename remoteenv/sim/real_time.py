@@ -25,6 +25,24 @@ Semantics:
   and a pending or later ``step`` is answered at once with ``terminated``.
 - Before the first reset, and while frozen, nothing advances.
 
+Emulated link: with ``link_delay`` (seconds: a number or a
+:class:`~remoteenv.wire.delays.DelaySpec` with ``unit="s"``, e.g.
+``Uniform(0.005, 0.015, unit="s")`` for jitter) every arriving action is
+held back by a delay drawn for it, on top of the real one, before it can
+take effect at the next substep: the extra round trip of a longer network,
+put on the action's way in (its reply, sent once the action was in force,
+is late by the same amount). Draws come from the link stream
+(:data:`~remoteenv.wire.delay_line.LINK_STREAM`), seeded by
+``reset(seed=...)`` (else by the launch seed, else OS entropy). A newer
+request supersedes one still held back, so an older action never overrides
+a newer one.
+
+Pause: :meth:`RealTimeStepping.pause` stops every world's clock: no substep
+runs, the held action stays, and on :meth:`RealTimeStepping.resume` every
+deadline (and the arrival time of a request still waiting) shifts by the
+paused wall time, so the pause counts in no pacing, arrival-to-application
+or latency figure.
+
 One clock per process: with several worlds (``--worlds K``) each world runs
 its own episode on the same wall clock, its deadlines counted from its own
 reset, each with its own held action.
@@ -44,7 +62,9 @@ seconds unless noted):
                       effect.
 ``apply_delay_s``     wall seconds from the request's arrival at its world
                       (once decoded and checked) to the substep where it
-                      took effect.
+                      took effect, the emulated link delay included.
+``link_delay_s``      the emulated link delay drawn for this step's action
+                      (wall seconds; 0.0 without ``link_delay``).
 ``pacing_overruns``   running count, for this world since the process
                       started, of substeps that ran more than one substep
                       period (``timestep / factor`` wall seconds) late.
@@ -64,6 +84,8 @@ from typing import Any
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.channels import Channel, Outgoing
 from remoteenv.sim.checks import RequestError
+from remoteenv.wire.delay_line import LINK_STREAM, DelayStream
+from remoteenv.wire.delays import SECONDS, DelaySpec, as_delay
 from remoteenv.wire.errors import SCENE
 from remoteenv.wire.protocol import error_reply
 from remoteenv.wire.stats import RunningStats
@@ -81,6 +103,7 @@ class _PendingStep:
     seq: int
     action: Any
     arrived: float  # clock time when the request was handed over
+    link_delay: float = 0.0  # emulated link: wall seconds it is held back after arriving
     applied_sim_time: float | None = None
     apply_delay_s: float | None = None
 
@@ -92,9 +115,20 @@ class RealTimeStepper:
         env: the world.
         real_time_factor: simulated seconds per wall-clock second (> 0).
         clock: where wall time comes from (seconds, monotonic).
+        link_delay: emulated extra link delay per action (wall seconds, a
+            number or a spec in seconds); None or 0: none.
+        seed: the world's launch seed: seeds the link stream at the first
+            reset when that reset brings no seed (None: OS entropy).
     """
 
-    def __init__(self, env: BaseEnv, real_time_factor: float = 1.0, clock: Clock = time.monotonic) -> None:
+    def __init__(
+        self,
+        env: BaseEnv,
+        real_time_factor: float = 1.0,
+        clock: Clock = time.monotonic,
+        link_delay: DelaySpec | float | None = None,
+        seed: int | None = None,
+    ) -> None:
         factor = float(real_time_factor)
         if not (math.isfinite(factor) and factor > 0):
             raise ValueError(f"real_time_factor must be a finite number > 0, got {real_time_factor!r}")
@@ -122,6 +156,14 @@ class RealTimeStepper:
         self._obs_time = 0.0
         self._info: dict[str, Any] = {}
         self._failure = ""
+        link = as_delay(0.0 if link_delay is None else link_delay, SECONDS)
+        #: The emulated link delay's draws (None: no emulated link).
+        self.link: DelayStream | None = None if link.is_zero else DelayStream(link, LINK_STREAM)
+        #: Emulated link delays drawn (wall seconds).
+        self.link_delay = RunningStats()
+        self._launch_seed = seed
+        self._seeded = False
+        self._paused_at: float | None = None
 
     # ------------------------------------------------------------ queries
 
@@ -138,12 +180,21 @@ class RealTimeStepper:
         """Reset but the clock not yet started (its reply is not sent yet)."""
         return self.state == _READY
 
+    @property
+    def paused(self) -> bool:
+        return self._paused_at is not None
+
     def next_deadline(self) -> float | None:
         """Clock time at which the next substep boundary is due (None: nothing runs)."""
-        return self._t0 + self._n * self.period if self.state == _RUNNING else None
+        if self.state != _RUNNING or self._paused_at is not None:
+            return None
+        return self._t0 + self._n * self.period
 
     def describe(self) -> dict[str, Any]:
-        return {"mode": "real_time", "real_time_factor": self.factor, "action_delay": 0}
+        out: dict[str, Any] = {"mode": "real_time", "real_time_factor": self.factor, "action_delay": 0}
+        if self.link is not None:
+            out["link_delay_spec"] = self.link.spec.to_wire()
+        return out
 
     def timing(self) -> dict[str, Any]:
         """Pacing figures of this world (wall seconds)."""
@@ -153,11 +204,13 @@ class RealTimeStepper:
             "overruns": self.overruns,
             "substeps": self.substeps,
             "period_s": self.period,
+            "link_delay_s": self.link_delay.summary(),
         }
 
     def clear_timing(self) -> None:
         self.pacing_error.clear()
         self.apply_delay.clear()
+        self.link_delay.clear()
         self.overruns = 0
         self.substeps = 0
 
@@ -166,6 +219,12 @@ class RealTimeStepper:
     def reset(self, *, seed: int | None, options: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
         """Synchronous reset; the clock starts with :meth:`start` once the reply is sent."""
         obs, info = self.env.reset(seed=seed, options=options)
+        if self.link is not None:
+            if seed is None and not self._seeded:
+                seed = self._launch_seed
+            if seed is not None:
+                self.link.seed(seed)
+                self._seeded = True
         self.state = _READY
         self._held = self.env.default_action()
         self._pending = None
@@ -183,6 +242,27 @@ class RealTimeStepper:
             self._t0 = now
             self._n = 0
             self.state = _RUNNING
+            if self._paused_at is not None:  # starts paused: its clock runs from the resume
+                self._paused_at = now
+
+    def pause(self, now: float) -> None:
+        """Stop this world's clock at ``now`` (idempotent): no substep runs until :meth:`resume`."""
+        if self._paused_at is None:
+            self._paused_at = now
+
+    def resume(self, now: float) -> float:
+        """Restart the clock where it stopped; returns the paused wall seconds.
+
+        Every deadline and a waiting request's arrival shift by the pause, so
+        it counts in no timing figure."""
+        if self._paused_at is None:
+            return 0.0
+        paused = max(0.0, now - self._paused_at)
+        self._paused_at = None
+        self._t0 += paused
+        if self._pending is not None:
+            self._pending.arrived += paused
+        return paused
 
     def submit(self, seq: int, action: Any, channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
         """A checked ``step`` request; its arrival time is read from the clock now.
@@ -197,6 +277,9 @@ class RealTimeStepper:
         pending = _PendingStep(channel, reply_to, seq, action, self.clock())
         if self.state == _FROZEN:
             return self._reply(pending, terminated=True)
+        if self.link is not None:
+            pending.link_delay = float(self.link.draw())
+            self.link_delay.add(pending.link_delay)
         # A newer request supersedes one still pending: its sender gave up on it.
         self._pending = pending
         return None
@@ -244,7 +327,7 @@ class RealTimeStepper:
                 self.state = _FROZEN
                 return out
         pending = self._pending
-        if pending is not None and pending.applied_sim_time is None:
+        if pending is not None and pending.applied_sim_time is None and now >= pending.arrived + pending.link_delay:
             env.prepare_step(pending.action)
             self._held = pending.action
             pending.applied_sim_time = float(env.data.time)
@@ -272,6 +355,7 @@ class RealTimeStepper:
             latency_ticks=None if latency is None else latency / dt,
             late=applied is None or self._ticks > 1,
             apply_delay_s=pending.apply_delay_s,
+            link_delay_s=pending.link_delay,
             pacing_overruns=self.overruns,
         )
         reply = {
@@ -296,11 +380,30 @@ class RealTimeStepping:
         envs: the worlds, one :class:`RealTimeStepper` each.
         real_time_factor: simulated seconds per wall-clock second (> 0).
         clock: where wall time comes from (seconds, monotonic).
+        link_delay: emulated extra link delay per action (wall seconds; see
+            :class:`RealTimeStepper`); each world draws from its own stream.
+        seed: launch seed of world 0 (world ``w``: ``seed + w``) for the link streams.
     """
 
-    def __init__(self, envs: Sequence[BaseEnv], real_time_factor: float = 1.0, clock: Clock = time.monotonic) -> None:
+    def __init__(
+        self,
+        envs: Sequence[BaseEnv],
+        real_time_factor: float = 1.0,
+        clock: Clock = time.monotonic,
+        link_delay: DelaySpec | float | None = None,
+        seed: int | None = None,
+    ) -> None:
         self.clock = clock
-        self._worlds = [RealTimeStepper(env, real_time_factor=real_time_factor, clock=clock) for env in envs]
+        self._worlds = [
+            RealTimeStepper(
+                env,
+                real_time_factor=real_time_factor,
+                clock=clock,
+                link_delay=link_delay,
+                seed=None if seed is None else seed + w,
+            )
+            for w, env in enumerate(envs)
+        ]
 
     @property
     def worlds(self) -> list[RealTimeStepper]:
@@ -342,6 +445,21 @@ class RealTimeStepping:
             for w in self._worlds:
                 w.clear_timing()
         return reply
+
+    def pause(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        """The ``pause`` command: stop every world's clock; ``sim_time`` per world (s)."""
+        now = self.clock()
+        for w in self._worlds:
+            w.pause(now)
+        return {"sim_time": [float(w.env.data.time) for w in self._worlds]}
+
+    def resume(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        """The ``resume`` command: restart the clocks; ``sim_time`` per world (s, unchanged
+        since the pause) and ``paused_s``, the wall seconds the clocks stood still
+        (0.0 if they were not paused)."""
+        now = self.clock()
+        paused = [w.resume(now) for w in self._worlds]
+        return {"sim_time": [float(w.env.data.time) for w in self._worlds], "paused_s": max(paused, default=0.0)}
 
 
 __all__ = ["Clock", "RealTimeStepper", "RealTimeStepping"]

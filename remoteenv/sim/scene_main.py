@@ -10,7 +10,35 @@ from typing import Any
 
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.server import RemoteControlledAgent
+from remoteenv.wire.delays import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
+from remoteenv.wire.errors import ProtocolError, short_repr
 from remoteenv.wire.keys import read_key, read_keys
+
+
+def _delay_argument(text: str, unit: str) -> DelaySpec:
+    """A delay given on the command line: a number, or a spec's wire form as JSON."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        raise argparse.ArgumentTypeError(f"not a number nor JSON: {short_repr(text)}") from None
+    try:
+        if isinstance(value, dict):
+            return as_delay(delay_from_wire(value), unit)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"expected a number or a map, got {short_repr(value)}")
+        return as_delay(value, unit)
+    except (ProtocolError, ValueError) as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def tick_delay_argument(text: str) -> DelaySpec:
+    """``--action-delay``/``--obs-delay``: ticks, an int or a JSON spec."""
+    return _delay_argument(text, TICKS)
+
+
+def seconds_delay_argument(text: str) -> DelaySpec:
+    """``--link-delay``: seconds, a number or a JSON spec."""
+    return _delay_argument(text, SECONDS)
 
 
 def scene_argument_parser(description: str | None = None) -> argparse.ArgumentParser:
@@ -33,7 +61,23 @@ def scene_argument_parser(description: str | None = None) -> argparse.ArgumentPa
         "--real-time-factor", type=float, default=1.0, help="simulated seconds per wall-clock second in real-time mode"
     )
     p.add_argument(
-        "--action-delay", type=int, default=0, help="lock-step: an action takes effect this many control ticks later"
+        "--action-delay",
+        type=tick_delay_argument,
+        default=0,
+        help="lock-step: an action takes effect this many control ticks later: an int, or a delay "
+        'spec\'s wire form as JSON, e.g. \'{"kind": "uniform", "unit": "ticks", "low": 0, "high": 3}\'',
+    )
+    p.add_argument(
+        "--obs-delay",
+        type=tick_delay_argument,
+        default=0,
+        help="lock-step: observations arrive this many control ticks late (int or JSON spec, as --action-delay)",
+    )
+    p.add_argument(
+        "--link-delay",
+        type=seconds_delay_argument,
+        default=None,
+        help="real time: emulated extra link delay per action, wall seconds (a number or a JSON spec with unit s)",
     )
     p.add_argument("--parent-pid", type=int, default=None, help="exit when this process stops being our parent")
     p.add_argument("--ready-file", default=None, help="write the bound endpoint here as JSON")
@@ -93,6 +137,9 @@ def run_scene(
         real_time=args.real_time,
         real_time_factor=args.real_time_factor,
         action_delay=args.action_delay,
+        obs_delay=args.obs_delay,
+        link_delay=args.link_delay,
+        seed=args.seed,
         allow_remote=args.allow_remote,
         curve_secret_key=secret,
         curve_client_keys=client_keys,

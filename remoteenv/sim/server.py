@@ -36,6 +36,7 @@ from remoteenv.sim.real_time import Clock, RealTimeStepping
 from remoteenv.sim.stepping import Stepping
 from remoteenv.wire import protocol
 from remoteenv.wire.addresses import is_loopback
+from remoteenv.wire.delays import DelaySpec
 from remoteenv.wire.errors import INVALID_ACTION, PROTOCOL, SCENE, InvalidAction, short_repr
 from remoteenv.wire.hot_wait import HotWait
 
@@ -61,8 +62,12 @@ class RemoteControlledAgent:
         real_time, real_time_factor: run physics paced to the wall clock
             (:mod:`remoteenv.sim.real_time`); the factor is simulated seconds
             per wall-clock second.
-        action_delay: lock-step only: control ticks between an action's
-            arrival and its effect (:mod:`remoteenv.sim.lock_step`).
+        action_delay, obs_delay: lock-step only: delays (control ticks, an int
+            or a spec) of actions and observations (:mod:`remoteenv.sim.lock_step`).
+        link_delay: real time only: emulated extra link delay per action (wall
+            seconds, a number or a spec; :mod:`remoteenv.sim.real_time`).
+        seed: launch seed of world 0 (world ``w``: ``seed + w``), seeding the
+            delay streams until a reset brings a seed.
         allow_remote: permit binding a non-loopback interface.
         curve_secret_key: this server's Z85 CURVE secret key; turns on CURVE
             encryption (required beyond loopback).
@@ -87,7 +92,10 @@ class RemoteControlledAgent:
         ready_file: str | None = None,
         real_time: bool = False,
         real_time_factor: float = 1.0,
-        action_delay: int = 0,
+        action_delay: DelaySpec | int = 0,
+        obs_delay: DelaySpec | int = 0,
+        link_delay: DelaySpec | float | None = None,
+        seed: int | None = None,
         allow_remote: bool = False,
         curve_secret_key: bytes | None = None,
         curve_client_keys: list[bytes] | None = None,
@@ -115,6 +123,9 @@ class RemoteControlledAgent:
             real_time=real_time,
             real_time_factor=real_time_factor,
             action_delay=action_delay,
+            obs_delay=obs_delay,
+            link_delay=link_delay,
+            seed=seed,
             clock=clock,
         )
         common = Commands(envs, self.stepping, instance, self.stop)
@@ -338,17 +349,27 @@ def _stepping_and_commands(
     *,
     real_time: bool,
     real_time_factor: float,
-    action_delay: int,
+    action_delay: DelaySpec | int,
+    obs_delay: DelaySpec | int,
+    link_delay: DelaySpec | float | None,
+    seed: int | None,
     clock: Clock,
 ) -> tuple[Stepping, dict[str, Handler]]:
     """The stepping of the requested mode and the commands only that mode answers:
-    ``timing`` in real time, ``reset_batch`` and ``step_batch`` in lock-step."""
+    ``timing``, ``pause`` and ``resume`` in real time, ``reset_batch`` and
+    ``step_batch`` in lock-step."""
     if real_time:
-        if action_delay:
-            raise ValueError("action_delay is the lock-step twin of real_time; use one or the other")
-        real = RealTimeStepping(envs, real_time_factor=real_time_factor, clock=clock)
-        return real, {"timing": real.timing}
-    lock = LockStepping(envs, action_delay=action_delay)
+        for name, value in (("action_delay", action_delay), ("obs_delay", obs_delay)):
+            if isinstance(value, DelaySpec) and not value.is_zero or not isinstance(value, DelaySpec) and value:
+                raise ValueError(
+                    f"{name} is lock-step's reproducible twin of real_time; use one or the other "
+                    "(an emulated link in real time is link_delay)"
+                )
+        real = RealTimeStepping(envs, real_time_factor=real_time_factor, clock=clock, link_delay=link_delay, seed=seed)
+        return real, {"timing": real.timing, "pause": real.pause, "resume": real.resume}
+    if link_delay:
+        raise ValueError("link_delay emulates a network in real time; in lock-step use action_delay/obs_delay")
+    lock = LockStepping(envs, action_delay=action_delay, obs_delay=obs_delay, seed=seed)
     batch = BatchCommands(lock.worlds, envs[0].action_space, instance)
     return lock, {"reset_batch": batch.reset_batch, "step_batch": batch.step_batch}
 

@@ -65,8 +65,10 @@ class Handshake:
     frame_skip: int | None = None
     #: ``LOCK_STEP`` or ``REAL_TIME``.
     stepping_mode: str = LOCK_STEP
-    #: Lock-step: ticks by which an action's effect is delayed.
+    #: Lock-step: ticks by which an action's effect is delayed (the largest, for a random model).
     action_delay: int = 0
+    #: Lock-step: ticks by which observations are delayed (the largest).
+    obs_delay: int = 0
     #: Real time: simulated seconds per wall-clock second (None in lock-step).
     real_time_factor: float | None = None
     #: Every command the server answers, if its reply lists them.
@@ -80,8 +82,8 @@ class Handshake:
 
     @property
     def timed_steps(self) -> bool:
-        """True when step replies carry timing keys (real time, or an action delay)."""
-        return self.real_time or self.action_delay > 0
+        """True when step replies carry timing keys (real time, or a lock-step delay)."""
+        return self.real_time or self.action_delay > 0 or self.obs_delay > 0
 
     def offers(self, cmd: str) -> bool:
         """Whether the server answers ``cmd``: as its ``commands`` list says, or
@@ -157,6 +159,7 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
         frame_skip=_typed(meta, "frame_skip", int, "metadata "),
         stepping_mode=_typed(stepping, "mode", str, "stepping ") or LOCK_STEP,
         action_delay=_typed(stepping, "action_delay", int, "stepping ") or 0,
+        obs_delay=_typed(stepping, "obs_delay", int, "stepping ") or 0,
         real_time_factor=None if rtf is None else float(rtf),
         commands=None if commands is None else frozenset(commands),
         raw=reply,
