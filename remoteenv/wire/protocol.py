@@ -51,7 +51,12 @@ command the server answers; a client that finds no such field assumes
 ``"lock_step"`` and ``timing`` exactly when it is ``"real_time"``. ``metadata`` holds ``render_modes``, ``render_fps``,
 ``dt`` (seconds of simulated time per env step), ``timestep`` (seconds per
 physics substep) and ``frame_skip``; ``stepping`` holds ``mode``
-(``"lock_step"`` or ``"real_time"``) and that mode's parameters.
+(``"lock_step"`` or ``"real_time"``) and that mode's parameters: in lock-step
+``action_delay`` (ticks; the largest of a random model) and, with delays
+beyond a constant action delay, ``obs_delay`` (the largest, ticks),
+``action_delay_spec`` and ``obs_delay_spec`` (the models' wire forms, see
+:mod:`remoteenv.wire.delays`); in real time ``real_time_factor`` and, with an
+emulated link, ``link_delay_spec``.
 
 ``reset`` ``{"world": int, "seed": int | nil, "options": map | nil}`` ->
 ``{"obs", "info"}``.
@@ -66,9 +71,19 @@ physics substep) and ``frame_skip``; ``stepping`` holds ``mode``
 ``timing`` ``{"clear": bool}`` -> ``{"worlds": [map, ...]}`` (real-time sims
 only): per world, ``pacing_error_s`` and ``apply_delay_s`` summaries
 (``count``, ``mean``, ``p50``, ``p99``, ``max``, wall seconds), ``overruns``,
-``substeps``, ``period_s``; ``clear`` resets them after replying. In real
-time a ``step`` reply is sent when its action has been in force for one
-control tick (see :mod:`remoteenv.sim.real_time`).
+``substeps``, ``period_s`` (and ``link_delay_s``, the emulated link delays
+drawn, when the reference server emulates one); ``clear`` resets them after
+replying. In real time a ``step`` reply is sent when its action has been in
+force for one control tick (see :mod:`remoteenv.sim.real_time`).
+
+``pause`` ``{}`` -> ``{"sim_time": [float, ...]}`` and ``resume`` ``{}`` ->
+``{"sim_time": [float, ...], "paused_s": float}`` (real-time sims that list
+them in ``commands``): ``pause`` stops every world's clock (no physics runs,
+the held action stays) and replies with each world's sim time; ``resume``
+restarts the clocks with every deadline shifted by the paused wall seconds
+``paused_s`` (0.0 if not paused), so the pause counts in no timing figure.
+Pausing twice or resuming unpaused changes nothing. A ``step`` sent while
+paused is answered after the resume.
 
 ``reset_batch`` ``{"worlds": [int, ...], "seeds": [int | nil, ...] | nil,
 "options": map | nil}`` -> ``{"obs", "info": infos}`` (lock-step sims only):
