@@ -95,10 +95,11 @@ class Pausable:
 
     _pauser: Pauser
 
-    def pause(self) -> None:
+    def pause(self) -> list[float]:
         """Real time: stop the sims' clocks between steps (physics stops, the held
-        action is kept); nothing runs until :meth:`resume`. A no-op in lock-step."""
-        self._pauser.pause()
+        action is kept); nothing runs until :meth:`resume`. Returns every world's
+        sim time (s) at the pause. A no-op in lock-step (returns [])."""
+        return self._pauser.pause()
 
     def resume(self) -> float:
         """Restart the clocks where they stopped, every deadline shifted so the

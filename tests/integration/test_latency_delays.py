@@ -1,0 +1,169 @@
+"""Lock-step delay models against an in-process replay, exactly.
+
+The replay runs the same scene in this process and schedules actions and
+observations by brute force from the rules in ``docs/latency.md`` (the
+newest due action is in force; the newest arrived observation is returned),
+with the delays drawn from the documented streams. It shares no code with
+the sim's delay engine besides the specs' ``sample``.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import remoteenv
+from remoteenv import RemoteVectorEnv
+from remoteenv.delays import Categorical, Constant, Trace, Uniform
+from remoteenv.scenes.reacher.reacher_scene import ReacherEnv
+from remoteenv.wire.delay_line import ACTION_STREAM, OBS_STREAM, delay_rng
+
+STEPS = 30
+DT = 0.02
+
+
+def draws(spec, seed, stream, n):
+    rng = delay_rng(seed, stream)
+    return [int(spec.sample(rng, i)) for i in range(n)]
+
+
+def replay(seed, actions, action_delay, obs_delay):
+    """The documented semantics, by brute force: ``[(obs, reward, info subset)]`` per step."""
+    env = ReacherEnv()
+    d = draws(action_delay, seed, ACTION_STREAM, len(actions))  # d[t - 1]: delay of the action of step t
+    o = draws(obs_delay, seed, OBS_STREAM, len(actions))  # o[n - 1]: delay of x_n
+    x0, _ = env.reset(seed=seed)
+    xs, times = [x0], [0.0]
+    out = []
+    for n in range(1, len(actions) + 1):
+        due = [s for s in range(1, n + 1) if s + d[s - 1] <= n]
+        action = actions[max(due) - 1] if due else env.default_action()
+        x, reward, _, _ = env.step(action)
+        xs.append(x)
+        times.append(float(env.data.time))
+        m = max([0] + [k for k in range(1, n + 1) if k + o[k - 1] <= n])
+        out.append(
+            (
+                xs[m],
+                float(reward),
+                {
+                    "action_delay_ticks": n - max(due) if due else n,
+                    "obs_delay_ticks": n - m,
+                    "obs_sim_time": times[m],
+                },
+            )
+        )
+    return out
+
+
+def actions_for(seed, n=STEPS):
+    rng = np.random.default_rng(seed)
+    return [rng.uniform(-1, 1, size=2).astype(np.float32) for _ in range(n)]
+
+
+def run_single(seed, actions, **delays):
+    env = gym.make("remoteenv/Reacher-v0", max_episode_steps=None, **delays)
+    try:
+        env.reset(seed=seed)
+        return [env.step(a) for a in actions]
+    finally:
+        env.close()
+
+
+def assert_matches(remote, expected):
+    assert len(remote) == len(expected)
+    for t, ((obs, reward, terminated, truncated, info), (x, r, keys)) in enumerate(zip(remote, expected), 1):
+        np.testing.assert_array_equal(obs, x, err_msg=f"step {t}")
+        assert reward == r, f"step {t}"
+        assert not terminated and not truncated
+        for key, value in keys.items():
+            assert info[key] == value, f"step {t}: {key} {info[key]} != {value}"
+
+
+MODELS = {
+    "constant": (Constant(2), Constant(3)),
+    "uniform": (Uniform(0, 3), Uniform(0, 2)),
+    "categorical": (Categorical([0, 2, 5], [0.5, 0.3, 0.2]), Categorical([1, 4])),
+    "trace": (Trace([3, 0, 0, 1, 4, 2]), Trace([0, 2, 1])),
+    "action only": (Uniform(1, 4), 0),
+    "obs only": (0, Uniform(0, 3)),
+}
+
+
+@pytest.mark.parametrize("model", list(MODELS))
+def test_every_delay_model_matches_the_in_process_replay_exactly(model):
+    action_delay, obs_delay = MODELS[model]
+    seed = 21
+    actions = actions_for(seed)
+    remote = run_single(seed, actions, action_delay=action_delay, obs_delay=obs_delay)
+    as_spec = [Constant(v) if isinstance(v, int) else v for v in (action_delay, obs_delay)]
+    assert_matches(remote, replay(seed, actions, *as_spec))
+
+
+def test_batched_worlds_draw_their_own_delays_seeded_per_world():
+    """Four worlds in two processes of two (step_batch): world i is the replay with seed + i."""
+    action_delay, obs_delay = Uniform(0, 3), Categorical([0, 1, 3])
+    seed = 40
+    env = RemoteVectorEnv(
+        remoteenv.scene_path("reacher"),
+        num_envs=4,
+        envs_per_process=2,
+        action_delay=action_delay,
+        obs_delay=obs_delay,
+    )
+    try:
+        assert env.envs_per_process == 2
+        env.reset(seed=seed)
+        rng = np.random.default_rng(3)
+        batch = [rng.uniform(-1, 1, size=(4, 2)).astype(np.float32) for _ in range(20)]
+        steps = [env.step(a) for a in batch]
+    finally:
+        env.close()
+    for w in range(4):
+        expected = replay(seed + w, [a[w] for a in batch], action_delay, obs_delay)
+        for t, ((obs, reward, terminated, truncated, infos), (x, r, keys)) in enumerate(zip(steps, expected), 1):
+            np.testing.assert_array_equal(obs[w], x, err_msg=f"world {w} step {t}")
+            assert reward[w] == r and not terminated[w] and not truncated[w]
+            for key, value in keys.items():
+                assert infos[key][w] == value, f"world {w} step {t}: {key}"
+
+
+def test_same_seed_same_trajectory_in_two_processes_and_another_seed_differs():
+    delays = {"action_delay": Uniform(0, 3), "obs_delay": Uniform(0, 2)}
+    actions = actions_for(5)
+    a = run_single(8, actions, **delays)
+    b = run_single(8, actions, **delays)
+    c = run_single(9, actions, **delays)
+    for (obs_a, rew_a, *_, info_a), (obs_b, rew_b, *_, info_b) in zip(a, b):
+        np.testing.assert_array_equal(obs_a, obs_b)
+        assert rew_a == rew_b
+        assert info_a["action_delay_ticks"] == info_b["action_delay_ticks"]
+        assert info_a["obs_delay_ticks"] == info_b["obs_delay_ticks"]
+    assert [i["obs_delay_ticks"] for *_, i in a] != [i["obs_delay_ticks"] for *_, i in c]
+
+
+def test_a_reset_without_seed_continues_the_streams_and_a_seeded_one_repeats():
+    env = gym.make("remoteenv/Reacher-v0", action_delay=Uniform(0, 5), max_episode_steps=None)
+    try:
+        push = np.ones(2, dtype=np.float32)
+        env.reset(seed=3)
+        first = [env.step(push)[4]["latency_ticks"] for _ in range(15)]
+        env.reset()
+        second = [env.step(push)[4]["latency_ticks"] for _ in range(15)]
+        env.reset(seed=3)
+        again = [env.step(push)[4]["latency_ticks"] for _ in range(15)]
+        hs = env.unwrapped.handshake
+    finally:
+        env.close()
+    assert first == again and first != second
+    assert hs.action_delay == 5 and hs["stepping"]["action_delay_spec"] == Uniform(0, 5).to_wire()
+
+
+def test_the_worked_example_of_the_docs():
+    """``action_delay=2, obs_delay=1``: the table in docs/latency.md."""
+    remote = run_single(0, actions_for(0, 4), action_delay=2, obs_delay=1)
+    rows = [(i["action_delay_ticks"], i["obs_delay_ticks"], i["latency_ticks"]) for *_, i in remote]
+    assert rows == [(1, 1, 2), (2, 1, 3), (2, 1, 3), (2, 1, 3)]
+    assert [i["obs_sim_time"] for *_, i in remote] == pytest.approx([0.0, DT, 2 * DT, 3 * DT])
+    assert remote[0][4]["applied_action"] is None and remote[1][4]["applied_action"] is None
