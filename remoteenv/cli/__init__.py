@@ -9,7 +9,14 @@ import sys
 from collections.abc import Sequence
 
 #: Command name -> module in remoteenv.cli, in the order ``--help`` lists them.
-COMMANDS = {"demo": "demo", "bench": "bench", "keys": "keys_command", "launch": "launch", "check": "check"}
+COMMANDS = {
+    "demo": "demo",
+    "bench": "bench",
+    "keys": "keys_command",
+    "launch": "launch",
+    "check": "check",
+    "latency-sweep": "latency_sweep",
+}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,0 +1,257 @@
+"""``python -m remoteenv latency-sweep``: a policy's return across delays, over seeds.
+
+For every delay in ``--delays`` and every seed in ``--seeds`` it runs
+``--episodes`` episodes of the env with a fixed policy and records each
+episode's return and length. ``--mode`` says what a delay of ``d`` means:
+
+- ``action_delay``: lock-step, ``action_delay=d`` ticks (or, with
+  ``--random``, ``Uniform(0, d)``);
+- ``obs_delay``: lock-step, ``obs_delay=d`` ticks (likewise);
+- ``real_time``: ``real_time=True`` and the agent thinks ``d`` control ticks
+  of wall time (``d * dt`` seconds) before each action, so the latency the
+  world sees is about ``d`` ticks plus the real one (the measured mean is
+  reported as ``latency_ticks``).
+
+Lock-step runs repeat exactly: seed ``s`` seeds the first reset of its run
+(scene and delay streams), later episodes continue the streams.
+
+It writes ``sweep.csv`` (one row per episode), ``sweep.json`` (the
+configuration, the rows and a summary per delay: mean over seeds of each
+seed's mean return, with the spread over seeds) and ``sweep.png`` (mean
+return against delay, the band spanning the seeds' means) into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+#: Builtin controllers (functions of remoteenv.controllers) and the scene each suits.
+BUILTIN_POLICIES = {
+    "cartpole_continuous": "CartPole with continuous=True",
+    "cartpole_discrete": "CartPole (Discrete(2))",
+    "reacher_reach": "Reacher",
+}
+MODES = ("action_delay", "obs_delay", "real_time")
+CSV_FIELDS = ("delay", "seed", "episode", "return", "length", "latency_ticks")
+
+Policy = Callable[[np.ndarray], Any]
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "latency-sweep",
+        help="a policy's return across action/observation delays or real-time think times",
+        description=__doc__.split("\n\n")[1] if __doc__ else None,
+    )
+    p.add_argument("env", help="a Gymnasium id (remoteenv/CartPole-v0), a shipped scene name or a scene script path")
+    p.add_argument(
+        "--policy",
+        required=True,
+        help=f"a builtin controller ({', '.join(BUILTIN_POLICIES)}) or a TorchScript file "
+        "(torch.jit.save of a module mapping a float32 obs batch to an action batch)",
+    )
+    p.add_argument("--delays", default="0,1,2,3,4", help="comma-separated delays in control ticks (default 0..4)")
+    p.add_argument("--mode", choices=MODES, default="action_delay", help="what a delay means (default action_delay)")
+    p.add_argument("--random", action="store_true", help="lock-step: draw each delay from Uniform(0, d) instead")
+    p.add_argument("--episodes", type=int, default=5, help="episodes per delay and seed (default 5)")
+    p.add_argument("--seeds", default="0,1,2", help="comma-separated seeds (default 0,1,2)")
+    p.add_argument("--max-steps", type=int, default=None, help="cut episodes at this many steps")
+    p.add_argument("--action-history", type=int, default=0, help="wrap in ActionHistory(env, k) (the policy's input)")
+    p.add_argument("--env-kwargs", default="{}", help="JSON map for the env, e.g. '{\"continuous\": true}'")
+    p.add_argument("--out", default="latency-sweep", help="directory for sweep.csv, sweep.json, sweep.png")
+    p.add_argument("--no-plot", action="store_true", help="skip the plot (no matplotlib needed)")
+    p.set_defaults(run=run)
+
+
+def int_list(text: str, what: str) -> list[int]:
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise SystemExit(f"{what} must be comma-separated integers, got {text[:80]!r}") from None
+    if not values or min(values) < 0:
+        raise SystemExit(f"{what} must hold at least one integer >= 0, got {text[:80]!r}")
+    return values
+
+
+def load_policy(name: str) -> Policy:
+    """A builtin controller by name, or a TorchScript module from a file (run on CPU, no grad)."""
+    if name in BUILTIN_POLICIES:
+        from remoteenv import controllers
+
+        fn: Policy = getattr(controllers, name)
+        return fn
+    if not os.path.isfile(name):
+        raise SystemExit(f"--policy {name[:200]!r} is neither a builtin ({', '.join(BUILTIN_POLICIES)}) nor a file")
+    import torch
+
+    module = torch.jit.load(name, map_location="cpu")
+    module.eval()
+
+    def policy(obs: np.ndarray) -> Any:
+        with torch.no_grad():
+            out = module(torch.as_tensor(np.asarray(obs, dtype=np.float32)).unsqueeze(0))
+        return out.squeeze(0).numpy()
+
+    return policy
+
+
+def make_env(args: argparse.Namespace, delay: int) -> Any:
+    """The env of one point of the sweep."""
+    import gymnasium as gym
+
+    import remoteenv
+    from remoteenv.delays import Uniform
+    from remoteenv.wrappers import ActionHistory
+
+    kwargs: dict[str, Any] = json.loads(args.env_kwargs)
+    if not isinstance(kwargs, dict):
+        raise SystemExit("--env-kwargs must be a JSON map")
+    spec: Any = Uniform(0, delay) if args.random else delay
+    if args.mode == "action_delay":
+        kwargs["action_delay"] = spec
+    elif args.mode == "obs_delay":
+        kwargs["obs_delay"] = spec
+    else:
+        kwargs["real_time"] = True
+    if args.max_steps is not None:
+        kwargs["max_episode_steps"] = args.max_steps
+    target = args.env
+    if target in remoteenv.SHIPPED_SCENES:
+        target = remoteenv.SHIPPED_SCENES[target]
+    if os.path.isfile(target):
+        env: Any = remoteenv.OpenAIRemoteEnv(target, **{k: v for k, v in kwargs.items() if k != "max_episode_steps"})
+        if args.max_steps is not None:
+            env = gym.wrappers.TimeLimit(env, args.max_steps)
+    else:
+        env = gym.make(target, **kwargs)
+    if args.action_history:
+        env = ActionHistory(env, args.action_history)
+    return env
+
+
+def run_point(env: Any, policy: Policy, seed: int, episodes: int, think_s: float) -> list[dict[str, Any]]:
+    """``episodes`` episodes from ``reset(seed=seed)``; one row per episode."""
+    rows = []
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=seed if episode == 0 else None)
+        total, length, latencies = 0.0, 0, []
+        done = False
+        while not done:
+            if think_s:
+                time.sleep(think_s)
+            obs, reward, terminated, truncated, info = env.step(policy(obs))
+            total += float(reward)
+            length += 1
+            if info.get("latency_ticks") is not None:
+                latencies.append(float(info["latency_ticks"]))
+            done = terminated or truncated
+        rows.append(
+            {
+                "seed": seed,
+                "episode": episode,
+                "return": total,
+                "length": length,
+                "latency_ticks": float(np.mean(latencies)) if latencies else 0.0,
+            }
+        )
+    return rows
+
+
+def summarize(rows: list[dict[str, Any]], delays: list[int], seeds: list[int]) -> list[dict[str, Any]]:
+    """Per delay: each seed's mean return, their mean, std, min and max, and the mean latency."""
+    out = []
+    for d in delays:
+        per_seed = [float(np.mean([r["return"] for r in rows if r["delay"] == d and r["seed"] == s])) for s in seeds]
+        lat = [r["latency_ticks"] for r in rows if r["delay"] == d]
+        out.append(
+            {
+                "delay": d,
+                "mean_return": float(np.mean(per_seed)),
+                "std_over_seeds": float(np.std(per_seed)),
+                "min_over_seeds": float(np.min(per_seed)),
+                "max_over_seeds": float(np.max(per_seed)),
+                "seed_means": per_seed,
+                "mean_latency_ticks": float(np.mean(lat)),
+            }
+        )
+    return out
+
+
+def plot(summary: list[dict[str, Any]], path: str, title: str, xlabel: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x = [s["delay"] for s in summary]
+    fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    ax.plot(x, [s["mean_return"] for s in summary], marker="o", label="mean over seeds")
+    ax.fill_between(
+        x,
+        [s["min_over_seeds"] for s in summary],
+        [s["max_over_seeds"] for s in summary],
+        alpha=0.25,
+        label="spread of the seeds' means",
+    )
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("episode return")
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    delays = int_list(args.delays, "--delays")
+    seeds = int_list(args.seeds, "--seeds")
+    if args.episodes < 1:
+        raise SystemExit("--episodes must be >= 1")
+    if args.random and args.mode == "real_time":
+        raise SystemExit("--random applies to the lock-step modes; real_time's think time is fixed per point")
+    policy = load_policy(args.policy)
+    os.makedirs(args.out, exist_ok=True)
+    rows: list[dict[str, Any]] = []
+    started = time.perf_counter()
+    with tqdm(total=len(delays) * len(seeds) * args.episodes, unit="episode", desc="latency sweep") as bar:
+        for d in delays:
+            env = make_env(args, d)
+            try:
+                think = d * float(env.unwrapped.dt) if args.mode == "real_time" else 0.0
+                for s in seeds:
+                    for row in run_point(env, policy, s, args.episodes, think):
+                        rows.append({"delay": d, **row})
+                        bar.update(1)
+            finally:
+                env.close()
+    wall = time.perf_counter() - started
+    summary = summarize(rows, delays, seeds)
+    csv_path = os.path.join(args.out, "sweep.csv")
+    with open(csv_path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)
+    config = {k: v for k, v in vars(args).items() if k != "run"}
+    with open(os.path.join(args.out, "sweep.json"), "w") as f:
+        json.dump({"config": config, "wall_s": wall, "summary": summary, "rows": rows}, f, indent=1)
+    kind = f"Uniform(0, d) {args.mode}" if args.random else args.mode
+    xlabel = "think time d (ticks)" if args.mode == "real_time" else f"{kind} d (ticks)"
+    if not args.no_plot:
+        plot(summary, os.path.join(args.out, "sweep.png"), f"{args.env}, {args.policy}: {kind}", xlabel)
+    print(f"{'delay':>5}  {'mean return':>11}  {'std (seeds)':>11}  {'latency ticks':>13}")
+    for s in summary:
+        print(
+            f"{s['delay']:5d}  {s['mean_return']:11.2f}  {s['std_over_seeds']:11.2f}  {s['mean_latency_ticks']:13.2f}"
+        )
+    print(f"wrote {csv_path}, sweep.json{'' if args.no_plot else ', sweep.png'} in {wall:.1f} s")
+    return 0
