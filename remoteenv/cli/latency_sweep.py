@@ -249,9 +249,10 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_plot:
         plot(summary, os.path.join(args.out, "sweep.png"), f"{args.env}, {args.policy}: {kind}", xlabel)
     print(f"{'delay':>5}  {'mean return':>11}  {'std (seeds)':>11}  {'latency ticks':>13}")
-    for s in summary:
+    for point in summary:
         print(
-            f"{s['delay']:5d}  {s['mean_return']:11.2f}  {s['std_over_seeds']:11.2f}  {s['mean_latency_ticks']:13.2f}"
+            f"{point['delay']:5d}  {point['mean_return']:11.2f}  {point['std_over_seeds']:11.2f}  "
+            f"{point['mean_latency_ticks']:13.2f}"
         )
     print(f"wrote {csv_path}, sweep.json{'' if args.no_plot else ', sweep.png'} in {wall:.1f} s")
     return 0

@@ -9,6 +9,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from remoteenv.sim.base_env import BaseEnv
+from remoteenv.sim.pacing_levers import GC_MODES, apply_levers
 from remoteenv.sim.server import RemoteControlledAgent
 from remoteenv.wire.delays import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
 from remoteenv.wire.errors import ProtocolError, short_repr
@@ -79,6 +80,13 @@ def scene_argument_parser(description: str | None = None) -> argparse.ArgumentPa
         default=None,
         help="real time: emulated extra link delay per action, wall seconds (a number or a JSON spec with unit s)",
     )
+    levers = p.add_argument_group("real-time pacing levers (see remoteenv.sim.pacing_levers)")
+    levers.add_argument("--rt-priority", type=int, default=0, help="run under SCHED_FIFO at this priority (1..99)")
+    levers.add_argument("--rt-cpus", default=None, help="pin the process to these CPUs, e.g. 1 or 0,1")
+    levers.add_argument("--rt-gc", choices=GC_MODES, default="auto", help="garbage collector: auto, freeze or off")
+    levers.add_argument(
+        "--rt-spin-s", type=float, default=None, help="spin this many wall seconds before each deadline"
+    )
     p.add_argument("--parent-pid", type=int, default=None, help="exit when this process stops being our parent")
     p.add_argument("--ready-file", default=None, help="write the bound endpoint here as JSON")
     p.add_argument(
@@ -146,4 +154,10 @@ def run_scene(
         private_dir=args.private_dir,
         pipe_fd=args.pipe_fd,
     )
+    if args.rt_spin_s is not None:
+        server.deadline_spin_s = max(0.0, float(args.rt_spin_s))
+    cpus = [int(c) for c in args.rt_cpus.split(",")] if args.rt_cpus else None
+    on = apply_levers(priority=args.rt_priority, cpus=cpus, gc_mode=args.rt_gc)
+    if on:
+        print(f"remoteenv sim {args.instance}: pacing levers on: {', '.join(on)}", file=sys.stderr)
     server.serve()

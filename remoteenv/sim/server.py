@@ -151,6 +151,8 @@ class RemoteControlledAgent:
         if self._pipe is not None:
             self.channels.append(self._pipe)
         self._running = True
+        #: Wall seconds before a deadline at which waiting turns from sleeping to spinning.
+        self.deadline_spin_s = DEADLINE_SPIN_S
         if ready_file:
             write_ready_file(ready_file, self.endpoint, instance)
 
@@ -198,6 +200,7 @@ class RemoteControlledAgent:
             poller.register(channel.pollable, zmq.POLLIN)
             by_pollable[channel.pollable] = channel
         fds = [channel.fd for channel in self.channels]
+        spin_s = self.deadline_spin_s
         last_check = clock()
         while self._running:
             deadline = stepping.next_deadline()
@@ -232,10 +235,10 @@ class RemoteControlledAgent:
                         self._send_later(outgoing)
                 else:
                     timeout = min(deadline - now, CHECK_INTERVAL_S)
-                    if timeout > DEADLINE_SPIN_S:
+                    if timeout > spin_s:
                         # Wake a little early: the kernel's wake-up latency is then
                         # absorbed by spinning (looping) instead of making us late.
-                        select.select(fds, [], [], timeout - DEADLINE_SPIN_S)
+                        select.select(fds, [], [], timeout - spin_s)
                 # The ZeroMQ descriptor is edge-triggered: read every channel.
                 for channel in self.channels:
                     self._answer(channel, channel.receive_nowait())
