@@ -83,7 +83,7 @@ class LatencyStats:
         if latency is not None:
             ticks = infos.get("latency_ticks")
             for i in np.flatnonzero(infos["_latency_s"]):
-                if latency[i] is None:
+                if latency[i] is None or latency[i] != latency[i]:  # None, or NaN where a column filled it
                     self.never_applied += 1
                 else:
                     self.latency_s.add(latency[i])
