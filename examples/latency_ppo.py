@@ -28,6 +28,7 @@ Needs torch, tqdm and matplotlib.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import time
@@ -106,7 +107,11 @@ def train(history: bool, seed: int, args: argparse.Namespace) -> tuple[Determini
         env.close()
 
 
-def _train(env: Any, seed: int, args: argparse.Namespace, label: str) -> tuple[Deterministic, list[float]]:
+def _train(
+    env: Any, seed: int, args: argparse.Namespace, label: str, pause_updates: bool = False
+) -> tuple[Deterministic, list[float]]:
+    """PPO on the vector ``env``; with ``pause_updates`` (real time) each update
+    runs inside ``env.unwrapped.paused()``, so the world waits for the learner."""
     n, T, gamma, lam = env.num_envs, args.rollout, 0.99, 0.95
     obs_dim = env.single_observation_space.shape[0]
     model = Gaussian(obs_dim, 1)
@@ -157,22 +162,28 @@ def _train(env: Any, seed: int, args: argparse.Namespace, label: str) -> tuple[D
         b = [x.reshape(-1, *x.shape[2:])[valid] for x in (obs_buf, act_buf, logp_buf, adv, ret)]
         for g in optim.param_groups:
             g["lr"] = 3e-4 * max(0.05, 1.0 - steps / args.budget)
-        for _ in range(args.epochs):
-            for idx in torch.randperm(len(b[0])).split(args.minibatch):
-                o, a, old_logp, ad, rt = (x[idx] for x in b)
-                d = model.dist(o)
-                ratio = (d.log_prob(a).sum(-1) - old_logp).exp()
-                ad = (ad - ad.mean()) / (ad.std() + 1e-8)
-                pg = -torch.min(ratio * ad, ratio.clamp(0.8, 1.2) * ad).mean()
-                vf = 0.5 * (model.value(o) - rt).pow(2).mean()
-                optim.zero_grad()
-                (pg + 0.5 * vf).backward()
-                nn.utils.clip_grad_norm_(model.parameters(), 0.5)
-                optim.step()
+        with env.unwrapped.paused() if pause_updates else contextlib.nullcontext():
+            update(model, optim, b, args)
         recent = returns[-20:]
         bar.set_postfix(mean20=f"{np.mean(recent) if recent else 0:.0f}")
     bar.close()
     return Deterministic(model).eval(), returns
+
+
+def update(model: Gaussian, optim: torch.optim.Optimizer, b: list[torch.Tensor], args: argparse.Namespace) -> None:
+    """PPO's epochs of clipped-surrogate minibatch steps over one rollout."""
+    for _ in range(args.epochs):
+        for idx in torch.randperm(len(b[0])).split(args.minibatch):
+            o, a, old_logp, ad, rt = (x[idx] for x in b)
+            d = model.dist(o)
+            ratio = (d.log_prob(a).sum(-1) - old_logp).exp()
+            ad = (ad - ad.mean()) / (ad.std() + 1e-8)
+            pg = -torch.min(ratio * ad, ratio.clamp(0.8, 1.2) * ad).mean()
+            vf = 0.5 * (model.value(o) - rt).pow(2).mean()
+            optim.zero_grad()
+            (pg + 0.5 * vf).backward()
+            nn.utils.clip_grad_norm_(model.parameters(), 0.5)
+            optim.step()
 
 
 # ---------------------------------------------------------------- evaluation

@@ -112,6 +112,11 @@ class Pausable:
         return self._pauser.held()
 
     @property
+    def pausing(self) -> Pauser:
+        """The :class:`Pauser`: ``pauses`` so far and ``paused_s`` in total."""
+        return self._pauser
+
+    @property
     def is_paused(self) -> bool:
         """Whether the sims are paused now (always False in lock-step)."""
         return self._pauser.paused
