@@ -1,4 +1,4 @@
-"""Checks of the single-world commands: reset, step, render, timing, close.
+"""Checks of the single-world commands: reset, step, render, timing, pause, close.
 
 Values are judged against the spaces the handshake advertised. Worlds are
 addressed one by one (the first :data:`MAX_WORLDS` of them).
@@ -168,6 +168,34 @@ def timing(p: Probe) -> str:
     return f"{len(worlds)} world(s)"
 
 
+def pause(p: Probe) -> str:
+    """``pause`` stops the clocks (sim time stands still), ``resume`` restarts them."""
+    hs = p.handshake
+    why = hs.lacks("pause", "resume")
+    if why:
+        raise CheckSkipped(why)
+
+    def sim_times(reply: dict[str, Any], cmd: str) -> list[Any]:
+        times = reply.get("sim_time")
+        ok = isinstance(times, list) and len(times) == hs.num_worlds and all(is_number(t) for t in times)
+        fail_unless(ok, f"{cmd} sim_time must be a list of {hs.num_worlds} numbers, got {short_repr(times)}")
+        return times  # type: ignore[return-value]
+
+    paused = sim_times(p.ok("pause"), "pause")
+    time.sleep(0.05)
+    again = sim_times(p.ok("pause"), "pause")
+    fail_unless(again == paused, f"sim time moved while paused: {short_repr(paused)} then {short_repr(again)}")
+    reply = p.ok("resume")
+    fail_unless(sim_times(reply, "resume") == paused, "resume reports a sim time other than the paused one")
+    fail_unless(
+        is_number(reply.get("paused_s")) and reply["paused_s"] >= 0.05,
+        f"resume paused_s must be the paused wall seconds (>= 0.05 here), got {short_repr(reply.get('paused_s'))}",
+    )
+    unpaused = p.ok("resume").get("paused_s")
+    fail_unless(unpaused == 0.0, f"resuming an unpaused server must report paused_s 0.0, got {short_repr(unpaused)}")
+    return f"sim time held over {reply['paused_s']:.3f} s"
+
+
 def close(p: Probe) -> str:
     if not p.target.allow_close:
         raise CheckSkipped("closing stops the server; allow it with --allow-close (allow_close = True)")
@@ -196,6 +224,7 @@ CHECKS = (
     Check("bad_arguments", "out-of-range worlds and ill-typed seed/options get a 'protocol' error", bad_arguments),
     Check("render", "render replies with a uint8 H x W x 3 frame or nil", render),
     Check("timing", "timing replies with per-world pacing figures (real-time servers)", timing),
+    Check("pause", "pause holds sim time, resume restarts it (real-time servers that offer them)", pause),
 )
 
 #: Last of all: it stops the server.
