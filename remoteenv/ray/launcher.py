@@ -297,8 +297,8 @@ class RayLauncher:
             render_mode=spec.render_mode,
             real_time=spec.real_time,
             real_time_factor=spec.real_time_factor,
-            action_delay=spec.action_delay,
-            extra_args=self.extra_args,
+            # Every delay (an int or a spec: action, observation, link) as scene arguments.
+            extra_args=(*spec.delay_arguments(), *self.extra_args),
             startup_timeout=spec.startup_timeout,
         )
         bundle = self.placement.bundle()
