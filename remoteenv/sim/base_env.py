@@ -10,6 +10,8 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
 
+from remoteenv.sim.obs_check import check_observation
+
 
 class BaseEnv:
     """One MuJoCo world and the env logic around it.
@@ -36,11 +38,15 @@ class BaseEnv:
         env_id: a name for the scene, reported in the handshake.
         metadata: ``render_modes`` supported; ``render_fps`` is derived from dt.
         default_camera: camera name used for rendering, or None for the free camera.
+        check_obs_bounds: also check that observations lie inside the
+            observation space's bounds (dtype and shape are always checked,
+            see :mod:`remoteenv.sim.obs_check`).
     """
 
     env_id: ClassVar[str] = "scene"
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"]}
     default_camera: ClassVar[str | None] = None
+    check_obs_bounds: ClassVar[bool] = False
 
     observation_space: spaces.Space
     action_space: spaces.Space
@@ -129,7 +135,19 @@ class BaseEnv:
             self.seed_rng(seed)
         mujoco.mj_resetData(self.model, self.data)
         obs, info = self.reset_model(options)
+        self._check_obs(obs, "reset_model")
         return obs, info
+
+    def finish_tick(self, action: Any) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
+        """:meth:`post_step` with its observation checked against ``observation_space``."""
+        result = self.post_step(action)
+        self._check_obs(result[0], "post_step")
+        return result
+
+    def _check_obs(self, obs: Any, hook: str) -> None:
+        check_observation(
+            self.observation_space, obs, scene=type(self).__name__, hook=hook, bounds=self.check_obs_bounds
+        )
 
     def substep(self) -> None:
         """Advance the physics by one ``model.opt.timestep``."""
@@ -141,7 +159,7 @@ class BaseEnv:
         """One control tick: ``(obs, reward, terminated, info)``."""
         self.prepare_step(action)
         mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
-        result = self.post_step(action)
+        result = self.finish_tick(action)
         if self._viewer is not None:
             self._viewer.sync()
         return result

@@ -116,7 +116,8 @@ class LockStepper:
             info["late"] = record.latency_ticks > 0
         return {
             "obs": obs,
-            "reward": float(reward),
+            # A float subclass (np.float64, as Gymnasium's MuJoCo envs return) keeps its type.
+            "reward": reward if isinstance(reward, float) else float(reward),
             "terminated": bool(terminated),
             "truncated": False,
             "info": info,

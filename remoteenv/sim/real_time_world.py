@@ -248,7 +248,7 @@ class RealTimeStepper:
         out: list[Outgoing] = []
         fs = env.frame_skip
         if self._n and self._n % fs == 0:
-            obs, reward, terminated, info = env.post_step(self._held)
+            obs, reward, terminated, info = env.finish_tick(self._held)
             self._obs, self._info = obs, info
             self._reward += float(reward)
             self._ticks += 1

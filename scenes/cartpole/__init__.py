@@ -17,5 +17,6 @@ if ENV_ID not in gymnasium.registry:
         entry_point="remoteenv.remote_env:OpenAIRemoteEnv",
         vector_entry_point="remoteenv.vector_env:RemoteVectorEnv",
         max_episode_steps=500,
+        reward_threshold=475.0,
         kwargs={"scene": SCENE_SCRIPT},
     )

@@ -11,7 +11,6 @@ Run by the launcher as ``python reacher_scene.py --address ... --seed ...``.
 
 from __future__ import annotations
 
-import math
 import os
 from typing import Any
 
@@ -69,10 +68,11 @@ class ReacherEnv(BaseEnv):
     def post_step(self, action: np.ndarray | None) -> tuple[np.ndarray, float, bool, dict[str, Any]]:
         # Like Gymnasium, distance uses body positions as left by mj_step.
         vec = self.data.xpos[self._fingertip] - self.data.xpos[self._target]
-        reward_dist = -math.sqrt(vec[0] * vec[0] + vec[1] * vec[1] + vec[2] * vec[2]) * self.reward_dist_weight
-        # float32 sum of squares, as Gymnasium computes it for a float32 action.
-        ctrl = 0.0 if action is None else float(np.square(action).sum())
-        reward_ctrl = -ctrl * self.reward_control_weight
+        # Reacher-v5's types: reward_dist np.float64, reward_ctrl np.float32 (the
+        # float32 sum of squares of a float32 action), reward their np.float64 sum.
+        reward_dist = -np.linalg.norm(vec) * self.reward_dist_weight
+        ctrl = np.float32(0.0) if action is None else np.square(action, dtype=np.float32).sum()
+        reward_ctrl = -ctrl * np.float32(self.reward_control_weight)
         info = {"reward_dist": reward_dist, "reward_ctrl": reward_ctrl}
         return self._obs(vec), reward_dist + reward_ctrl, False, info
 

@@ -72,6 +72,9 @@ class TickWorld:
         self.ticks += 1
         return np.array([float(self.ticks)]), float(self.ticks), self.ticks == self.end_tick, {"tick": self.ticks}
 
+    # BaseEnv's post_step with the observation check; the stepper calls this one.
+    finish_tick = post_step
+
 
 def make(world: TickWorld | None = None, factor: float = 1.0) -> tuple[RealTimeStepper, TickWorld, FakeClock]:
     clock = FakeClock(T0 - 1.0)
