@@ -20,8 +20,10 @@ import gymnasium as gym
 import numpy as np
 
 from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.agent.forwarding import SceneReach
 from remoteenv.agent.latency import LatencyStats
 from remoteenv.agent.pausing import Pausable, Pauser
+from remoteenv.agent.pickling import RebuildOnUnpickle, remember_init_args
 from remoteenv.agent.restart import RestartBudget, restarted_info
 from remoteenv.agent.session import SimSession, choose_group, scene_label
 from remoteenv.agent.sim_group import LaunchSpec, SimGroup
@@ -32,7 +34,7 @@ from remoteenv.wire.handshake import Handshake
 __all__ = ["OpenAIRemoteEnv", "check_action"]
 
 
-class OpenAIRemoteEnv(Pausable, gym.Env):
+class OpenAIRemoteEnv(Pausable, RebuildOnUnpickle, gym.Env):
     """A Gymnasium env served by a sim process that this env launches.
 
     Usually created with ``gymnasium.make("remoteenv/CartPole-v0", ...)``;
@@ -89,6 +91,14 @@ class OpenAIRemoteEnv(Pausable, gym.Env):
     stop the sim's clock between steps (no-ops in lock-step; see
     :mod:`remoteenv.agent.pausing`).
 
+    The scene's own attributes and methods are reachable too: :meth:`call`,
+    :meth:`get_scene_attr`, :meth:`set_scene_attr`, and ``get_wrapper_attr`` /
+    ``set_wrapper_attr`` (what Gymnasium's ``SyncVectorEnv.call`` uses) fall
+    through to the scene for names this class does not have.
+
+    Pickling or ``copy.deepcopy`` builds a new env from the same constructor
+    arguments, with a fresh sim (see :mod:`remoteenv.agent.pickling`).
+
     Attributes:
         latency_stats: :class:`remoteenv.agent.latency.LatencyStats` of every step so
             far: action latency (mean/p50/p99/max, seconds and ticks), wall
@@ -100,6 +110,7 @@ class OpenAIRemoteEnv(Pausable, gym.Env):
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array", "human"], "render_fps": None}
 
+    @remember_init_args
     def __init__(
         self,
         scene: str | os.PathLike[str],
@@ -175,6 +186,7 @@ class OpenAIRemoteEnv(Pausable, gym.Env):
         self.dt: float = hs.dt
         self._timed_steps = hs.timed_steps
         self._pauser = Pauser(self._session)
+        self._reach = SceneReach(self._session)
 
     @classmethod
     def attach(cls, launch_info: str | os.PathLike[str], instance: int = 0, **kwargs: Any) -> OpenAIRemoteEnv:
@@ -276,6 +288,44 @@ class OpenAIRemoteEnv(Pausable, gym.Env):
         if self.render_mode != "rgb_array":
             return None
         return self._request("render")["frame"]
+
+    # ------------------------------------------------------------ the scene's attributes
+
+    def call(self, name: str, *args: Any, **kwargs: Any) -> Any:
+        """Call the scene env's public method ``name`` in the sim and return its
+        result (for a plain attribute and no arguments: its value), as
+        Gymnasium's vector ``call`` does for one env. Arguments and result must
+        cross the wire (numbers, strings, numpy arrays, lists, str-keyed maps)."""
+        return self._reach.call(0, 0, name, args, kwargs)
+
+    def get_scene_attr(self, name: str) -> Any:
+        """The scene env's public attribute ``name`` (a method comes back as a
+        callable that calls it in the sim)."""
+        return self._reach.get(0, 0, name)
+
+    def set_scene_attr(self, name: str, value: Any) -> None:
+        """Set the scene env's public attribute ``name`` (one it has) in the sim."""
+        self._reach.set(0, 0, name, value)
+
+    def get_wrapper_attr(self, name: str) -> Any:
+        """This env's attribute ``name``, else the scene's (see :meth:`get_scene_attr`)."""
+        if hasattr(self, name):
+            return getattr(self, name)
+        return self.get_scene_attr(name)
+
+    def set_wrapper_attr(self, name: str, value: Any, *, force: bool = True) -> bool:
+        """Set ``name`` here if this env has it, else on the scene if it has it;
+        otherwise create it here when ``force`` (Gymnasium's rule)."""
+        if hasattr(self, name):
+            setattr(self, name, value)
+            return True
+        try:
+            self.set_scene_attr(name, value)
+            return True
+        except AttributeError:  # the scene lacks it (SceneAttributeError), or a private name
+            if force:
+                setattr(self, name, value)
+            return force
 
     def close(self) -> None:
         """Ask the sim to exit, then make sure it has (no process or socket file

@@ -171,22 +171,39 @@ class SB3VecEnv(VecEnv):
         return [values[i] for i in self._get_indices(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        """Set ``attr_name`` to ``value`` on the envs ``indices`` (all by default);
+        on a :class:`remoteenv.RemoteVectorEnv` that is the scene's attribute in each world."""
         setter = getattr(self.venv, "set_attr", None)
         if setter is None:
             raise AttributeError(f"{type(self.venv).__name__} cannot set per-env attributes")
         targets = list(self._get_indices(indices))
-        if targets != list(range(self.num_envs)):
-            raise NotImplementedError("SB3VecEnv sets attributes on all envs at once")
-        setter(attr_name, value)
+        if targets == list(range(self.num_envs)):
+            setter(attr_name, [value] * self.num_envs)
+        elif hasattr(self.venv, "set_attr_at"):
+            self.venv.set_attr_at(targets, attr_name, [value] * len(targets))
+        else:
+            # Any Gymnasium vector env: write back the current values elsewhere.
+            values = self._per_env(attr_name)
+            for i in targets:
+                values[i] = value
+            setter(attr_name, values)
 
     def env_method(
         self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
     ) -> list[Any]:
+        """Call ``method_name`` on the envs ``indices`` only (all by default), one result each."""
+        targets = list(self._get_indices(indices))
+        if targets != list(range(self.num_envs)):
+            if hasattr(self.venv, "call_at"):
+                return list(self.venv.call_at(targets, method_name, *method_args, **method_kwargs))
+            envs = getattr(self.venv, "envs", None)
+            if envs is not None:  # an in-process vector env: call its sub-envs one by one
+                return [envs[i].get_wrapper_attr(method_name)(*method_args, **method_kwargs) for i in targets]
+            raise NotImplementedError(f"{type(self.venv).__name__} cannot call a method on some envs only")
         caller = getattr(self.venv, "call", None)
         if caller is None:
             raise AttributeError(f"{type(self.venv).__name__} cannot call per-env methods")
-        results = list(caller(method_name, *method_args, **method_kwargs))
-        return [results[i] for i in self._get_indices(indices)]
+        return list(caller(method_name, *method_args, **method_kwargs))
 
     def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
         # Remote worlds are not Gymnasium envs wrapped on this side; sub-envs of

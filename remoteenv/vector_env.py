@@ -32,8 +32,10 @@ from gymnasium.vector.utils import batch_space, iterate
 
 from remoteenv.agent.autoreset import after_reset, after_step, plan_ops
 from remoteenv.agent.errors import RemoteEnvError, StateError
+from remoteenv.agent.forwarding import SceneReach, VectorAttributes
 from remoteenv.agent.latency import LatencyStats
 from remoteenv.agent.pausing import Pausable, Pauser
+from remoteenv.agent.pickling import RebuildOnUnpickle, remember_init_args
 from remoteenv.agent.reset_args import is_int_seed, split_reset_mask, world_seeds
 from remoteenv.agent.restart import RestartBudget, restarted_info
 from remoteenv.agent.session import SimSession, choose_group, scene_label
@@ -63,7 +65,7 @@ def default_envs_per_process(num_envs: int) -> int:
     return min(num_envs, max(8, per_cpu))
 
 
-class RemoteVectorEnv(Pausable, VectorEnv):
+class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
     """``num_envs`` worlds of one scene in sim processes, with Gymnasium 1.x vector semantics.
 
     Usually created with ``gymnasium.make_vec("remoteenv/Reacher-v0",
@@ -116,12 +118,19 @@ class RemoteVectorEnv(Pausable, VectorEnv):
     seeds world ``i`` with ``s + i``, so a vector env and N single envs with
     the same seeds give the same trajectories, for any K.
 
+    ``call``, ``get_attr`` and ``set_attr`` follow Gymnasium's vector API and
+    reach each world's scene (:class:`~remoteenv.agent.forwarding.VectorAttributes`),
+    e.g. ``set_attr("pole_mass", [0.05, 0.1, 0.2])`` for per-world model
+    parameters. Pickling or ``copy.deepcopy`` builds a new env from the same
+    constructor arguments, with fresh sims.
+
     Attributes:
         latency_stats: :class:`remoteenv.agent.latency.LatencyStats` of every
             vector step so far: one wall round trip per call, and with
             ``real_time`` or ``action_delay`` each world's action latency.
     """
 
+    @remember_init_args
     def __init__(
         self,
         scene: str | os.PathLike[str],
@@ -228,6 +237,7 @@ class RemoteVectorEnv(Pausable, VectorEnv):
         )
         self.latency_stats = LatencyStats()
         self._pauser = Pauser(self._session)
+        self._reach = SceneReach(self._session)
         n = self.num_envs
         self._elapsed = np.zeros(n, dtype=np.int64)
         self._autoreset = np.zeros(n, dtype=np.bool_)

@@ -118,13 +118,30 @@ class StateError(RemoteEnvError):
     KIND = wire_errors.STATE
 
 
+class SceneAttributeError(RemoteEnvError, AttributeError):
+    """``get_attr``/``set_attr``/``call`` named a scene attribute that does not
+    exist or may not be reached (private, or one that drives the world)
+    (kind ``"attribute"``)."""
+
+    KIND = wire_errors.ATTRIBUTE
+
+
+class UnsendableValueError(RemoteEnvError, TypeError):
+    """A scene attribute's value (or a method's result) cannot cross the wire
+    (kind ``"unsendable"``)."""
+
+    KIND = wire_errors.UNSENDABLE
+
+
 __all__ = [
     "InvalidActionError",
     "LaunchError",
     "RemoteEnvError",
     "RemoteEnvTimeout",
     "RemoteProtocolError",
+    "SceneAttributeError",
     "SceneError",
     "SimDiedError",
     "StateError",
+    "UnsendableValueError",
 ]

@@ -24,6 +24,7 @@ from typing import Any
 
 import zmq
 
+from remoteenv.sim.attributes import AttributeCommands
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.batch import BatchCommands
 from remoteenv.sim.channels import Channel, Outgoing, PipeChannel, ZmqChannel
@@ -130,6 +131,7 @@ class RemoteControlledAgent:
         )
         common = Commands(envs, self.stepping, instance, self.stop)
         self._handlers: dict[str, Handler] = common.handlers()
+        self._handlers.update(AttributeCommands(envs, instance).handlers())
         self._handlers.update(mode_commands)
         common.advertised = sorted(self._handlers)
         self._authenticator: Any = None

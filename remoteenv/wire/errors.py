@@ -17,8 +17,12 @@ INVALID_ACTION = "invalid_action"
 SCENE = "scene"
 #: A request that does not fit the world's state (e.g. step before reset).
 STATE = "state"
+#: ``get_attr``/``set_attr``/``call`` named an attribute the scene lacks, or a private one.
+ATTRIBUTE = "attribute"
+#: A value that cannot cross the wire (e.g. an ``MjModel`` asked for by ``get_attr``).
+UNSENDABLE = "unsendable"
 #: The kinds an error reply may carry.
-ERROR_KINDS = frozenset({PROTOCOL, INVALID_ACTION, SCENE, STATE})
+ERROR_KINDS = frozenset({PROTOCOL, INVALID_ACTION, SCENE, STATE, ATTRIBUTE, UNSENDABLE})
 
 #: Longest text of an error message built from a request's content (characters).
 MAX_ECHO_CHARS = 200

@@ -38,7 +38,8 @@ stale reply from a request that timed out is never taken for the current one).
 A frame that cannot be decoded as a request gets an error reply with
 ``seq = -1``. Error kinds: ``"protocol"`` (malformed request, unknown command,
 version mismatch), ``"invalid_action"``, ``"scene"`` (the env code raised),
-``"state"`` (e.g. step before reset).
+``"state"`` (e.g. step before reset), ``"attribute"`` and ``"unsendable"``
+(see ``get_attr`` below).
 
 Commands (version 1)
 --------------------
@@ -108,6 +109,25 @@ obs is an array of one shape and dtype, else a list of ``n`` obs. ``infos`` is
 int or float with one type per key (``values``: list of ``n`` such values, 0
 where absent; ``present``: list of ``n`` bools), else
 ``{"maps": [map, ...]}``, one info map per world.
+
+``get_attr`` ``{"world": int, "name": str}`` -> ``{"value", "callable":
+bool}``: a public attribute of the world's scene env; for a method,
+``callable`` is true and ``value`` nil (call it with ``call``).
+
+``set_attr`` ``{"world": int, "name": str, "value"}`` -> ``{}``: sets an
+attribute the scene env has (it never creates one).
+
+``call`` ``{"world": int, "name": str, "args": list | nil, "kwargs": map |
+nil}`` -> ``{"result"}``: calls the scene env's method ``name`` with the
+arguments and returns what it returned; for an attribute that is not
+callable (and no arguments) returns its value, as Gymnasium's vector
+``call`` does.
+
+These three refuse private names (leading ``_``), names the scene env lacks
+and the methods that drive the world (``reset``, ``step``, ``render``,
+``close``, ...) with error kind ``"attribute"``, and a value that cannot be
+encoded with kind ``"unsendable"``. A server without them leaves them out of
+its handshake's ``commands``.
 
 ``world`` defaults to 0 and addresses one of the ``num_worlds`` MuJoCo worlds
 a sim process hosts.
@@ -220,6 +240,10 @@ def _array_header(dtype: str, shape: tuple[int, ...]) -> bytes:
     return head
 
 
+#: Plain msgpack types whose subclasses are sent as the plain type.
+_PLAIN_TYPES: tuple[Any, ...] = (bool, int, float, str, bytes, dict)
+
+
 def _default(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
         dtype = obj.dtype.str
@@ -236,7 +260,7 @@ def _default(obj: Any) -> Any:
         return list(obj)
     # Subclasses of the plain types (packing is strict about types, so that
     # np.float64, a float subclass, reaches the scalar case above).
-    for base in (bool, int, float, str, bytes, dict):
+    for base in _PLAIN_TYPES:
         if isinstance(obj, base):
             return base(obj)
     raise TypeError(f"cannot send a {type(obj).__name__} on the wire: {obj!r:.200}")

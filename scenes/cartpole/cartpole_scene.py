@@ -57,6 +57,21 @@ class CartPoleEnv(BaseEnv):
             height=height,
         )
         self._terminated = False
+        self._pole = self.model.body("pole").id
+
+    @property
+    def pole_mass(self) -> float:
+        """Mass of the pole (kg, 0.1 by default). Set it per world for domain
+        randomization; the pole's inertia scales with it."""
+        return float(self.model.body_mass[self._pole])
+
+    @pole_mass.setter
+    def pole_mass(self, kg: float) -> None:
+        if not kg > 0:
+            raise ValueError(f"pole_mass must be > 0 kg, got {kg!r}")
+        scale = float(kg) / self.model.body_mass[self._pole]
+        self.model.body_mass[self._pole] = float(kg)
+        self.model.body_inertia[self._pole] *= scale
 
     def reset_model(self, options: dict[str, Any] | None) -> tuple[np.ndarray, dict[str, Any]]:
         options = options or {}

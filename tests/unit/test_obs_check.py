@@ -42,7 +42,9 @@ def test_nested_spaces_name_the_failing_entry() -> None:
     with pytest.raises(ObservationError, match=r"\['pos'\]"):
         check_observation(space, {"pos": np.zeros(3), "n": 1}, scene="S", hook="reset_model")
     with pytest.raises(ObservationError, match=r"\[1\]"):
-        check_observation(spaces.Tuple((BOX, BOX)), (np.zeros(3, np.float32), np.zeros(4, np.float32)), scene="S", hook="h")
+        check_observation(
+            spaces.Tuple((BOX, BOX)), (np.zeros(3, np.float32), np.zeros(4, np.float32)), scene="S", hook="h"
+        )
 
 
 def test_bounds_only_when_asked() -> None:
