@@ -30,6 +30,7 @@ from remoteenv.agent.sim_group import LaunchSpec, SimGroup
 from remoteenv.wire.actions import check_action
 from remoteenv.wire.delays import DelaySpec
 from remoteenv.wire.handshake import Handshake
+from remoteenv.wire.scalar_types import restore_scalars
 
 __all__ = ["OpenAIRemoteEnv", "check_action"]
 
@@ -248,7 +249,7 @@ class OpenAIRemoteEnv(Pausable, RebuildOnUnpickle, gym.Env):
         restarted: dict[str, Any] = {}
         while True:
             try:
-                reply = self._request("reset", seed=seed, options=options)
+                reply = restore_scalars(self._request("reset", seed=seed, options=options))
                 break
             except RemoteEnvError as err:
                 if not self._session.restarts.covers(err):
@@ -262,7 +263,7 @@ class OpenAIRemoteEnv(Pausable, RebuildOnUnpickle, gym.Env):
         wire_action = check_action(self.action_space, action)
         try:
             sent = time.perf_counter()
-            reply = self._request("step", action=wire_action)
+            reply = restore_scalars(self._request("step", action=wire_action))
             round_trip = time.perf_counter() - sent
         except RemoteEnvError as err:
             if not self._session.restarts.covers(err):

@@ -81,6 +81,14 @@ class LaunchError(RemoteEnvError):
     KIND = "launch"
 
 
+class SceneArgumentError(LaunchError, TypeError):
+    """The scene's env class does not take a keyword argument it was given
+    (kind ``"scene_args"``); raised before launching when the scene script's
+    source shows it, else when the sim process reports it."""
+
+    KIND = "scene_args"
+
+
 class SimDiedError(RemoteEnvError):
     """The sim process exited or was killed while the agent needed it (kind ``"died"``)."""
 
@@ -139,6 +147,7 @@ __all__ = [
     "RemoteEnvError",
     "RemoteEnvTimeout",
     "RemoteProtocolError",
+    "SceneArgumentError",
     "SceneAttributeError",
     "SceneError",
     "SimDiedError",

@@ -23,6 +23,7 @@ from remoteenv.agent.connection import SimConnection
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launcher import Launcher
 from remoteenv.agent.restart import RestartBudget
+from remoteenv.agent.scene_signature import check_scene_kwargs
 from remoteenv.agent.sim_group import LaunchSpec, SimGroup
 from remoteenv.wire.errors import ProtocolError
 from remoteenv.wire.handshake import Handshake, handshake_request, parse_handshake
@@ -115,6 +116,8 @@ class SimSession:
         try:
             if self.group.layout is None:
                 assert self.spec is not None
+                names = [*self.spec.env_kwargs, *(["render_mode"] if self.spec.render_mode is not None else [])]
+                check_scene_kwargs(self.spec.scene, names)
                 self.group.start(self.spec)
             for index in range(len(self.group.sims)):
                 self.conns.append(self.group.connect(index, self.timeout))

@@ -24,6 +24,7 @@ from remoteenv.wire import protocol
 from remoteenv.wire import spaces as spaces_codec
 from remoteenv.wire.actions import check_action
 from remoteenv.wire.errors import PROTOCOL, short_repr
+from remoteenv.wire.scalar_types import describe_scalars
 
 #: A command handler: ``(request, channel, reply_to) -> reply fields``, or None
 #: when the reply will be sent later.
@@ -91,14 +92,15 @@ class Commands:
         seed = seed_value(msg.get("seed"))
         options = options_value(msg.get("options"))
         obs, info = self._worlds[world].reset(seed=seed, options=options)
-        return {"obs": obs, "info": info}
+        return describe_scalars({"obs": obs, "info": info})
 
     def step(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
         world = world_index(msg, len(self.envs))
         stepper = self._worlds[world]
         require_reset(stepper.has_reset, world, self.instance)
         action = check_action(self.envs[world].action_space, msg.get("action"))
-        return stepper.submit(msg["seq"], action, channel, reply_to)
+        reply = stepper.submit(msg["seq"], action, channel, reply_to)
+        return None if reply is None else describe_scalars(reply)
 
     def render(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
         world = world_index(msg, len(self.envs))

@@ -12,7 +12,7 @@ from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.pacing_levers import GC_MODES, apply_levers
 from remoteenv.sim.server import RemoteControlledAgent
 from remoteenv.wire.delays import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
-from remoteenv.wire.errors import ProtocolError, short_repr
+from remoteenv.wire.errors import EXIT_SCENE_ARGS, ProtocolError, short_repr
 from remoteenv.wire.keys import read_key, read_keys
 
 
@@ -127,7 +127,14 @@ def run_scene(
         sys.exit(f"--env-kwargs must be a JSON map, got {args.env_kwargs!r}")
     if args.render_mode is not None:
         env_kwargs["render_mode"] = args.render_mode
-    envs = [env_factory(**env_kwargs) for _ in range(args.worlds)]
+    try:
+        envs = [env_factory(**env_kwargs) for _ in range(args.worlds)]
+    except TypeError as exc:
+        if "keyword argument" not in str(exc):
+            raise
+        # The launcher turns this exit status into a TypeError in the agent.
+        print(f"remoteenv: the scene's env factory refused its keyword arguments: {exc}", file=sys.stderr)
+        sys.exit(EXIT_SCENE_ARGS)
     if args.seed is not None:
         for w, env in enumerate(envs):
             env.seed_rng(args.seed + w)

@@ -24,6 +24,10 @@ UNSENDABLE = "unsendable"
 #: The kinds an error reply may carry.
 ERROR_KINDS = frozenset({PROTOCOL, INVALID_ACTION, SCENE, STATE, ATTRIBUTE, UNSENDABLE})
 
+#: Exit status of a sim process whose env factory refused its keyword
+#: arguments (the launcher raises a ``TypeError`` for it, see ``run_scene``).
+EXIT_SCENE_ARGS = 3
+
 #: Longest text of an error message built from a request's content (characters).
 MAX_ECHO_CHARS = 200
 

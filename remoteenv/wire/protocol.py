@@ -63,8 +63,8 @@ emulated link, ``link_delay_spec``.
 ``{"obs", "info"}``.
 
 ``step`` ``{"world": int, "action"}`` -> ``{"obs", "reward": float,
-"terminated": bool, "truncated": bool, "info": map}``. ``reward`` is a plain
-float, or a float64 numpy scalar when the scene returned one.
+"terminated": bool, "truncated": bool, "info": map}`` (and ``"types"``, see
+Values).
 
 ``render`` ``{"world": int}`` -> ``{"frame": uint8 array H x W x 3 | nil}``.
 
@@ -143,16 +143,12 @@ with ``dtype`` an explicit little-endian numpy type string from
 :data:`ARRAY_DTYPES` (``"<f4"``, ``"|u1"``, ...), ``ndim`` at most 32 and
 ``data`` the C-ordered raw bytes. Decoders check that ``len(data) ==
 prod(shape) * itemsize`` and return a fresh, writable array that shares
-memory with nothing. numpy scalars (``np.float32(1.5)``, ``np.float64``,
-``np.int64``, ``np.bool_``, ...) travel as msgpack extension type 2, so they
-arrive with their type (Gymnasium's own envs return such rewards and info
-values)::
-
-    uint8 L | dtype: L ASCII bytes from ARRAY_DTYPES | data: itemsize bytes
-
-and decode to a numpy scalar of that dtype. Python ints, floats and bools
-stay plain msgpack values; so do subclasses of the plain types that are not
-numpy's (sent as their base type).
+memory with nothing. numpy scalars are sent as plain ints, floats and
+bools; a ``reset`` or ``step`` reply whose reward or info values were numpy
+scalars says which in an optional ``"types"`` map, ``{"reward": dtype,
+"info": {key: dtype}}`` (dtype strings from :data:`ARRAY_DTYPES`), so a
+client can give them back their type (see :mod:`remoteenv.wire.scalar_types`;
+a client may ignore it).
 
 Spaces (Box, Discrete, MultiDiscrete, MultiBinary, Dict, Tuple) travel as maps,
 see :mod:`remoteenv.wire.spaces`.
@@ -175,7 +171,6 @@ PROTOCOL_VERSION = 1
 MAX_MESSAGE_BYTES = 256 * 1024 * 1024
 
 _EXT_NDARRAY = 1
-_EXT_SCALAR = 2
 
 #: The only dtypes that may appear on the wire.
 ARRAY_DTYPES = frozenset(
@@ -220,8 +215,6 @@ def wire_dtype(dtype: np.dtype) -> str:
 
 #: numpy dtype for each allowed wire dtype string (native byte order on decode).
 _DTYPES = {t: np.dtype(t) for t in ARRAY_DTYPES}
-#: Native dtype strings of the numpy scalars sent as extension type 2 (little-endian hosts).
-_SCALAR_DTYPES = frozenset(t for t in ARRAY_DTYPES if np.dtype(t).isnative)
 _SHAPE_FORMATS = [struct.Struct(f"<{n}Q") for n in range(_MAX_NDIM + 1)]
 #: Encoded array headers by (dtype string, shape); arrays of one shape recur every step.
 _HEADERS: dict[tuple[str, tuple[int, ...]], bytes] = {}
@@ -240,10 +233,6 @@ def _array_header(dtype: str, shape: tuple[int, ...]) -> bytes:
     return head
 
 
-#: Plain msgpack types whose subclasses are sent as the plain type.
-_PLAIN_TYPES: tuple[Any, ...] = (bool, int, float, str, bytes, dict)
-
-
 def _default(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
         dtype = obj.dtype.str
@@ -251,38 +240,18 @@ def _default(obj: Any) -> Any:
             dtype = wire_dtype(obj.dtype)
             obj = np.asarray(obj, dtype=_DTYPES[dtype], order="C")  # keeps 0-d arrays 0-d
         return msgpack.ExtType(_EXT_NDARRAY, _array_header(dtype, obj.shape) + obj.tobytes())
-    if isinstance(obj, np.generic) and obj.dtype.str in _SCALAR_DTYPES:
-        name = obj.dtype.str.encode("ascii")
-        return msgpack.ExtType(_EXT_SCALAR, bytes([len(name)]) + name + obj.tobytes())
-    if isinstance(obj, (np.bool_, np.integer, np.floating)):  # e.g. big-endian: as the plain type
-        return obj.item()
-    if isinstance(obj, (tuple, set, frozenset, list)):
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating):
+        return float(obj)
+    if isinstance(obj, (tuple, set, frozenset)):
         return list(obj)
-    # Subclasses of the plain types (packing is strict about types, so that
-    # np.float64, a float subclass, reaches the scalar case above).
-    for base in _PLAIN_TYPES:
-        if isinstance(obj, base):
-            return base(obj)
     raise TypeError(f"cannot send a {type(obj).__name__} on the wire: {obj!r:.200}")
 
 
-def _scalar(data: bytes) -> Any:
-    try:
-        n = data[0]
-        dtype = data[1 : 1 + n].decode("ascii")
-    except (IndexError, UnicodeDecodeError) as exc:
-        raise ProtocolError(f"malformed numpy scalar: {exc}") from None
-    dt = _DTYPES.get(dtype)
-    if dt is None:
-        raise ProtocolError(f"scalar dtype {dtype!r} is not allowed")
-    if len(data) - 1 - n != dt.itemsize:
-        raise ProtocolError(f"a {dtype} scalar needs {dt.itemsize} bytes, got {len(data) - 1 - n}")
-    return np.frombuffer(data, dt, 1, 1 + n)[0]
-
-
 def _ext_hook(code: int, data: bytes) -> Any:
-    if code == _EXT_SCALAR:
-        return _scalar(data)
     if code != _EXT_NDARRAY:
         raise ProtocolError(f"unknown msgpack extension type {code}")
     try:
@@ -309,7 +278,7 @@ def _ext_hook(code: int, data: bytes) -> Any:
 
 def pack(obj: Any) -> bytes:
     """Encode one message (a map) as msgpack bytes."""
-    return msgpack.packb(obj, default=_default, use_bin_type=True, strict_types=True)
+    return msgpack.packb(obj, default=_default, use_bin_type=True)
 
 
 def unpack(frame: bytes) -> Any:

@@ -1,0 +1,73 @@
+"""numpy scalar types of a reply's reward and info values, both directions.
+
+Part of the spec (:mod:`remoteenv.wire.protocol`, "Values"): numpy scalars
+travel as plain msgpack numbers, which loses their type; Gymnasium's own
+MuJoCo envs return an ``np.float64`` reward and, e.g., an ``np.float32``
+``info["reward_ctrl"]``, and a strict comparison
+(``gymnasium.utils.env_match.check_environments_match``) tells them apart.
+So the sim adds a ``"types"`` map to a ``reset``/``step`` reply that had
+such values (:func:`describe_scalars`), and the agent casts them back
+(:func:`restore_scalars`). A reply with only plain values carries no map.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from remoteenv.wire.protocol import ARRAY_DTYPES
+
+
+def _wire_name(value: Any) -> str | None:
+    if isinstance(value, (np.bool_, np.integer, np.floating)):
+        name = value.dtype.newbyteorder("<").str if value.dtype.itemsize > 1 else value.dtype.str
+        return name if name in ARRAY_DTYPES else None
+    return None
+
+
+def describe_scalars(reply: dict[str, Any]) -> dict[str, Any]:
+    """Add ``reply["types"]`` naming the numpy scalar types of ``reward`` and of
+    the top-level ``info`` values, when there are any; returns ``reply``."""
+    types: dict[str, Any] = {}
+    reward = _wire_name(reply.get("reward"))
+    if reward is not None:
+        types["reward"] = reward
+    info = reply.get("info")
+    if isinstance(info, dict):
+        info_types = {}
+        for key, value in info.items():
+            name = _wire_name(value)
+            if name is not None:
+                info_types[key] = name
+        if info_types:
+            types["info"] = info_types
+    if types:
+        reply["types"] = types
+    return reply
+
+
+def restore_scalars(reply: dict[str, Any]) -> dict[str, Any]:
+    """Cast ``reward`` and ``info`` values named in ``reply["types"]`` back to
+    their numpy scalar types (and drop the map); returns ``reply``. Names
+    outside :data:`~remoteenv.wire.protocol.ARRAY_DTYPES`, and values that are
+    not plain numbers, are left as they are."""
+    types = reply.pop("types", None)
+    if not isinstance(types, dict):
+        return reply
+    reward = types.get("reward")
+    if reward in ARRAY_DTYPES and _is_number(reply.get("reward")):
+        reply["reward"] = np.dtype(reward).type(reply["reward"])
+    info, info_types = reply.get("info"), types.get("info")
+    if isinstance(info, dict) and isinstance(info_types, dict):
+        for key, name in info_types.items():
+            if name in ARRAY_DTYPES and _is_number(info.get(key)):
+                info[key] = np.dtype(name).type(info[key])
+    return reply
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (bool, int, float))
+
+
+__all__ = ["describe_scalars", "restore_scalars"]
