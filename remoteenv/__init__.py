@@ -39,6 +39,9 @@ _LAZY = {
     "RemoteEnvTimeout": "remoteenv.agent.errors",
     "LaunchError": "remoteenv.agent.errors",
     "SceneError": "remoteenv.agent.errors",
+    "SceneArgumentError": "remoteenv.agent.errors",
+    "SceneAttributeError": "remoteenv.agent.errors",
+    "UnsendableValueError": "remoteenv.agent.errors",
     "RemoteProtocolError": "remoteenv.agent.errors",
     "InvalidActionError": "remoteenv.agent.errors",
     "StateError": "remoteenv.agent.errors",
@@ -69,9 +72,12 @@ if TYPE_CHECKING:
         RemoteEnvError,
         RemoteEnvTimeout,
         RemoteProtocolError,
+        SceneArgumentError,
+        SceneAttributeError,
         SceneError,
         SimDiedError,
         StateError,
+        UnsendableValueError,
     )
     from remoteenv.agent.launcher import Launcher
     from remoteenv.agent.sim_group import SimGroup
@@ -111,10 +117,13 @@ __all__ = [
     "RemoteProtocolError",
     "RemoteVectorEnv",
     "SHIPPED_SCENES",
+    "SceneArgumentError",
+    "SceneAttributeError",
     "SceneError",
     "SimDiedError",
     "SimGroup",
     "StateError",
+    "UnsendableValueError",
     "scene_path",
 ]
 
