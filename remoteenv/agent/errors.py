@@ -82,11 +82,10 @@ class LaunchError(RemoteEnvError):
 
 
 class SceneArgumentError(LaunchError, TypeError):
-    """The scene's env class does not take a keyword argument it was given
-    (kind ``"scene_args"``); raised before launching when the scene script's
+    """The scene's env class does not take a keyword argument it was given (a
+    launch failure, kind ``"launch"``, and a ``TypeError`` as Python raises for
+    an unexpected keyword); raised before launching when the scene script's
     source shows it, else when the sim process reports it."""
-
-    KIND = "scene_args"
 
 
 class SimDiedError(RemoteEnvError):

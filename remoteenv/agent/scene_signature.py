@@ -83,8 +83,7 @@ def check_scene_kwargs(scene: str | os.PathLike[str], names: Iterable[str]) -> N
         if name not in keywords:
             raise SceneArgumentError(
                 f"{factory}() got an unexpected keyword argument {name!r} "
-                f"(scene {os.path.basename(path)} takes {sorted(keywords)}; no sim was launched)",
-                kind="scene_args",
+                f"(scene {os.path.basename(path)} takes {sorted(keywords)}; no sim was launched)"
             )
 
 

@@ -13,7 +13,7 @@ import subprocess
 import time
 from dataclasses import dataclass, field
 
-from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.agent.errors import RemoteEnvError, SceneArgumentError
 from remoteenv.wire.errors import EXIT_SCENE_ARGS
 
 _STDERR_TAIL_LINES = 20
@@ -94,9 +94,7 @@ def startup_failure(sim: SimProcess, scene: str) -> RemoteEnvError | None:
     if code == EXIT_SCENE_ARGS:
         lines = [line for line in sim.stderr_tail().splitlines() if "refused its keyword arguments" in line]
         reason = lines[-1].split(": ", 2)[-1] if lines else "see its stderr"
-        return RemoteEnvError(
-            f"{reason} (sim instance {sim.instance} of {scene})", kind="scene_args", instance=sim.instance
-        )
+        return SceneArgumentError(f"{reason} (sim instance {sim.instance} of {scene})", instance=sim.instance)
     if code == 0:
         text += (
             "\nIt exited without serving: did the script call run_scene(YourEnv) under "

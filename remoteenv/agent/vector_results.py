@@ -20,6 +20,7 @@ from gymnasium import spaces
 from gymnasium.vector.utils import concatenate, create_empty_array
 
 from remoteenv.wire.batch import AddInfo, merge_infos
+from remoteenv.wire.scalar_types import restore_info, restore_scalars
 
 
 class ObsBatch:
@@ -68,6 +69,7 @@ class ObsBatch:
 
 def step_reply_as_batch(reply: dict[str, Any]) -> dict[str, Any]:
     """A plain ``step`` reply (one world) in ``step_batch`` form."""
+    reply = restore_scalars(reply)
     return {
         "obs": [reply["obs"]],
         "reward": [reply["reward"]],
@@ -81,10 +83,21 @@ def step_reply_as_batch(reply: dict[str, Any]) -> dict[str, Any]:
 def reset_reply_as_batch(reply: dict[str, Any], as_step: bool = False) -> dict[str, Any]:
     """A plain ``reset`` reply (one world) in ``reset_batch`` form, or with
     ``as_step`` in ``step_batch`` form (reward 0, not terminated, not truncated)."""
+    reply = restore_scalars(reply)
     result: dict[str, Any] = {"obs": [reply["obs"]], "info": {"maps": [reply["info"]]}}
     if as_step:
         result.update(reward=[0.0], terminated=[False], truncated=[False], final=[])
     return result
+
+
+def _finals(result: dict[str, Any]) -> list[Any]:
+    """The ``final`` entries of a ``step_batch`` result, their info values
+    typed as ``final_types`` says (see :mod:`remoteenv.wire.scalar_types`)."""
+    final, types = result["final"], result.get("final_types")
+    if isinstance(types, list) and len(types) == len(final):
+        for (_, _, info), info_types in zip(final, types):
+            restore_info(info, info_types)
+    return final
 
 
 def assemble(
@@ -103,7 +116,7 @@ def assemble(
     if len(results) == 1 and obs_batch.box and isinstance(results[0]["obs"], np.ndarray):
         r = results[0]  # one process: its fresh arrays are the batch
         idx = np.arange(n)
-        for w, fobs, finfo in r["final"]:
+        for w, fobs, finfo in _finals(r):
             add_info(infos, {"final_obs": fobs, "final_info": finfo}, w)
         merge_infos(infos, r["info"], idx, n, add_info)
         return (
@@ -124,7 +137,7 @@ def assemble(
         rewards[lo:hi] = r["reward"]
         terminated[lo:hi] = r["terminated"]
         truncated[lo:hi] = r["truncated"]
-        for w, fobs, finfo in r["final"]:
+        for w, fobs, finfo in _finals(r):
             add_info(infos, {"final_obs": fobs, "final_info": finfo}, lo + w)
         merge_infos(infos, r["info"], idx, n, add_info)
     return obs, rewards, terminated, truncated, infos

@@ -75,6 +75,7 @@ class BatchCommands:
         terminated = np.zeros(n, dtype=np.bool_)
         truncated = np.zeros(n, dtype=np.bool_)
         final: list[Any] = []
+        final_types: list[Any] = []
         for w in range(n):
             op = ops[w]
             world = worlds[w]
@@ -87,11 +88,12 @@ class BatchCommands:
             truncated[w] = r["truncated"]
             if op == OP_STEP_RESET or (op == OP_STEP_AUTORESET and (r["terminated"] or r["truncated"])):
                 final.append([w, r["obs"], r["info"]])
+                final_types.append(r.get("types", {}).get("info"))
                 obs[w], infos[w] = world.reset(seed=None, options=None)
             else:
                 obs[w], infos[w] = r["obs"], r["info"]
         # Short vectors go as msgpack lists: cheaper than arrays to encode and decode.
-        return {
+        reply = {
             "obs": stack(obs),
             "reward": reward.tolist(),
             "terminated": terminated.tolist(),
@@ -99,6 +101,9 @@ class BatchCommands:
             "info": columnar_infos(infos),
             "final": final,
         }
+        if any(final_types):
+            reply["final_types"] = final_types
+        return reply
 
 
 __all__ = ["BatchCommands"]

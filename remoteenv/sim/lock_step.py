@@ -19,6 +19,7 @@ from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.channels import Channel, Outgoing
 from remoteenv.wire.delay_line import LockStepDelays
 from remoteenv.wire.delays import TICKS, Constant, DelaySpec, as_delay
+from remoteenv.wire.scalar_types import describe_scalars
 
 
 def _tick_delay(value: DelaySpec | int, name: str) -> DelaySpec:
@@ -114,14 +115,16 @@ class LockStepper:
             info["ticks_elapsed"] = 1
             info["latency_s"] = record.latency_ticks * self.env.dt
             info["late"] = record.latency_ticks > 0
-        return {
-            "obs": obs,
-            # A float subclass (np.float64, as Gymnasium's MuJoCo envs return) keeps its type.
-            "reward": reward if isinstance(reward, float) else float(reward),
-            "terminated": bool(terminated),
-            "truncated": False,
-            "info": info,
-        }
+        return describe_scalars(
+            {
+                "obs": obs,
+                # A float subclass (np.float64, as Gymnasium's MuJoCo envs return) keeps its type.
+                "reward": reward if isinstance(reward, float) else float(reward),
+                "terminated": bool(terminated),
+                "truncated": False,
+                "info": info,
+            }
+        )
 
 
 class LockStepping:

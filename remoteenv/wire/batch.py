@@ -27,12 +27,15 @@ def columnar_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
     If every value is a bool, int or float (numpy scalars included) and each
     key has one type across the worlds: ``{"columns": {key: [values, mask]}}``
     with ``values`` a list of ``n`` (bool, int or float; zero where the world
-    lacks the key) and ``mask`` a list of ``n`` bools saying which worlds have
+    lacks the key), or, when the first world's value is a numpy number, an
+    array of its dtype (the dtype Gymnasium's own vector envs would give it), and ``mask`` a list of ``n`` bools saying which worlds have
     it. Otherwise ``{"maps": infos}``. Columns cost one list per key instead
     of ``n`` maps to encode and to merge on the agent side.
     """
     n = len(infos)
     kinds: dict[str, type] = {}
+    #: Per key, the numpy dtype of its first value (None: a plain bool, int or float).
+    numpy_dtypes: dict[str, np.dtype | None] = {}
     for info in infos:
         for key, value in info.items():
             t = type(value)
@@ -46,15 +49,19 @@ def columnar_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
             base = _SCALAR_TYPES[t][0]
             if kinds.setdefault(key, base) is not base:
                 return {"maps": infos}
+            numpy_dtypes.setdefault(key, value.dtype if isinstance(value, np.number) else None)
     columns: dict[str, Any] = {}
     for key, base in kinds.items():
-        values = np.zeros(n, dtype=np.dtype(_SCALAR_TYPES[base][1]))
+        dtype = numpy_dtypes[key]
+        values = np.zeros(n, dtype=dtype if dtype is not None else np.dtype(_SCALAR_TYPES[base][1]))
         mask = np.zeros(n, dtype=np.bool_)
         for w, info in enumerate(infos):
             if key in info:
                 values[w] = info[key]
                 mask[w] = True
-        columns[key] = [values.tolist(), mask.tolist()]
+        # A key whose first value is a numpy scalar goes as an array of its
+        # dtype: Gymnasium's vector envs type an info array by its first value.
+        columns[key] = [values if dtype is not None else values.tolist(), mask.tolist()]
     return {"columns": columns}
 
 

@@ -101,13 +101,16 @@ ints of shape ``(n,)``) or as a list. ``ops[w]`` says what world ``w`` does:
 info = the reset's info); 2 step, then reset if the step terminated or
 truncated; 3 step, then reset (the agent's time limit ends the episode). A
 world reset after a step is listed in ``final`` with the step's obs and info,
-and its ``obs``/``info`` entries are the reset's.
+and its ``obs``/``info`` entries are the reset's. An optional
+``"final_types"`` list (one entry per ``final`` entry: nil or an info
+``{key: dtype}`` map) types their info values as ``"types"`` does (see Values).
 
 In both, ``obs`` is one array of shape ``(n, *obs_shape)`` when every world's
 obs is an array of one shape and dtype, else a list of ``n`` obs. ``infos`` is
 ``{"columns": {key: [values, present]}}`` when every info value is a bool,
 int or float with one type per key (``values``: list of ``n`` such values, 0
-where absent; ``present``: list of ``n`` bools), else
+where absent, or an array of the dtype of the first world's value when that
+is a numpy number; ``present``: list of ``n`` bools), else
 ``{"maps": [map, ...]}``, one info map per world.
 
 ``get_attr`` ``{"world": int, "name": str}`` -> ``{"value", "callable":

@@ -20,7 +20,7 @@ from remoteenv.wire.protocol import ARRAY_DTYPES
 
 
 def _wire_name(value: Any) -> str | None:
-    if isinstance(value, (np.bool_, np.integer, np.floating)):
+    if isinstance(value, (np.integer, np.floating)):  # np.bool_ stays a plain bool, as before
         name = value.dtype.newbyteorder("<").str if value.dtype.itemsize > 1 else value.dtype.str
         return name if name in ARRAY_DTYPES else None
     return None
@@ -47,6 +47,16 @@ def describe_scalars(reply: dict[str, Any]) -> dict[str, Any]:
     return reply
 
 
+def restore_info(info: Any, info_types: Any) -> Any:
+    """Cast the values of the info map ``info`` named in ``info_types`` (``{key:
+    dtype}``, as in a ``"types"`` map's ``"info"``) back to numpy scalars, in place."""
+    if isinstance(info, dict) and isinstance(info_types, dict):
+        for key, name in info_types.items():
+            if name in ARRAY_DTYPES and _is_number(info.get(key)):
+                info[key] = np.dtype(name).type(info[key])
+    return info
+
+
 def restore_scalars(reply: dict[str, Any]) -> dict[str, Any]:
     """Cast ``reward`` and ``info`` values named in ``reply["types"]`` back to
     their numpy scalar types (and drop the map); returns ``reply``. Names
@@ -58,11 +68,7 @@ def restore_scalars(reply: dict[str, Any]) -> dict[str, Any]:
     reward = types.get("reward")
     if reward in ARRAY_DTYPES and _is_number(reply.get("reward")):
         reply["reward"] = np.dtype(reward).type(reply["reward"])
-    info, info_types = reply.get("info"), types.get("info")
-    if isinstance(info, dict) and isinstance(info_types, dict):
-        for key, name in info_types.items():
-            if name in ARRAY_DTYPES and _is_number(info.get(key)):
-                info[key] = np.dtype(name).type(info[key])
+    restore_info(reply.get("info"), types.get("info"))
     return reply
 
 
@@ -70,4 +76,4 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (bool, int, float))
 
 
-__all__ = ["describe_scalars", "restore_scalars"]
+__all__ = ["describe_scalars", "restore_info", "restore_scalars"]

@@ -59,7 +59,8 @@ def test_columns_round_trip_like_gymnasium(name):
     assert "columns" in packed
     merged: dict[str, Any] = {}
     merge_infos(merged, over_the_wire(packed), idx, n, _Merger(n)._add_info)
-    plain = [{k: v.item() if isinstance(v, np.generic) else v for k, v in info.items()} for info in per_world]
+    # numpy numbers keep their dtype, as in Gymnasium's merge (issue 14); np.bool_ becomes bool.
+    plain = [{k: v.item() if isinstance(v, np.bool_) else v for k, v in info.items()} for info in per_world]
     assert_same(merged, gymnasium_merge(plain, idx.tolist(), n))
 
 

@@ -36,7 +36,9 @@ def test_unknown_signatures_refuse_nothing(tmp_path, source: str) -> None:
 
 def test_a_factory_function_and_keyword_only_parameters(tmp_path) -> None:
     script = tmp_path / "scene.py"
-    script.write_text("def make(render_mode=None, *, size=1):\n    pass\n\nif __name__ == '__main__':\n    run_scene(make)\n")
+    script.write_text(
+        "def make(render_mode=None, *, size=1):\n    pass\n\nif __name__ == '__main__':\n    run_scene(make)\n"
+    )
     check_scene_kwargs(script, ["size", "render_mode"])
     with pytest.raises(SceneArgumentError, match=r"make\(\) got an unexpected keyword argument 'width'"):
         check_scene_kwargs(script, ["width"])
@@ -44,8 +46,3 @@ def test_a_factory_function_and_keyword_only_parameters(tmp_path) -> None:
 
 def test_a_missing_script_is_left_to_the_launcher(tmp_path) -> None:
     check_scene_kwargs(tmp_path / "nope.py", ["x"])
-
-
-def test_the_kind_builds_the_type() -> None:
-    err = remoteenv.RemoteEnvError("bad", kind="scene_args")
-    assert isinstance(err, SceneArgumentError) and isinstance(err, TypeError)
