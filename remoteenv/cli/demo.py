@@ -1,8 +1,20 @@
-"""``python -m remoteenv demo <scene>``: launch a sim, run a controller, print returns."""
+"""``python -m remoteenv demo ID_OR_SCENE``: launch a sim, run a controller, print returns.
+
+``ID_OR_SCENE`` is a shipped scene's name (``cartpole``, ``reacher``,
+``hexapod``: each has its own controller), any registered Gymnasium id that
+remoteenv serves (``module:id`` imports the module first) or the path of a
+scene script. Other scenes run random actions, unless their scene script
+defines ``demo_policy(obs, t) -> action`` (``t``: simulated seconds since the
+reset), which the demo then loads and uses.
+"""
 
 from __future__ import annotations
 
 import argparse
+import ast
+import importlib.util
+import os
+import sys
 import time
 from collections.abc import Callable
 from typing import Any
@@ -10,18 +22,39 @@ from typing import Any
 import gymnasium as gym
 
 from remoteenv import SHIPPED_SCENES as SCENES
+from remoteenv.remote_env import OpenAIRemoteEnv
+
+#: Steps per episode for a scene script run without a registered time limit.
+DEFAULT_MAX_STEPS = 1000
 
 
 def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "demo",
-        help="run a shipped scene with a simple controller",
+        help="run a scene (shipped, registered id or scene script) with a controller or random actions",
         description="Launch a scene's sim process, drive it with a simple controller "
-        "(cartpole: LQR balance, reacher: reaching controller, hexapod: tripod gait) "
-        "and print each episode's return, length and steps/s (and, for scenes that "
-        "report info['x_position'], the distance moved along x).",
+        "(cartpole: LQR balance, reacher: reaching controller, hexapod: tripod gait; "
+        "another scene: its script's demo_policy(obs, t) if it defines one, else random "
+        "actions) and print each episode's return, length and steps/s (and, for scenes "
+        "that report info['x_position'], the distance moved along x).",
     )
-    p.add_argument("scene", choices=sorted(SCENES), help="which shipped scene")
+    p.add_argument(
+        "scene",
+        metavar="ID_OR_SCENE",
+        help=f"a shipped scene ({', '.join(sorted(SCENES))}), a registered env id "
+        "(e.g. remoteenv/Reacher-v0 or mypkg:mypkg/MyScene-v0) or the path of a scene script",
+    )
+    p.add_argument(
+        "--max-steps",
+        type=int,
+        default=None,
+        help=f"truncate episodes after this many steps (default: the id's limit; {DEFAULT_MAX_STEPS} for a script)",
+    )
+    p.add_argument(
+        "--viewer",
+        action="store_true",
+        help="show the sim in MuJoCo's viewer window (render_mode='human'; needs a display)",
+    )
     p.add_argument("--episodes", type=int, default=3, help="episodes to run (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first reset (default 0)")
     p.add_argument("--continuous", action="store_true", help="cartpole: Box(-1, 1) action instead of Discrete(2)")
@@ -67,12 +100,46 @@ def add_parser(sub: Any) -> None:
 Policy = Callable[[Any, float], Any]
 
 
+def scene_script(target: str) -> str | None:
+    """The scene script behind a demo target (a path, or an id's ``scene`` kwarg)."""
+    if os.path.isfile(target):
+        return os.path.abspath(target)
+    try:
+        spec = gym.spec(target)
+    except gym.error.Error:
+        return None
+    scene = (spec.kwargs or {}).get("scene")
+    return os.fspath(scene) if scene else None
+
+
+def script_policy(path: str | None) -> Policy | None:
+    """The ``demo_policy`` a scene script defines (loaded without running its
+    ``__main__`` block), or None if it defines none."""
+    if path is None:
+        return None
+    try:
+        with open(path, encoding="utf-8") as f:
+            tree = ast.parse(f.read(), filename=path)
+    except (OSError, SyntaxError):
+        return None
+    if not any(isinstance(n, ast.FunctionDef) and n.name == "demo_policy" for n in tree.body):
+        return None
+    spec = importlib.util.spec_from_file_location("_remoteenv_demo_scene", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.demo_policy
+
+
 def make_policy(scene: str, env: gym.Env, random: bool) -> Policy:
     """The demo's controller for ``scene`` (or random actions)."""
     from remoteenv import controllers
 
     if random:
         return lambda obs, t: env.action_space.sample()
+    if scene not in SCENES:
+        own = script_policy(scene_script(scene))
+        return own if own is not None else (lambda obs, t: env.action_space.sample())
     if scene == "hexapod":
         return controllers.hexapod_tripod
     if scene == "reacher":
@@ -80,6 +147,11 @@ def make_policy(scene: str, env: gym.Env, random: bool) -> Policy:
     if isinstance(env.action_space, gym.spaces.Discrete):
         return lambda obs, t: controllers.cartpole_discrete(obs)
     return lambda obs, t: controllers.cartpole_continuous(obs)
+
+
+def has_display() -> bool:
+    """Whether a window can be opened (an X11 or Wayland display is set)."""
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
 def make_env(args: argparse.Namespace) -> gym.Env:
@@ -90,24 +162,49 @@ def make_env(args: argparse.Namespace) -> gym.Env:
         kwargs.update(real_time=True, real_time_factor=args.real_time_factor)
     if getattr(args, "action_delay", 0):
         kwargs["action_delay"] = args.action_delay
-    if getattr(args, "record", None):
+    if getattr(args, "viewer", False):
+        kwargs["render_mode"] = "human"
+    record = getattr(args, "record", None)
+    if record:
         kwargs["render_mode"] = "rgb_array"
-        env = gym.make(SCENES[args.scene], **kwargs)
-        return gym.wrappers.RecordVideo(env, args.record, episode_trigger=lambda episode: True, name_prefix=args.scene)
-    return gym.make(SCENES[args.scene], **kwargs)
+    env = _make(args.scene, getattr(args, "max_steps", None), kwargs)
+    if record:
+        prefix = os.path.splitext(os.path.basename(args.scene))[0].replace("/", "-")
+        return gym.wrappers.RecordVideo(env, record, episode_trigger=lambda episode: True, name_prefix=prefix)
+    return env
+
+
+def _make(target: str, max_steps: int | None, kwargs: dict[str, Any]) -> gym.Env:
+    """The env of a demo target: a shipped scene, a registered id or a scene script."""
+    if target in SCENES:
+        return gym.make(SCENES[target], max_episode_steps=max_steps, **kwargs)
+    if os.path.isfile(target):
+        env: gym.Env = OpenAIRemoteEnv(target, **kwargs)
+        return gym.wrappers.TimeLimit(env, max_steps or DEFAULT_MAX_STEPS)
+    try:
+        return gym.make(target, max_episode_steps=max_steps, **kwargs)
+    except gym.error.Error as exc:
+        raise SystemExit(
+            f"demo: {target!r} is neither a shipped scene ({', '.join(sorted(SCENES))}), a scene "
+            f"script nor a registered id ({exc}); for a package's id use 'package:namespace/Name-v0'"
+        ) from None
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.viewer and not has_display():
+        print("demo: --viewer needs a display (DISPLAY or WAYLAND_DISPLAY); use --record DIR instead", file=sys.stderr)
+        return 2
     t0 = time.perf_counter()
     env = make_env(args)
     try:
-        policy = make_policy(args.scene, env, args.random)
+        shipped = {env_id: name for name, env_id in SCENES.items()}.get(args.scene, args.scene)
+        policy = make_policy(shipped, env, args.random)
         env.action_space.seed(args.seed)
         obs, info = env.reset(seed=args.seed)
         remote: Any = env.unwrapped  # the OpenAIRemoteEnv under gym.make's wrappers
-        dt = float(remote.dt)
+        dt = float(getattr(remote, "dt", 0.0) or 0.0)  # an in-process env may not say
         print(
-            f"{env.spec.id if env.spec else args.scene}: sim pid {remote.pid}, "
+            f"{env.spec.id if env.spec else args.scene}: sim pid {getattr(remote, 'pid', None)}, "
             f"obs {env.observation_space}, action {env.action_space}; "
             f"make + first reset {time.perf_counter() - t0:.3f} s"
         )
@@ -138,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
                 f"episode {episode}: return {ret:9.3f}  steps {steps:4d} ({end})  {steps / elapsed:8.0f} steps/s{moved}"
             )
         print(f"all episodes: {total_steps} steps, {total_steps / max(total_time, 1e-9):.0f} steps/s")
-        if args.real_time or args.action_delay or args.think_ms > 0:
+        if (args.real_time or args.action_delay or args.think_ms > 0) and hasattr(remote, "latency_stats"):
             print("latency stats (env.unwrapped.latency_stats):")
             print(remote.latency_stats.format())
     finally:

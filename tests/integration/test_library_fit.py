@@ -113,3 +113,35 @@ def test_torchrl_gym_wrapper_over_remote_vector_env():
         assert np.all(rollout["next", "reward"].numpy() >= 0)
     finally:
         env.close()
+
+
+def test_demo_runs_a_scene_script_with_its_own_policy(tmp_path, capsys):
+    from remoteenv.cli import main as cli_main
+
+    path = _script(
+        tmp_path,
+        """
+        import sys
+        sys.path.insert(0, "{scenes}")
+        from cartpole_scene import CartPoleEnv
+        from remoteenv.sim import run_scene
+
+        def demo_policy(obs, t):
+            return 1 if obs[2] + 0.5 * obs[3] > 0 else 0  # keeps the pole up
+
+        if __name__ == "__main__":
+            run_scene(CartPoleEnv)
+        """,
+    )
+    assert cli_main(["demo", str(path), "--episodes", "1", "--max-steps", "200"]) == 0
+    out = capsys.readouterr().out
+    assert "return   200.000  steps  200 (truncated)" in out
+
+
+def test_demo_runs_a_registered_id_and_refuses_unknown_ones(capsys):
+    from remoteenv.cli import main as cli_main
+
+    assert cli_main(["demo", "remoteenv/CartPole-v0", "--episodes", "1", "--continuous", "--max-steps", "100"]) == 0
+    assert "steps  100 (truncated)" in capsys.readouterr().out  # the LQR controller of the shipped scene
+    with pytest.raises(SystemExit, match="neither a shipped scene"):
+        cli_main(["demo", "nobody/Nothing-v0"])
