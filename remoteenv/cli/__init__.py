@@ -11,6 +11,7 @@ from collections.abc import Sequence
 #: Command name -> module in remoteenv.cli, in the order ``--help`` lists them.
 COMMANDS = {
     "demo": "demo",
+    "new-scene": "new_scene",
     "bench": "bench",
     "keys": "keys_command",
     "launch": "launch",

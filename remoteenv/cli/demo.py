@@ -105,7 +105,7 @@ def scene_script(target: str) -> str | None:
     if os.path.isfile(target):
         return os.path.abspath(target)
     try:
-        spec = gym.spec(target)
+        spec = gym.spec(target.rsplit(":", 1)[-1])  # "module:id": make() has imported the module
     except gym.error.Error:
         return None
     scene = (spec.kwargs or {}).get("scene")
