@@ -15,8 +15,9 @@ import time
 from collections.abc import Sequence
 from typing import Any, Protocol
 
-from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.agent.errors import RemoteEnvError, SceneArgumentError
 from remoteenv.wire.delays import DelaySpec
+from remoteenv.wire.errors import SCENE_ARGS_MARKER
 
 
 def scene_command(
@@ -109,6 +110,26 @@ class StartingSim(Protocol):
     def stderr_tail(self, lines: int = ...) -> str: ...
 
 
+def startup_failure(sim: StartingSim, what: str, why: str) -> RemoteEnvError:
+    """The error for a sim that exited before reporting ready; ``why`` is its
+    ``death()`` text, ``what`` names the scene. A
+    :class:`~remoteenv.agent.errors.SceneArgumentError` (a ``TypeError``) when
+    the scene refused its keyword arguments (the sim says so on stderr), else
+    a launch error, with a hint when the script exited cleanly without
+    serving (it never called ``run_scene``)."""
+    refused = [line for line in sim.stderr_tail().splitlines() if SCENE_ARGS_MARKER in line]
+    if refused:
+        reason = refused[-1].split(SCENE_ARGS_MARKER, 1)[1].strip()
+        return SceneArgumentError(f"{reason} (sim instance {sim.instance} of {what})", instance=sim.instance)
+    text = f"sim instance {sim.instance} of {what} failed to start: {why}"
+    if "exited with code 0" in why:
+        text += (
+            "\nIt exited without serving: did the script call run_scene(YourEnv) under "
+            '`if __name__ == "__main__":`? (see remoteenv.sim.run_scene)'
+        )
+    return RemoteEnvError(text, kind="launch", instance=sim.instance)
+
+
 def wait_ready(sim: StartingSim, timeout: float, what: str) -> None:
     """Wait until ``sim`` has written its ready file and set ``sim.endpoint``.
 
@@ -128,11 +149,7 @@ def wait_ready(sim: StartingSim, timeout: float, what: str) -> None:
             pass
         why = sim.death()
         if why is not None:
-            raise RemoteEnvError(
-                f"sim instance {sim.instance} of {what} failed to start: {why}",
-                kind="launch",
-                instance=sim.instance,
-            )
+            raise startup_failure(sim, what, why)
         if time.monotonic() > deadline:
             raise RemoteEnvError(
                 f"sim instance {sim.instance} (pid {sim.pid}) of {what} did not report ready within "

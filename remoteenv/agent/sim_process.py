@@ -13,9 +13,6 @@ import subprocess
 import time
 from dataclasses import dataclass, field
 
-from remoteenv.agent.errors import RemoteEnvError, SceneArgumentError
-from remoteenv.wire.errors import EXIT_SCENE_ARGS
-
 _STDERR_TAIL_LINES = 20
 
 
@@ -81,28 +78,6 @@ class SimProcess:
         return text
 
 
-def startup_failure(sim: SimProcess, scene: str) -> RemoteEnvError | None:
-    """The error to raise for a sim that exited before reporting ready (None
-    while it runs): a :class:`~remoteenv.agent.errors.SceneArgumentError` when
-    the scene refused its keyword arguments, a launch error otherwise, with a
-    hint when the script exited cleanly without serving (no ``run_scene``)."""
-    why = sim.death()
-    if why is None:
-        return None
-    text = f"sim instance {sim.instance} of {scene} failed to start: {why}"
-    code = sim.proc.poll()
-    if code == EXIT_SCENE_ARGS:
-        lines = [line for line in sim.stderr_tail().splitlines() if "refused its keyword arguments" in line]
-        reason = lines[-1].split(": ", 2)[-1] if lines else "see its stderr"
-        return SceneArgumentError(f"{reason} (sim instance {sim.instance} of {scene})", instance=sim.instance)
-    if code == 0:
-        text += (
-            "\nIt exited without serving: did the script call run_scene(YourEnv) under "
-            '`if __name__ == "__main__":`? (see remoteenv.sim.run_scene)'
-        )
-    return RemoteEnvError(text, kind="launch", instance=sim.instance)
-
-
 @dataclass
 class LaunchState:
     """What a launcher's finalizer needs (its private dir and its sims); holds
@@ -140,4 +115,4 @@ def stop_all(state: LaunchState, grace: float = 2.0) -> None:
     shutil.rmtree(state.workdir, ignore_errors=True)
 
 
-__all__ = ["LaunchState", "SimProcess", "startup_failure", "stop_all"]
+__all__ = ["LaunchState", "SimProcess", "stop_all"]

@@ -12,7 +12,7 @@ from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.pacing_levers import GC_MODES, apply_levers
 from remoteenv.sim.server import RemoteControlledAgent
 from remoteenv.wire.delays import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
-from remoteenv.wire.errors import EXIT_SCENE_ARGS, ProtocolError, short_repr
+from remoteenv.wire.errors import EXIT_SCENE_ARGS, SCENE_ARGS_MARKER, ProtocolError, short_repr
 from remoteenv.wire.keys import read_key, read_keys
 
 
@@ -133,7 +133,7 @@ def run_scene(
         if "keyword argument" not in str(exc):
             raise
         # The launcher turns this exit status into a TypeError in the agent.
-        print(f"remoteenv: the scene's env factory refused its keyword arguments: {exc}", file=sys.stderr)
+        print(f"{SCENE_ARGS_MARKER} {exc}", file=sys.stderr)
         sys.exit(EXIT_SCENE_ARGS)
     if args.seed is not None:
         for w, env in enumerate(envs):

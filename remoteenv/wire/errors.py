@@ -25,8 +25,10 @@ UNSENDABLE = "unsendable"
 ERROR_KINDS = frozenset({PROTOCOL, INVALID_ACTION, SCENE, STATE, ATTRIBUTE, UNSENDABLE})
 
 #: Exit status of a sim process whose env factory refused its keyword
-#: arguments (the launcher raises a ``TypeError`` for it, see ``run_scene``).
+#: arguments; it also writes :data:`SCENE_ARGS_MARKER` and the reason to
+#: stderr, which the launcher raises as a ``TypeError`` (see ``run_scene``).
 EXIT_SCENE_ARGS = 3
+SCENE_ARGS_MARKER = "remoteenv: the scene's env factory refused its keyword arguments:"
 
 #: Longest text of an error message built from a request's content (characters).
 MAX_ECHO_CHARS = 200
