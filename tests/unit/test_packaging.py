@@ -1,0 +1,33 @@
+"""The wheel ships what users need besides the modules: py.typed, the scene templates, the models."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def test_package_data_lists_py_typed_templates_and_models() -> None:
+    with open(os.path.join(ROOT, "pyproject.toml"), "rb") as f:
+        data = tomllib.load(f)["tool"]["setuptools"]["package-data"]
+    assert "py.typed" in data["remoteenv"]
+    assert os.path.isfile(os.path.join(ROOT, "remoteenv", "py.typed"))
+    assert "scene_template/*.tmpl" in data["remoteenv.cli"]
+    templates = os.listdir(os.path.join(ROOT, "remoteenv", "cli", "scene_template"))
+    assert {"pyproject.toml.tmpl", "scene.py.tmpl", "model.xml.tmpl", "init.py.tmpl", "test.py.tmpl"} <= set(templates)
+    for scene in ("cartpole", "reacher", "hexapod"):
+        assert data[f"remoteenv.scenes.{scene}"] == ["*.xml"]
+
+
+def test_cartpole_registration_carries_cartpole_v1_threshold() -> None:
+    import gymnasium as gym
+
+    import remoteenv  # noqa: F401
+
+    assert gym.spec("remoteenv/CartPole-v0").reward_threshold == gym.spec("CartPole-v1").reward_threshold == 475.0
