@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from collections.abc import Iterable, Sequence
 
-from remoteenv.compliance import checks_batch, checks_episode, checks_wire
+from remoteenv.compliance import checks_attributes, checks_batch, checks_episode, checks_wire
 from remoteenv.compliance.failures import CheckFailed, CheckSkipped
 from remoteenv.compliance.probe import Probe, Target
 from remoteenv.compliance.results import FAIL, PASS, SKIP, Check, Result
@@ -25,6 +25,7 @@ CHECKS: tuple[Check, ...] = (
     *checks_wire.CHECKS[1:],
     *checks_episode.CHECKS[1:],
     *checks_batch.CHECKS,
+    *checks_attributes.CHECKS,
     checks_episode.CLOSE,  # last: it stops the server
 )
 
