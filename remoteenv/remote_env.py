@@ -45,7 +45,7 @@ class OpenAIRemoteEnv(Pausable, RebuildOnUnpickle, gym.Env):
     Args:
         scene: path of the scene script to launch.
         render_mode: ``"rgb_array"`` renders offscreen in the sim process.
-        real_time: run the sim on a paced wall clock (see README, real time).
+        real_time: run the sim on a paced wall clock (see docs/real-time.md).
         real_time_factor: simulated seconds per wall-clock second.
         action_delay: lock-step; an action takes effect this many ticks later:
             an int, or a :mod:`remoteenv.delays` spec in ticks (e.g.
@@ -105,7 +105,7 @@ class OpenAIRemoteEnv(Pausable, RebuildOnUnpickle, gym.Env):
             far: action latency (mean/p50/p99/max, seconds and ticks), wall
             round trip, late actions, pacing overruns. With ``real_time`` or
             ``action_delay`` each step's info also carries the timing keys
-            (see README, real time) plus ``wall_round_trip_s``, the wall
+            (see docs/real-time.md) plus ``wall_round_trip_s``, the wall
             seconds from sending the step to receiving its reply.
     """
 
