@@ -140,7 +140,9 @@ def test_an_admitted_client_gets_through_a_connection_storm():
             conn.close()
         took = time.perf_counter() - start
         fds = len(os.listdir(f"/proc/{pid}/fd"))
-        print(f"admitted handshake in {took * 1e3:.0f} ms during {STORM} idle connections; sim fds {fds}, cpu {cpu:.0%}")
+        print(
+            f"admitted handshake in {took * 1e3:.0f} ms during {STORM} idle connections; sim fds {fds}, cpu {cpu:.0%}"
+        )
         assert cpu < 0.5
         assert took < 10.0
         # Idle connections are closed once the handshake interval has passed.
