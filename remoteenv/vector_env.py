@@ -356,8 +356,8 @@ class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every world once (or autoreset it, see ``autoreset_mode``)."""
-        if not self._has_reset:
-            raise StateError("step() before reset(): call reset() on the RemoteVectorEnv first")
+        if not self._has_reset or self._session.closed:
+            raise StateError("step() before reset() or after close(): reset() an open RemoteVectorEnv first")
         acts = self._check_actions(actions)
         mode, limit = self.autoreset_mode, self.max_episode_steps
         ops = plan_ops(mode, self._autoreset, self._elapsed, limit)

@@ -6,7 +6,11 @@ launch.json`` starts sims and writes a launch-info file;
 attach="launch.json")``) and ``RemoteVectorEnv.attach("launch.json")`` drive
 them from any other process. Nothing in the file is a secret: the spaces come
 from each sim's handshake; when CURVE is on, the file names the sims' public
-keys and the path of the client secret key file (mode 0600) written beside it.
+keys and the path of the client secret key file (mode 0600). ``launch``
+writes that key into its private dir, which goes with the sims even when the
+command is killed; a relative path is taken from the launch-info file's dir,
+and an absolute one that does not exist on this machine falls back to its
+file name there (copy the key beside the file to attach from elsewhere).
 
 File format (JSON, ``"format": "remoteenv-launch/1"``)::
 
@@ -40,6 +44,7 @@ from remoteenv.agent.processes import pid_alive
 from remoteenv.agent.sim_connection import SimConnection
 from remoteenv.agent.sim_group import LaunchSpec, SimLayout
 from remoteenv.agent.zmq_connection import ZmqConnection
+from remoteenv.wire.files import write_atomic
 from remoteenv.wire.keys import KeyPair, load_keypair
 
 FORMAT = "remoteenv-launch/1"
@@ -129,8 +134,8 @@ class LaunchInfo:
         if self.curve_client_secret_key_file is None:
             return None
         path = self.curve_client_secret_key_file
-        if not os.path.isabs(path) and self.path is not None:
-            path = os.path.join(os.path.dirname(os.path.abspath(self.path)), path)
+        if self.path is not None and (not os.path.isabs(path) or not os.path.exists(path)):
+            path = os.path.join(os.path.dirname(os.path.abspath(self.path)), os.path.basename(path))
         try:
             return load_keypair(path)
         except OSError as exc:
@@ -142,13 +147,11 @@ class LaunchInfo:
 
 
 def write_launch_info(path: str | os.PathLike[str], info: LaunchInfo) -> None:
-    """Write ``info`` to ``path`` atomically (readers never see half a file)."""
+    """Write ``info`` to ``path`` atomically (readers never see half a file),
+    never through a symlink planted there or at a temporary name
+    (:func:`remoteenv.wire.files.write_atomic`)."""
     path = os.fspath(path)
-    tmp = f"{path}.tmp-{os.getpid()}"
-    with open(tmp, "w") as f:
-        json.dump(info.to_json(), f, indent=2)
-        f.write("\n")
-    os.replace(tmp, path)
+    write_atomic(path, json.dumps(info.to_json(), indent=2) + "\n", 0o644)
     info.path = path
 
 

@@ -3,7 +3,11 @@ sequence numbers, stale replies, timeouts, error replies, a dead peer.
 
 Runs in the agent process (the sim's ends are :mod:`remoteenv.sim.channels`).
 Every request gets a fresh sequence number; replies with another number are
-stale (from a request that timed out) and are dropped. The transports are
+stale (from a request that timed out) and are dropped. A request above the
+wire's frame limit is refused before anything is sent. An error reply with
+``seq`` -1 (the sim could not decode a frame) answers the oldest request
+still unanswered on the connection: it is raised only when that is the one
+being waited for, else dropped with that request. The transports are
 subclasses: :class:`remoteenv.agent.zmq_connection.ZmqConnection` and
 :class:`remoteenv.agent.pipe_connection.PipeConnection`.
 """
@@ -11,6 +15,7 @@ subclasses: :class:`remoteenv.agent.zmq_connection.ZmqConnection` and
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
@@ -19,6 +24,8 @@ from remoteenv.wire import protocol
 
 #: How often (seconds) a waiting call checks that the sim process still lives.
 LIVENESS_CHECK_S = 0.1
+#: Unanswered requests remembered per connection (to place ``seq`` -1 replies).
+_MAX_UNANSWERED = 1024
 
 
 class SimConnection:
@@ -51,6 +58,9 @@ class SimConnection:
         self.death_check = death_check
         self.closed = False
         self._seq = 0
+        #: Requests sent and not yet answered, oldest first (a timed-out one stays
+        #: until its late reply arrives or the transport is reset).
+        self._unanswered: OrderedDict[int, None] = OrderedDict()
 
     # ------------------------------------------------------------ transport
 
@@ -91,8 +101,25 @@ class SimConnection:
             raise RemoteEnvError(
                 f"connection to sim instance {self.instance} is closed", kind="state", instance=self.instance
             )
-        self._send_frame(protocol.pack(args))
+        self._send_frame(self._encode(cmd, args))
+        self._unanswered[self._seq] = None
+        if len(self._unanswered) > _MAX_UNANSWERED:
+            self._unanswered.popitem(last=False)
         return self._seq
+
+    def _encode(self, cmd: str, args: dict[str, Any]) -> bytes:
+        """``args`` as a frame; a clear error naming the field when it cannot be sent."""
+        try:
+            return protocol.pack(args)
+        except (protocol.ProtocolError, ValueError, TypeError) as exc:
+            field = next((k for k, v in args.items() if not _packable(v)), None)
+            where = f" (field {field!r})" if field is not None else ""
+            raise RemoteEnvError(
+                f"'{cmd}' for sim instance {self.instance} was not sent{where}: {exc}. "
+                "Nothing reached the sim; the env is still usable.",
+                kind="protocol",
+                instance=self.instance,
+            ) from None
 
     def receive(self, seq: int, timeout: float | None = ..., what: str = "reply") -> dict[str, Any]:  # type: ignore[assignment]
         """Wait for the reply to request ``seq`` and return it.
@@ -119,10 +146,8 @@ class SimConnection:
                     ) from None
                 continue
             reply = self._decode(frame)
-            if reply.get("seq") == seq:
+            if self._answers(reply, seq):
                 break
-            if reply.get("seq") == -1 and not reply.get("ok", True):
-                self._raise(reply, what)
             # A stale reply to an earlier, abandoned request: drop it.
         if not reply.get("ok"):
             self._raise(reply, what)
@@ -143,18 +168,26 @@ class SimConnection:
             if frame is None:
                 return None
             reply = self._decode(frame)
-            if reply.get("seq") == seq:
+            if self._answers(reply, seq):
                 if not reply.get("ok"):
                     self._raise(reply, what)
                 return reply
-            if reply.get("seq") == -1 and not reply.get("ok", True):
-                self._raise(reply, what)
 
     def check_alive(self, what: str = "a reply") -> None:
         """Raise :class:`remoteenv.SimDiedError` (kind ``"died"``) if the sim process is gone."""
         self._check_alive(what)
 
     # ------------------------------------------------------------ helpers
+
+    def _answers(self, reply: dict[str, Any], seq: int) -> bool:
+        """Whether ``reply`` answers request ``seq``; forgets the request it answers."""
+        got = reply.get("seq")
+        if got == -1 and not reply.get("ok", True):
+            # An undecodable frame: the oldest unanswered request's, in order.
+            got = next(iter(self._unanswered), seq)
+        if isinstance(got, int):
+            self._unanswered.pop(got, None)
+        return got == seq
 
     def _check_alive(self, what: str) -> None:
         if self.death_check is None:
@@ -194,6 +227,14 @@ class SimConnection:
             instance=self.instance,
             remote_traceback=str(err.get("traceback", "")),
         )
+
+
+def _packable(value: Any) -> bool:
+    try:
+        protocol.pack(value)
+    except (protocol.ProtocolError, ValueError, TypeError):
+        return False
+    return True
 
 
 __all__ = ["LIVENESS_CHECK_S", "SimConnection"]

@@ -3,11 +3,14 @@
 
 Runs in the agent process. A DEALER socket to the sim's ROUTER. After a
 timeout the socket is thrown away and a new one connected, so the next call
-starts clean (the zguide's "Lazy Pirate" pattern).
+starts clean (the zguide's "Lazy Pirate" pattern). The new socket keeps the
+connection's random routing id, so a real-time sim still knows it as the
+connection that drives its world.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from typing import Any
 
@@ -42,6 +45,8 @@ class ZmqConnection(SimConnection):
         self.curve_server_key = curve_server_key
         self.curve_client_keypair = curve_client_keypair
         self.socket: Any = None
+        # Routing ids starting with a zero byte are reserved by ZeroMQ.
+        self.routing_id = b"\x01" + os.urandom(15)
         self._open()
 
     def _open(self) -> None:
@@ -50,6 +55,7 @@ class ZmqConnection(SimConnection):
         sock.setsockopt(zmq.RECONNECT_IVL, 20)
         sock.setsockopt(zmq.MAXMSGSIZE, protocol.MAX_MESSAGE_BYTES)
         sock.setsockopt(zmq.RCVTIMEO, int(LIVENESS_CHECK_S * 1000))
+        sock.setsockopt(zmq.ROUTING_ID, self.routing_id)
         if self.curve_server_key is not None:
             public, secret = self.curve_client_keypair or zmq.curve_keypair()
             sock.curve_serverkey = self.curve_server_key

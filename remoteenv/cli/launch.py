@@ -89,7 +89,6 @@ def run(args: argparse.Namespace) -> int:
     if not isinstance(env_kwargs, dict):
         raise SystemExit(f"--env-kwargs must be a JSON map, got {args.env_kwargs!r}")
     out = os.path.abspath(args.out)
-    key_file = f"{os.path.splitext(out)[0]}.client.key_secret"
 
     def _stop(signum: int, _frame: Any) -> None:
         raise SystemExit(128 + signum)
@@ -121,11 +120,11 @@ def run(args: argparse.Namespace) -> int:
             env_id = parse_handshake(conn.request("handshake", **handshake_request())).env_id
         finally:
             conn.close()
+        key_file = None
         if keys is not None:
-            if os.path.exists(key_file):
-                os.unlink(key_file)  # a stale key of an earlier launch
+            # In the private dir (0700): it goes with the sims, however this command ends.
+            key_file = os.path.join(launcher.workdir, f"launch.{os.path.basename(os.path.splitext(out)[0])}.key_secret")
             write_secret_key(key_file, keys.secret)
-            written.append(key_file)
         info = LaunchInfo(
             scene=launcher.scene,
             env_id=env_id,
@@ -136,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
             real_time=args.real_time,
             real_time_factor=args.real_time_factor,
             action_delay=args.action_delay,
-            curve_client_secret_key_file=None if keys is None else os.path.basename(key_file),
+            curve_client_secret_key_file=key_file,
             instances=[
                 AttachedSim(
                     instance=s.instance,
@@ -151,6 +150,8 @@ def run(args: argparse.Namespace) -> int:
         written.append(out)
         for s in info.instances:
             print(f"instance {s.instance}: pid {s.pid} at {s.endpoint}")
+        if key_file is not None:
+            print(f"CURVE client secret key (mode 0600, removed with the sims): {key_file}")
         print(
             f"{env_id}: {args.instances} sim(s) running; wrote {out}. "
             "Attach with OpenAIRemoteEnv.attach(FILE); Ctrl-C or SIGTERM stops them.",

@@ -14,7 +14,9 @@ from typing import Any, Protocol
 
 import zmq
 
+from remoteenv.sim.limits import FRAMES_PER_DRAIN
 from remoteenv.wire import protocol
+from remoteenv.wire.errors import PROTOCOL
 from remoteenv.wire.hot_wait import yield_cpu
 
 _PIPE_READ_BYTES = 1 << 20
@@ -29,6 +31,8 @@ class Channel(Protocol):
     pollable: Any
     #: A file descriptor that becomes readable when requests may be waiting.
     fd: int
+    #: True when the last :meth:`receive_nowait` left requests waiting (it takes a bounded number).
+    more: bool
 
     def receive_nowait(self) -> list[tuple[Any, bytes]]:
         """The request frames that have arrived, each with whom to answer (never blocks)."""
@@ -46,7 +50,12 @@ Outgoing = tuple["Channel | None", Any, dict[str, Any]]
 
 
 class ZmqChannel:
-    """The bound ROUTER socket; ``reply_to`` is the peer's routing id."""
+    """The bound ROUTER socket; ``reply_to`` is the peer's routing id.
+
+    :meth:`receive_nowait` takes at most :data:`~remoteenv.sim.limits.FRAMES_PER_DRAIN`
+    frames per call, so a flood cannot keep the loop from its other channels;
+    :attr:`more` says whether frames were left waiting.
+    """
 
     def __init__(self, sock: zmq.Socket) -> None:
         self.socket = sock
@@ -56,14 +65,22 @@ class ZmqChannel:
         #: A file descriptor that becomes readable when requests may be waiting
         #: (edge-triggered: always drain with :meth:`receive_nowait`).
         self.fd: int = int(sock.getsockopt(zmq.FD))
+        #: True when the last :meth:`receive_nowait` left frames waiting.
+        self.more = False
 
     def receive_nowait(self) -> list[tuple[Any, bytes]]:
-        out = []
+        out: list[tuple[Any, bytes]] = []
         sock = self.socket
+        handled = 0
         while sock.getsockopt(zmq.EVENTS) & zmq.POLLIN:  # type: ignore[arg-type,operator]
+            if handled == FRAMES_PER_DRAIN:
+                self.more = True
+                return out
+            handled += 1
             frames = sock.recv_multipart(zmq.NOBLOCK)
             if len(frames) == 2:  # anything else is not a DEALER-framed request: drop
                 out.append((frames[0], frames[1]))
+        self.more = False
         return out
 
     def send(self, reply_to: Any, payload: bytes) -> None:
@@ -73,8 +90,9 @@ class ZmqChannel:
 class PipeChannel:
     """The inherited end of the launcher's socketpair; one peer, no routing id.
 
-    ``closed`` becomes True at end of file (the agent closed its end or died)
-    or when the stream breaks the framing rules.
+    ``closed`` becomes True at end of file (the agent closed its end or died).
+    A frame above the frame limit is skipped and answered here with a
+    ``protocol`` error (``seq`` -1); the frames after it are served as usual.
     """
 
     def __init__(self, fd: int) -> None:
@@ -84,6 +102,8 @@ class PipeChannel:
         self.closed = False
         self.pollable: Any = self.sock.fileno()
         self.fd: int = self.sock.fileno()
+        #: The pipe has no backlog the loop must come back for (see :class:`ZmqChannel`).
+        self.more = False
 
     def receive_nowait(self) -> list[tuple[Any, bytes]]:
         if self.closed:
@@ -97,11 +117,13 @@ class PipeChannel:
         if not data:
             self.closed = True
             return []
-        try:
-            return [(None, frame) for frame in self._decoder.feed(data)]
-        except protocol.ProtocolError:
-            self.closed = True
-            return []
+        out: list[tuple[Any, bytes]] = []
+        for frame in self._decoder.items(data):
+            if isinstance(frame, protocol.FrameTooLarge):
+                self.send(None, protocol.pack(protocol.error_reply(-1, PROTOCOL, f"{frame}; dropped unread")))
+            else:
+                out.append((None, frame))
+        return out
 
     def receive_spinning(self, max_s: float) -> list[tuple[Any, bytes]]:
         """Like :meth:`receive_nowait`, but busy-wait up to ``max_s`` seconds for a frame.

@@ -72,6 +72,30 @@ def options_value(options: Any) -> dict[str, Any] | None:
     return options
 
 
+def protocol_version(value: Any, speaks: int, instance: int) -> int:
+    """The handshake's ``protocol``: exactly the int ``speaks`` (no bool, float or array)."""
+    if not _is_int(value) or value != speaks:
+        raise RequestError(
+            PROTOCOL,
+            f"protocol version mismatch: agent speaks {short_repr(value)}, sim instance {instance} speaks {speaks}",
+        )
+    return value
+
+
+def require_driver(owner: Any, sender: Any, world: int, instance: int, cmd: str) -> None:
+    """Refuse ``cmd`` on ``world`` from ``sender`` when another connection (``owner``) drives it.
+
+    ``owner`` and ``sender`` are ``(channel, routing id)`` pairs; ``owner`` None means nobody does yet.
+    """
+    if owner is not None and owner != sender:
+        raise RequestError(
+            STATE,
+            f"'{cmd}' refused: world {world} of real-time sim instance {instance} is driven by another "
+            "connection (the launching agent, or the one that reset it last); only that one may step "
+            "or reset it. Read-only commands (handshake, render, timing) are open to all.",
+        )
+
+
 def require_reset(has_reset: bool, world: int, instance: int) -> None:
     """Refuse to step ``world`` of sim ``instance`` before its first reset."""
     if not has_reset:
@@ -81,6 +105,8 @@ def require_reset(has_reset: bool, world: int, instance: int) -> None:
 __all__ = [
     "RequestError",
     "options_value",
+    "protocol_version",
+    "require_driver",
     "require_reset",
     "seed_list",
     "seed_value",

@@ -18,7 +18,14 @@ from typing import Any
 
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.channels import Channel
-from remoteenv.sim.checks import RequestError, options_value, require_reset, seed_value, world_index
+from remoteenv.sim.checks import (
+    options_value,
+    protocol_version,
+    require_driver,
+    require_reset,
+    seed_value,
+    world_index,
+)
 from remoteenv.sim.stepping import Stepping
 from remoteenv.wire import protocol
 from remoteenv.wire import spaces as spaces_codec
@@ -39,9 +46,23 @@ class Commands:
         stepping: how they advance (its ``worlds`` match ``envs``).
         instance: this sim process's index (reported in the handshake, named in errors).
         stop: called by ``close`` to end serving once the reply is sent.
+        launcher_channel: the launching agent's local pipe, if any.
+
+    In real time one connection drives each world (a second client's step
+    would displace the driver's pending one): the launching agent's pipe if
+    there is one, else the connection that reset the world last. ``step``
+    and ``reset`` from any other connection are refused with a ``state``
+    error; the other commands are open to every connection.
     """
 
-    def __init__(self, envs: Sequence[BaseEnv], stepping: Stepping, instance: int, stop: Callable[[], None]) -> None:
+    def __init__(
+        self,
+        envs: Sequence[BaseEnv],
+        stepping: Stepping,
+        instance: int,
+        stop: Callable[[], None],
+        launcher_channel: Channel | None = None,
+    ) -> None:
         self.envs = envs
         self.stepping = stepping
         #: Every command the server answers, sent in the handshake (the server fills it in).
@@ -49,6 +70,11 @@ class Commands:
         self._worlds = stepping.worlds
         self.instance = instance
         self._stop = stop
+        self._exclusive = self._worlds[0].describe().get("mode") == "real_time"
+        launcher = None if launcher_channel is None else (launcher_channel, None)
+        self._launcher = launcher
+        #: Per world, the ``(channel, routing id)`` that drives it in real time (None: nobody yet).
+        self._drivers: list[Any] = [launcher] * len(envs)
 
     def handlers(self) -> dict[str, Handler]:
         return {
@@ -60,13 +86,7 @@ class Commands:
         }
 
     def handshake(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
-        version = msg.get("protocol")
-        if version != protocol.PROTOCOL_VERSION:
-            raise RequestError(
-                PROTOCOL,
-                f"protocol version mismatch: agent speaks {short_repr(version)}, sim instance "
-                f"{self.instance} speaks {protocol.PROTOCOL_VERSION}",
-            )
+        protocol_version(msg.get("protocol"), protocol.PROTOCOL_VERSION, self.instance)
         env = self.envs[0]
         return {
             "protocol": protocol.PROTOCOL_VERSION,
@@ -91,6 +111,11 @@ class Commands:
         world = world_index(msg, len(self.envs))
         seed = seed_value(msg.get("seed"))
         options = options_value(msg.get("options"))
+        if self._exclusive:
+            sender = (channel, reply_to)
+            if self._launcher is not None:
+                require_driver(self._launcher, sender, world, self.instance, "reset")
+            self._drivers[world] = sender
         obs, info = self._worlds[world].reset(seed=seed, options=options)
         return describe_scalars({"obs": obs, "info": info})
 
@@ -98,6 +123,8 @@ class Commands:
         world = world_index(msg, len(self.envs))
         stepper = self._worlds[world]
         require_reset(stepper.has_reset, world, self.instance)
+        if self._exclusive:
+            require_driver(self._drivers[world], (channel, reply_to), world, self.instance, "step")
         action = check_action(self.envs[world].action_space, msg.get("action"))
         reply = stepper.submit(msg["seq"], action, channel, reply_to)
         return None if reply is None else describe_scalars(reply)

@@ -14,6 +14,7 @@ import signal
 from typing import Any
 
 from remoteenv.wire.addresses import ipc_path
+from remoteenv.wire.files import write_atomic
 
 
 def exit_on_sigterm() -> None:
@@ -28,10 +29,7 @@ def exit_on_sigterm() -> None:
 def write_ready_file(path: str, endpoint: str, instance: int) -> None:
     """Write ``{"endpoint", "pid", "instance"}`` as JSON to ``path``, atomically
     (a reader sees no file or the whole of it)."""
-    tmp = f"{path}.tmp"
-    with open(tmp, "w") as f:
-        json.dump({"endpoint": endpoint, "pid": os.getpid(), "instance": instance}, f)
-    os.replace(tmp, path)
+    write_atomic(path, json.dumps({"endpoint": endpoint, "pid": os.getpid(), "instance": instance}))
 
 
 def remove_ipc_file(endpoint: str) -> None:

@@ -1,6 +1,10 @@
 """What a sim process does when the agent that launched it dies.
 
-Runs in the sim process. The server's loop checks the parent every
+Runs in the sim process. First line: the orphan guard
+(:mod:`remoteenv.sim.orphan_guard`, :func:`start_guard`), a tiny separate
+process that ends the sim within a second of the agent's death whatever the
+sim is doing (SIGTERM, then SIGKILL after 0.5 s) and removes its files.
+Besides, the server's loop checks the parent every
 :data:`CHECK_INTERVAL_S` between requests (``RemoteControlledAgent.check_parent``),
 the frame publisher as often while it waits; :class:`ParentWatch`
 is the backstop for a sim whose main thread is busy (a long step, a stuck
@@ -14,7 +18,12 @@ launcher's private dir, and the last one to leave removes the dir itself
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import threading
+import time
+
+from remoteenv.sim import orphan_guard
 
 #: Seconds between two looks at the parent pid (every sim-side loop and the watch).
 CHECK_INTERVAL_S = 0.25
@@ -27,24 +36,64 @@ def parent_alive(parent_pid: int) -> bool:
     return os.getppid() == parent_pid
 
 
+def parent_gone_within(parent_pid: int, wait_s: float) -> bool:
+    """True if ``parent_pid`` stops being our parent within ``wait_s`` seconds."""
+    deadline = time.monotonic() + wait_s
+    while parent_alive(parent_pid):
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
 def remove_private_files(private_dir: str, instance: int) -> None:
     """Remove this instance's files (``sim-<instance>.*``) from the launcher's
-    private dir, then the dir itself if nothing else is left in it."""
-    prefix = f"sim-{instance}."
+    private dir, then the dir itself if no other sim's files are left in it."""
+    orphan_guard.remove_instance_files(private_dir, instance)
+
+
+class Guard:
+    """The running orphan guard of this sim; :meth:`release` when the sim stops on its own."""
+
+    def __init__(self, proc: subprocess.Popen[bytes], alive_fd: int) -> None:
+        self.proc = proc
+        self._alive_fd = alive_fd
+
+    def release(self) -> None:
+        """Tell the guard the sim is shutting down by itself (it then exits)."""
+        if self._alive_fd >= 0:
+            os.close(self._alive_fd)
+            self._alive_fd = -1
+
+
+def start_guard(parent_pid: int, private_dir: str | None, instance: int) -> Guard | None:
+    """Start the orphan guard for this process (None where it cannot run:
+    not Linux, or no pidfds; :class:`ParentWatch` remains)."""
+    if not sys.platform.startswith("linux") or not hasattr(os, "pidfd_open"):
+        return None
+    read_end, write_end = os.pipe()  # both close-on-exec: only the guard gets the read end
     try:
-        names = os.listdir(private_dir)
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-I",
+                "-S",
+                orphan_guard.__file__,
+                str(parent_pid),
+                str(os.getpid()),
+                private_dir or "",
+                str(instance),
+            ],
+            stdin=read_end,
+            stdout=subprocess.DEVNULL,
+            close_fds=True,
+        )
     except OSError:
-        return
-    for name in names:
-        if name.startswith(prefix):
-            try:
-                os.unlink(os.path.join(private_dir, name))
-            except OSError:
-                pass
-    try:
-        os.rmdir(private_dir)  # fails while another instance's files remain
-    except OSError:
-        pass
+        os.close(write_end)
+        return None
+    finally:
+        os.close(read_end)
+    return Guard(proc, write_end)
 
 
 class ParentWatch:

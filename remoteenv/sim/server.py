@@ -31,8 +31,16 @@ from remoteenv.sim.channels import Channel, Outgoing, PipeChannel, ZmqChannel
 from remoteenv.sim.checks import RequestError
 from remoteenv.sim.commands import Commands, Handler
 from remoteenv.sim.lifecycle import exit_on_sigterm, remove_ipc_file, write_ready_file
+from remoteenv.sim.limits import configure_router, raise_fd_limit
 from remoteenv.sim.lock_step import LockStepping
-from remoteenv.sim.orphan import CHECK_INTERVAL_S, ParentWatch, parent_alive, remove_private_files
+from remoteenv.sim.orphan import (
+    CHECK_INTERVAL_S,
+    ParentWatch,
+    parent_alive,
+    parent_gone_within,
+    remove_private_files,
+    start_guard,
+)
 from remoteenv.sim.real_time import Clock, RealTimeStepping
 from remoteenv.sim.stepping import Stepping
 from remoteenv.wire import protocol
@@ -118,6 +126,8 @@ class RemoteControlledAgent:
         self.real_time = real_time
         self.clock = clock
         self.orphaned = False
+        self._pipe_ended = False
+        self._pipe = PipeChannel(pipe_fd) if pipe_fd is not None else None
         self.stepping, mode_commands = _stepping_and_commands(
             envs,
             instance,
@@ -129,16 +139,16 @@ class RemoteControlledAgent:
             seed=seed,
             clock=clock,
         )
-        common = Commands(envs, self.stepping, instance, self.stop)
+        common = Commands(envs, self.stepping, instance, self.stop, launcher_channel=self._pipe)
         self._handlers: dict[str, Handler] = common.handlers()
         self._handlers.update(AttributeCommands(envs, instance).handlers())
         self._handlers.update(mode_commands)
         common.advertised = sorted(self._handlers)
         self._authenticator: Any = None
+        raise_fd_limit()
         self._ctx: zmq.Context[Any] = zmq.Context.instance()
         self.socket = self._ctx.socket(zmq.ROUTER)
-        self.socket.setsockopt(zmq.LINGER, 0)
-        self.socket.setsockopt(zmq.MAXMSGSIZE, protocol.MAX_MESSAGE_BYTES)
+        configure_router(self.socket)
         if curve_secret_key is not None:
             if curve_client_keys is not None:
                 self._authenticator = _start_client_key_check(self._ctx, curve_client_keys)
@@ -149,7 +159,6 @@ class RemoteControlledAgent:
         self.socket.bind(address)
         self.endpoint: str = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
         self.channels: list[Channel] = [ZmqChannel(self.socket)]
-        self._pipe = PipeChannel(pipe_fd) if pipe_fd is not None else None
         if self._pipe is not None:
             self.channels.append(self._pipe)
         self._running = True
@@ -177,19 +186,25 @@ class RemoteControlledAgent:
     def serve(self) -> None:
         """Answer requests until a ``close`` command, SIGTERM/SIGINT or parent death."""
         exit_on_sigterm()
-        watch = None
+        watch = guard = None
         if self.parent_pid is not None:
+            guard = start_guard(self.parent_pid, self.private_dir, self.instance)
             watch = ParentWatch(self.parent_pid, self.private_dir, self.instance)
             watch.start()
         try:
             self._serve_until_stopped()
         finally:
             self.shutdown()
-            gone = self.orphaned or (self.parent_pid is not None and not parent_alive(self.parent_pid))
+            # The pipe ends a moment before the kernel reparents us: wait for that
+            # before deciding that the agent is gone (and its files with it).
+            wait_s = 0.5 if self._pipe_ended else 0.0
+            gone = self.orphaned or (self.parent_pid is not None and parent_gone_within(self.parent_pid, wait_s))
             if self.private_dir and gone:
                 remove_private_files(self.private_dir, self.instance)
             if watch is not None:
                 watch.finished()
+            if guard is not None:
+                guard.release()
 
     def _serve_until_stopped(self) -> None:
         stepping, clock, pipe = self.stepping, self.clock, self._pipe
@@ -237,7 +252,7 @@ class RemoteControlledAgent:
                         self._send_later(outgoing)
                 else:
                     timeout = min(deadline - now, CHECK_INTERVAL_S)
-                    if timeout > spin_s:
+                    if timeout > spin_s and not any(channel.more for channel in self.channels):
                         # Wake a little early: the kernel's wake-up latency is then
                         # absorbed by spinning (looping) instead of making us late.
                         select.select(fds, [], [], timeout - spin_s)
@@ -267,8 +282,11 @@ class RemoteControlledAgent:
             channel.send(reply_to, self.pack_reply(reply))
 
     def pipe_closed(self) -> None:
-        """The local pipe ended: the agent died or closed it. Stop, and leave no files."""
-        self.orphaned = True
+        """The local pipe ended: the agent died or closed it. Stop; if the agent is
+        gone (or nobody can tell: no parent pid), leave no files."""
+        self._pipe_ended = True
+        if self.parent_pid is None:
+            self.orphaned = True
         self._running = False
 
     def check_parent(self) -> None:
@@ -283,13 +301,24 @@ class RemoteControlledAgent:
         """Encode a reply; one that cannot go on the wire becomes a typed error (never raises)."""
         try:
             return protocol.pack(reply)
+        except protocol.FrameTooLarge as exc:
+            seq = reply.get("seq", -1)
+            return protocol.pack(
+                protocol.error_reply(
+                    seq if isinstance(seq, int) else -1,
+                    PROTOCOL,
+                    f"the reply to this request is too large to send: {exc}; ask for less "
+                    "(e.g. a smaller render size or fewer worlds per batch)",
+                )
+            )
         except Exception as exc:
             seq = reply.get("seq", -1)
             return protocol.pack(
                 protocol.error_reply(
                     seq if isinstance(seq, int) else -1,
                     SCENE,
-                    f"the reply to this request cannot be sent on the wire ({type(exc).__name__}: {exc}); "
+                    f"the reply to this request cannot be sent on the wire ({type(exc).__name__}: "
+                    f"{short_repr(str(exc))}); "
                     "scene code must return numpy arrays, numbers, strings, lists and str-keyed maps",
                     traceback.format_exc(),
                 )

@@ -51,6 +51,12 @@ class _BoundedRepr(reprlib.Repr):
 
     repr_bytearray = repr_bytes
 
+    def repr_int(self, value: int, level: int) -> str:
+        # repr() of a huge int costs time quadratic in its digits (and may raise).
+        if value.bit_length() > 4 * self.maxlong:
+            return f"<int of {value.bit_length()} bits>"
+        return super().repr_int(value, level)
+
     def repr_instance(self, value: object, level: int) -> str:
         # numpy arrays summarise themselves; other objects are named, not printed.
         import numpy as np

@@ -8,7 +8,8 @@ the CURVE handshake and gets nothing.
 
 Key files are text: comment lines starting with ``#`` and one line holding a
 40-character Z85 key. Secret key files are created with mode 0600 and never
-overwritten. A file of allowed client keys holds one public key per line.
+overwritten; no key file is written through a symlink
+(:func:`remoteenv.wire.files.create_new`). A file of allowed client keys holds one public key per line.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ from dataclasses import dataclass
 
 import zmq
 from zmq.utils import z85
+
+from remoteenv.wire.files import create_new
 
 #: Length of a Z85-encoded 32-byte CURVE key.
 Z85_KEY_LENGTH = 40
@@ -64,10 +67,8 @@ def check_key(key: bytes | str, what: str = "key") -> bytes:
 
 
 def _write_new(path: str, text: str, mode: int) -> None:
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.chmod(path, mode)  # O_CREAT's mode is filtered by the umask
+    # Exclusive creation: a planted file or symlink at ``path`` makes this fail.
+    create_new(path, text, mode)
 
 
 def write_secret_key(path: str | os.PathLike[str], secret: bytes) -> None:

@@ -18,7 +18,24 @@ which skips ZeroMQ's I/O threads (the fastest path on one machine). On the
 pipe each message is a 4-byte little-endian unsigned length followed by that
 many bytes: the same msgpack frame as on ZeroMQ. It has exactly one peer, so
 there is no routing id. End of file on the pipe means the agent is gone; the
-sim then stops. A length above :data:`MAX_MESSAGE_BYTES` ends the pipe.
+sim then stops. A frame whose length is above :data:`MAX_MESSAGE_BYTES` is
+skipped (its bytes are read and dropped, so the stream stays in step) and
+answered like an undecodable frame.
+
+Limits
+------
+No frame, in either direction and on either transport, is longer than
+:data:`MAX_MESSAGE_BYTES` (32 MiB: a 4K RGB frame fits). A sender checks
+before sending: the agent refuses an oversize request with an error naming
+the limit and sends nothing; the sim answers a request whose reply would be
+oversize with an error reply instead. A receiver drops an oversize frame
+(ZeroMQ does so itself through ``ZMQ_MAXMSGSIZE``, which closes that peer's
+connection). In a request, no msgpack array or map holds more than
+:data:`MAX_REQUEST_ITEMS` entries (lists of numbers travel as arrays).
+Integers are within msgpack's range ``[-2**63, 2**64)``. Error messages echo
+at most a bounded repr of the request's content
+(:data:`remoteenv.wire.errors.MAX_ECHO_CHARS` characters per value) and are
+at most :data:`MAX_ERROR_CHARS` characters long.
 
 Messages
 --------
@@ -36,7 +53,10 @@ reply echoes it::
 A client drops any reply whose ``seq`` is not the one it is waiting for (a
 stale reply from a request that timed out is never taken for the current one).
 A frame that cannot be decoded as a request gets an error reply with
-``seq = -1``. Error kinds: ``"protocol"`` (malformed request, unknown command,
+``seq = -1``; a client takes such a reply as the answer to its request only
+when it has no earlier request outstanding on that connection (otherwise the
+undecodable frame may have been an earlier one) and never waits past it
+for nothing: see :class:`remoteenv.agent.sim_connection.SimConnection`. Error kinds: ``"protocol"`` (malformed request, unknown command,
 version mismatch), ``"invalid_action"``, ``"scene"`` (the env code raised),
 ``"state"`` (e.g. step before reset), ``"attribute"`` and ``"unsendable"``
 (see ``get_attr`` below).
@@ -166,12 +186,16 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from remoteenv.wire.errors import ProtocolError
+from remoteenv.wire.errors import ProtocolError, short_repr
 
 PROTOCOL_VERSION = 1
 
-#: Largest frame a peer accepts (bytes). Larger frames are dropped by ZeroMQ.
-MAX_MESSAGE_BYTES = 256 * 1024 * 1024
+#: Largest frame either side sends or accepts (bytes), on ZeroMQ and on the pipe.
+MAX_MESSAGE_BYTES = 32 * 1024 * 1024
+#: Most entries of one msgpack array or map inside a request.
+MAX_REQUEST_ITEMS = 1 << 20
+#: Longest ``message`` of an error reply (characters); the traceback is capped alike.
+MAX_ERROR_CHARS = 4000
 
 _EXT_NDARRAY = 1
 
@@ -238,6 +262,8 @@ def _array_header(dtype: str, shape: tuple[int, ...]) -> bytes:
 
 def _default(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
+        if obj.nbytes > MAX_MESSAGE_BYTES:  # refuse before copying it
+            raise FrameTooLarge(obj.nbytes, "a numpy array")
         dtype = obj.dtype.str
         if dtype not in _DTYPES or not obj.flags.c_contiguous:
             dtype = wire_dtype(obj.dtype)
@@ -251,7 +277,9 @@ def _default(obj: Any) -> Any:
         return float(obj)
     if isinstance(obj, (tuple, set, frozenset)):
         return list(obj)
-    raise TypeError(f"cannot send a {type(obj).__name__} on the wire: {obj!r:.200}")
+    if isinstance(obj, int):  # msgpack hands over the ints it cannot hold
+        raise ValueError(f"integer {short_repr(obj)} is outside the wire's range [-2**63, 2**64)")
+    raise TypeError(f"cannot send a {type(obj).__name__} on the wire: {short_repr(obj)}")
 
 
 def _ext_hook(code: int, data: bytes) -> Any:
@@ -279,26 +307,54 @@ def _ext_hook(code: int, data: bytes) -> Any:
     return np.frombuffer(data, dt, count, offset).reshape(shape).copy()
 
 
+class FrameTooLarge(ProtocolError):
+    """A frame (or a value in it) is above :data:`MAX_MESSAGE_BYTES`; nothing was sent."""
+
+    def __init__(self, size: int, what: str = "a frame") -> None:
+        super().__init__(
+            f"{what} of {size} bytes is above the wire's frame limit of {MAX_MESSAGE_BYTES} bytes "
+            f"({MAX_MESSAGE_BYTES >> 20} MiB, remoteenv.wire.protocol.MAX_MESSAGE_BYTES)"
+        )
+        self.size = size
+
+
 def pack(obj: Any) -> bytes:
-    """Encode one message (a map) as msgpack bytes."""
-    return msgpack.packb(obj, default=_default, use_bin_type=True)
+    """Encode one message (a map) as msgpack bytes.
 
-
-def unpack(frame: bytes) -> Any:
-    """Decode one frame. Raises :class:`ProtocolError` for anything off-spec."""
-    if len(frame) > MAX_MESSAGE_BYTES:
-        raise ProtocolError(f"frame of {len(frame)} bytes exceeds {MAX_MESSAGE_BYTES}")
+    Raises :class:`FrameTooLarge` for a frame above :data:`MAX_MESSAGE_BYTES`
+    (an oversize array is refused before it is copied), ``ValueError`` for an
+    integer outside msgpack's range and ``TypeError`` for a value the wire
+    cannot carry.
+    """
     try:
-        return msgpack.unpackb(frame, raw=False, ext_hook=_ext_hook, strict_map_key=True, use_list=True)
+        frame: bytes = msgpack.packb(obj, default=_default, use_bin_type=True)
+    except OverflowError:
+        raise ValueError("an integer is outside the wire's range [-2**63, 2**64)") from None
+    if len(frame) > MAX_MESSAGE_BYTES:
+        raise FrameTooLarge(len(frame))
+    return frame
+
+
+def unpack(frame: bytes, max_items: int | None = None) -> Any:
+    """Decode one frame. Raises :class:`ProtocolError` for anything off-spec.
+
+    ``max_items`` caps the entries of every array and map (before any is built).
+    """
+    if len(frame) > MAX_MESSAGE_BYTES:
+        raise FrameTooLarge(len(frame))
+    limits = {} if max_items is None else {"max_array_len": max_items, "max_map_len": max_items}
+    try:
+        return msgpack.unpackb(frame, raw=False, ext_hook=_ext_hook, strict_map_key=True, use_list=True, **limits)
     except ProtocolError:
         raise
     except Exception as exc:  # msgpack raises several types for bad input
-        raise ProtocolError(f"undecodable frame ({type(exc).__name__}: {exc})") from None
+        raise ProtocolError(f"undecodable frame ({type(exc).__name__}: {short_repr(str(exc))})") from None
 
 
 def decode_request(frame: bytes) -> dict[str, Any]:
-    """Decode and shape-check a request frame."""
-    msg = unpack(frame)
+    """Decode and shape-check a request frame (arrays and maps of at most
+    :data:`MAX_REQUEST_ITEMS` entries; an int ``seq``, a str ``cmd``)."""
+    msg = unpack(frame, MAX_REQUEST_ITEMS)
     if not isinstance(msg, dict):
         raise ProtocolError(f"a request must be a map, got {type(msg).__name__}")
     seq = msg.get("seq")
@@ -318,25 +374,40 @@ def stream_frame(payload: bytes) -> bytes:
 
 
 class StreamDecoder:
-    """Splits the byte stream of a local pipe into frames."""
+    """Splits the byte stream of a local pipe into frames.
+
+    A frame that declares a length above :data:`MAX_MESSAGE_BYTES` is skipped:
+    its bytes are dropped as they arrive (never buffered), so the frames after
+    it decode normally. The decoder is never left out of step.
+    """
 
     def __init__(self) -> None:
         self._buf = bytearray()
+        self._skip = 0
+        self._held: list[bytes | FrameTooLarge] = []
 
-    def feed(self, data: bytes) -> list[bytes]:
-        """Add received bytes; return the frames now complete, in order.
-
-        Raises :class:`ProtocolError` for a declared length above
-        :data:`MAX_MESSAGE_BYTES` (the stream cannot be trusted after that).
-        """
+    def items(self, data: bytes) -> list[bytes | FrameTooLarge]:
+        """Add received bytes; return the frames now complete, in order, an
+        oversize frame as a :class:`FrameTooLarge` at the place it started."""
+        frames, self._held = self._held, []
+        if self._skip:
+            dropped = min(self._skip, len(data))
+            self._skip -= dropped
+            data = data[dropped:]
         buf = self._buf
         buf += data
-        frames = []
         start = 0
         while len(buf) - start >= 4:
             (length,) = _LENGTH.unpack_from(buf, start)
             if length > MAX_MESSAGE_BYTES:
-                raise ProtocolError(f"pipe frame of {length} bytes exceeds {MAX_MESSAGE_BYTES}")
+                frames.append(FrameTooLarge(length, "a pipe frame"))
+                available = len(buf) - start - 4
+                if available < length:
+                    self._skip = length - available
+                    start = len(buf)
+                    break
+                start += 4 + length
+                continue
             end = start + 4 + length
             if len(buf) < end:
                 break
@@ -346,20 +417,50 @@ class StreamDecoder:
             del buf[:start]
         return frames
 
+    def feed(self, data: bytes) -> list[bytes]:
+        """Like :meth:`items`, but raise :class:`FrameTooLarge` for an oversize
+        frame once the frames before it are returned; the frames after it come
+        with the next call (``feed(b"")`` if nothing more arrives)."""
+        frames = self.items(data)
+        for i, frame in enumerate(frames):
+            if isinstance(frame, FrameTooLarge):
+                self._held = frames[i + 1 :]
+                if i == 0:
+                    raise frame
+                self._held.insert(0, frame)
+                return frames[:i]  # type: ignore[return-value]
+        return frames  # type: ignore[return-value]
+
+
+def _capped(text: str) -> str:
+    if len(text) <= MAX_ERROR_CHARS:
+        return text
+    return f"{text[: MAX_ERROR_CHARS - 40]}... ({len(text) - MAX_ERROR_CHARS + 40} more characters)"
+
 
 def error_reply(seq: int, kind: str, message: str, traceback: str = "") -> dict[str, Any]:
-    return {"seq": seq, "ok": False, "error": {"kind": kind, "message": message, "traceback": traceback}}
+    """An error reply; ``message`` and ``traceback`` are capped at :data:`MAX_ERROR_CHARS`
+    (messages built from request content must bound each echoed value themselves,
+    with :func:`~remoteenv.wire.errors.short_repr`)."""
+    return {
+        "seq": seq,
+        "ok": False,
+        "error": {"kind": kind, "message": _capped(message), "traceback": _capped(traceback)},
+    }
 
 
 __all__ = [
     "ARRAY_DTYPES",
+    "MAX_ERROR_CHARS",
     "MAX_MESSAGE_BYTES",
+    "MAX_REQUEST_ITEMS",
     "OPS",
     "OP_RESET",
     "OP_STEP",
     "OP_STEP_AUTORESET",
     "OP_STEP_RESET",
     "PROTOCOL_VERSION",
+    "FrameTooLarge",
     "ProtocolError",
     "StreamDecoder",
     "decode_request",

@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import signal
 import socket
+import threading
 from collections.abc import Iterator
 from typing import Any
 
@@ -83,8 +84,18 @@ def test_the_pipes_end_of_file_stops_the_server_as_orphaned(pipe_server):
     assert server.orphaned and not server.running
 
 
-def test_a_frame_longer_than_the_limit_ends_the_pipe(pipe_server):
+def test_a_frame_longer_than_the_limit_is_skipped_and_answered(pipe_server):
+    # Issue 10: an oversize length no longer ends the pipe (the sim took that
+    # for the agent's death and removed the live launcher's files).
     server, agent, _ = pipe_server
-    agent.sendall((protocol.MAX_MESSAGE_BYTES + 1).to_bytes(4, "little"))
+    size = protocol.MAX_MESSAGE_BYTES + 1
+    after = protocol.stream_frame(protocol.pack({"seq": 7, "cmd": "handshake", "protocol": 1}))
+    after += protocol.stream_frame(protocol.pack({"seq": 8, "cmd": "close"}))
+    writer = threading.Thread(target=agent.sendall, args=(size.to_bytes(4, "little") + bytes(size) + after,))
+    writer.start()
     server.serve()
-    assert replies(agent) == [] and server.orphaned
+    writer.join()
+    got = replies(agent)
+    assert [r["seq"] for r in got] == [-1, 7, 8]
+    assert str(protocol.MAX_MESSAGE_BYTES) in got[0]["error"]["message"]
+    assert not server.orphaned

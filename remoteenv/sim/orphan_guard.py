@@ -1,0 +1,120 @@
+"""The orphan guard: a tiny process that ends a sim within a second of its agent's death.
+
+Started by the sim (:func:`remoteenv.sim.orphan.start_guard`) as a script
+(``python -I -S orphan_guard.py AGENT_PID SIM_PID PRIVATE_DIR INSTANCE``) that
+imports only the standard library, with its stdin the read end of a pipe
+whose write end only the sim holds: end of file there means the sim is gone.
+It watches the agent through a pidfd (Linux 5.3+), which fires when the agent
+*process* exits, whichever of its threads launched the sim.
+
+When the agent dies, the guard sends the sim SIGTERM (the sim shuts down and
+removes its files itself: the usual case), waits :data:`GRACE_S`, then sends
+SIGKILL (a sim stuck in code that holds its interpreter lock cannot run its
+own watch thread), and removes the sim's ``sim-<instance>.*`` files from the
+private dir, and the dir once no other sim's files are left. Being another
+process, it needs nothing from the sim's interpreter. Where pidfds do not
+exist it exits at once and the sim's own watch (:class:`ParentWatch`) is all
+there is.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import shutil
+import signal
+import sys
+
+#: Seconds the sim gets to shut down by itself after SIGTERM before SIGKILL.
+GRACE_S = 0.5
+#: Seconds to wait, once the sim is gone, for the agent's pidfd to tell whether it died too.
+_AGENT_SETTLE_S = 0.3
+
+
+def remove_instance_files(private_dir: str, instance: int) -> None:
+    """Remove ``sim-<instance>.*`` from ``private_dir``; then, if no other sim's
+    files are left, the dir with what remains (the dead launcher's own files)."""
+    prefix = f"sim-{instance}."
+    try:
+        names = os.listdir(private_dir)
+    except OSError:
+        return
+    for name in names:
+        if name.startswith(prefix):
+            try:
+                os.unlink(os.path.join(private_dir, name))
+            except OSError:
+                pass
+    try:
+        others = [n for n in os.listdir(private_dir) if n.startswith("sim-")]
+    except OSError:
+        return
+    if not others:
+        shutil.rmtree(private_dir, ignore_errors=True)
+
+
+def _readable(fd: int, timeout_s: float) -> bool:
+    poller = select.poll()
+    poller.register(fd, select.POLLIN | select.POLLHUP)
+    return bool(poller.poll(timeout_s * 1000))
+
+
+def guard(agent_pid: int, sim_pid: int, private_dir: str, instance: int, sim_gone_fd: int = 0) -> int:
+    """Watch ``agent_pid`` and the sim ``sim_pid`` (our parent; ``sim_gone_fd``
+    reaches end of file when it exits). Returns the exit status."""
+    try:
+        sim = os.pidfd_open(sim_pid)
+    except (AttributeError, OSError):
+        return 0  # no pidfds here (or the sim is gone): the sim's own watch is the fallback
+    if os.getppid() != sim_pid:
+        return 0  # the sim ended before we started (its pid may be another process's now)
+    try:
+        agent = os.pidfd_open(agent_pid)
+    except OSError:
+        agent = -1  # gone already
+    if agent >= 0 and not _sim_parent_is(sim_pid, agent_pid):
+        os.close(agent)
+        agent = -1  # the agent died before we could watch it
+    if agent >= 0:
+        poller = select.poll()
+        poller.register(sim_gone_fd, select.POLLIN | select.POLLHUP)
+        poller.register(agent, select.POLLIN)
+        fds = {fd for fd, _ in poller.poll()}
+        if agent not in fds:  # the sim ended first
+            if not _readable(agent, _AGENT_SETTLE_S):
+                return 0  # ... while its agent lives: the launcher tidies up
+            if private_dir:
+                remove_instance_files(private_dir, instance)
+            return 0
+    _signal(sim, signal.SIGTERM)
+    if not _readable(sim_gone_fd, GRACE_S):
+        _signal(sim, signal.SIGKILL)
+        _readable(sim_gone_fd, 1.0)
+    if private_dir:
+        remove_instance_files(private_dir, instance)
+    return 0
+
+
+def _signal(pidfd: int, sig: int) -> None:
+    try:
+        signal.pidfd_send_signal(pidfd, sig)
+    except OSError:  # gone already
+        pass
+
+
+def _sim_parent_is(sim_pid: int, agent_pid: int) -> bool:
+    try:
+        with open(f"/proc/{sim_pid}/stat") as f:
+            return int(f.read().rsplit(")", 1)[1].split()[1]) == agent_pid
+    except (OSError, IndexError, ValueError):
+        return True  # cannot tell: the pidfd will
+
+
+def main(argv: list[str]) -> int:
+    agent_pid, sim_pid, private_dir, instance = int(argv[0]), int(argv[1]), argv[2], int(argv[3])
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C in a terminal is for the agent
+    return guard(agent_pid, sim_pid, private_dir, instance)
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,76 @@
+"""Issue 10, item 8: in real time only the connection that drives a world may
+step or reset it; a second client is refused with a clear error and the
+driver's steps are all answered."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+import zmq
+
+from remoteenv import OpenAIRemoteEnv, StateError, scene_path
+from remoteenv.agent.zmq_connection import ZmqConnection
+from remoteenv.wire import protocol
+
+
+def test_a_second_client_cannot_displace_the_drivers_steps():
+    env = OpenAIRemoteEnv(scene_path("cartpole"), real_time=True, timeout=10.0, startup_timeout=120.0)
+    stop = threading.Event()
+    refusals: list[str] = []
+    try:
+        endpoint = env.launcher.sims[0].endpoint
+
+        def interfere() -> None:
+            sock = zmq.Context.instance().socket(zmq.DEALER)
+            sock.setsockopt(zmq.LINGER, 0)
+            sock.connect(endpoint)
+            seq = 0
+            while not stop.is_set():
+                seq += 1
+                for cmd in ("step", "reset"):
+                    sock.send(protocol.pack({"seq": seq, "cmd": cmd, "action": 0}))
+                    if sock.poll(2000):
+                        reply = protocol.unpack(sock.recv())
+                        if not reply["ok"]:
+                            refusals.append(reply["error"]["kind"] + ": " + reply["error"]["message"])
+            sock.close(linger=0)
+
+        env.reset(seed=0)
+        thread = threading.Thread(target=interfere, daemon=True)
+        thread.start()
+        answered = 0
+        for _ in range(20):
+            _, _, terminated, _, _ = env.step(env.action_space.sample())
+            answered += 1
+            if terminated:
+                env.reset()
+        stop.set()
+        thread.join(10)
+        assert answered == 20
+        assert refusals and all(r.startswith("state: ") and "driven by another connection" in r for r in refusals)
+        # Read-only commands stay open to everyone.
+        reader = ZmqConnection(endpoint, timeout=10.0)
+        try:
+            assert reader.request("timing", clear=False)["worlds"]
+        finally:
+            reader.close()
+    finally:
+        stop.set()
+        env.close()
+
+
+def test_without_a_launching_pipe_the_last_resetter_drives():
+    env = OpenAIRemoteEnv(scene_path("cartpole"), transport="ipc", real_time=True, timeout=10.0, startup_timeout=120.0)
+    try:
+        env.reset(seed=0)
+        other = ZmqConnection(env.launcher.sims[0].endpoint, timeout=10.0)
+        try:
+            with pytest.raises(StateError, match="driven by another connection"):
+                other.request("step", action=0)
+            other.request("reset")  # a reset takes the world over
+            assert other.request("step", action=0)["ok"]
+        finally:
+            other.close()
+    finally:
+        env.close()
