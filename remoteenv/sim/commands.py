@@ -30,7 +30,6 @@ from remoteenv.sim.stepping import Stepping
 from remoteenv.wire import protocol
 from remoteenv.wire import spaces as spaces_codec
 from remoteenv.wire.actions import check_action
-from remoteenv.wire.errors import PROTOCOL, short_repr
 from remoteenv.wire.scalar_types import describe_scalars
 
 #: A command handler: ``(request, channel, reply_to) -> reply fields``, or None
