@@ -8,11 +8,11 @@ export MUJOCO_GL ?= egl
 
 .PHONY: demo test test-ray lint bench install deps clean
 
-$(VENV)/.deps: pyproject.toml
+$(VENV)/.deps: pyproject.toml Makefile
 	$(PYTHON3) -m venv $(VENV)
 	# torch first and pinned: a looser requirement pulls GBs of CUDA packages.
 	$(PIP) install --quiet torch==2.13.0
-	$(PIP) install --quiet ".[test,lint,torch,sb3,video]"
+	$(PIP) install --quiet ".[test,lint,torch,torchrl,sb3,video]"
 	touch $@
 
 deps: $(VENV)/.deps
