@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from typing import Any, ClassVar, SupportsFloat
 
 import mujoco
@@ -10,6 +11,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
 
+from remoteenv.sim.batch_result import BatchResult
 from remoteenv.sim.obs_check import check_observation
 
 
@@ -127,6 +129,38 @@ class BaseEnv:
         """After the substeps of one tick: ``(obs, reward, terminated, info)``."""
         raise NotImplementedError
 
+    # ------------------------------------------------------------ batched hooks
+
+    @classmethod
+    def prepare_steps(cls, envs: Sequence[BaseEnv], actions: Any) -> None:
+        """Optional batched :meth:`prepare_step`: apply ``actions[i]`` to ``envs[i]``.
+
+        A lock-step sim without action delay steps the worlds of one
+        ``step_batch`` request together: ``prepare_steps``, then the physics of
+        every world on threads (:mod:`remoteenv.sim.batch_physics`), then
+        :meth:`post_steps`. ``envs`` are worlds of this class; ``actions``
+        are checked and stacked: an array ``(n, *shape)`` for a Box space,
+        an int array ``(n,)`` for Discrete, else a list; never None. The
+        default calls :meth:`prepare_step` per world; a scene may override
+        both hooks to work with numpy over all worlds at once, and must then
+        give exactly the per-world hooks' results (a test should say so).
+        """
+        for env, action in zip(envs, _per_world(actions)):
+            env.prepare_step(action)
+
+    @classmethod
+    def post_steps(cls, envs: Sequence[BaseEnv], actions: Any) -> BatchResult:
+        """Optional batched :meth:`post_step` for ``envs`` after their substeps
+        (see :meth:`prepare_steps`). The default calls :meth:`post_step` per world."""
+        obs, rewards, terminated, infos = [], [], [], []
+        for env, action in zip(envs, _per_world(actions)):
+            o, r, t, info = env.post_step(action)
+            obs.append(o)
+            rewards.append(float(r))
+            terminated.append(bool(t))
+            infos.append(info)
+        return BatchResult(obs, np.array(rewards, dtype=np.float64), np.array(terminated, dtype=np.bool_), infos)
+
     # ------------------------------------------------------------ driving
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
@@ -194,3 +228,10 @@ class BaseEnv:
         if self._viewer is not None:
             self._viewer.close()
             self._viewer = None
+
+
+def _per_world(actions: Any) -> Any:
+    """Batched actions as the per-world hooks get them (python ints for Discrete)."""
+    if isinstance(actions, np.ndarray) and actions.dtype.kind in "iu":
+        return actions.tolist()
+    return actions

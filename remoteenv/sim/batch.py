@@ -1,12 +1,18 @@
 """Batched commands: reset or step several worlds of one sim process per request.
 
 Runs in the sim process (lock-step only). One ``step_batch`` request carries
-the actions of the first ``n`` worlds stacked in one array and gets their
-results stacked in one reply, so a process hosting K worlds pays one round
-trip per vector step instead of K. The wire form of both commands is
-specified in :mod:`remoteenv.wire.protocol`. The per-world autoreset
-operations (``OP_*``) let the agent's vector env keep Gymnasium's autoreset
-semantics without a second round trip.
+the actions of several worlds stacked in one array and gets their results
+stacked in one reply, so a process hosting K worlds pays one round trip per
+vector step instead of K. The wire form of both commands is specified in
+:mod:`remoteenv.wire.protocol`. The per-world autoreset operations (``OP_*``)
+let the agent's vector env keep Gymnasium's autoreset semantics without a
+second round trip.
+
+Without an action delay the stepped worlds advance together
+(:class:`~remoteenv.sim.batch_step.WorldsStepper`: the scene's batched
+hooks, physics on threads); with one, or for worlds that cannot be stepped
+together, each world steps through its :class:`LockStepper`. Both give the
+same results.
 """
 
 from __future__ import annotations
@@ -17,6 +23,8 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from remoteenv.sim.batch_result import BatchResult
+from remoteenv.sim.batch_step import WorldsStepper, steps_together
 from remoteenv.sim.channels import Channel
 from remoteenv.sim.checks import RequestError, options_value, require_reset, seed_list, world_list
 from remoteenv.sim.lock_step import LockStepper
@@ -37,13 +45,25 @@ class BatchCommands:
         worlds: the lock-step worlds of the process, in world order.
         action_space: the worlds' action space.
         instance: this sim process's index (named in error messages).
+        threads: physics threads of the batched path (default:
+            :func:`~remoteenv.sim.batch_physics.default_threads`).
     """
 
-    def __init__(self, worlds: Sequence[LockStepper], action_space: spaces.Space, instance: int) -> None:
+    def __init__(
+        self, worlds: Sequence[LockStepper], action_space: spaces.Space, instance: int, threads: int | None = None
+    ) -> None:
         self.worlds = worlds
         self.instance = instance
         self._space = action_space
         self._discrete = isinstance(action_space, spaces.Discrete)
+        envs = [w.env for w in worlds]
+        together = all(w.action_delay == 0 for w in worlds) and steps_together(envs)
+        self.stepper = WorldsStepper(envs, threads) if together else None
+
+    def close(self) -> None:
+        """Stop the physics threads."""
+        if self.stepper is not None:
+            self.stepper.close()
 
     def reset_batch(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
         worlds = world_list(msg.get("worlds"), len(self.worlds))
@@ -57,18 +77,49 @@ class BatchCommands:
         return {"obs": stack(obs), "info": columnar_infos(infos)}
 
     def step_batch(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
-        ops = msg.get("ops")
         num = len(self.worlds)
+        ops = msg.get("ops")
         if not isinstance(ops, list) or not 0 < len(ops) <= num or not all(type(op) is int and op in OPS for op in ops):
             raise RequestError(PROTOCOL, f"ops must be a list of 1..{num} ints from {OPS}, got {short_repr(ops)}")
         n = len(ops)
-        worlds = self.worlds
-        for w in range(n):
-            if ops[w] != OP_RESET:
-                require_reset(worlds[w].has_reset, w, self.instance)
+        worlds = self._request_worlds(msg.get("worlds"), n)
+        for j, w in enumerate(worlds):
+            if ops[j] != OP_RESET:
+                require_reset(self.worlds[w].has_reset, w, self.instance)
         actions = check_actions(self._space, msg.get("actions"), n)
-        if isinstance(actions, np.ndarray) and self._discrete:
-            actions = actions.tolist()
+        stepped = [j for j in range(n) if ops[j] != OP_RESET]
+        if self.stepper is not None and stepped:
+            if len(stepped) < n:
+                picked = actions[stepped] if isinstance(actions, np.ndarray) else [actions[j] for j in stepped]
+            else:
+                picked = actions
+            batch = self.stepper.step([worlds[j] for j in stepped], picked)
+            resets = len(stepped) < n or OP_STEP_RESET in ops or (OP_STEP_AUTORESET in ops and batch.terminated.any())
+            if not resets:
+                return _plain_reply(batch)  # the scene's arrays as they are
+            results = _per_world_results(batch, stepped, n)
+        else:
+            if isinstance(actions, np.ndarray) and self._discrete:
+                actions = actions.tolist()
+            results = [None if ops[j] == OP_RESET else self.worlds[worlds[j]].step(actions[j]) for j in range(n)]
+        return self._reply(ops, worlds, results)
+
+    # ------------------------------------------------------------ helpers
+
+    def _request_worlds(self, worlds: Any, n: int) -> list[int]:
+        """The worlds a ``step_batch`` addresses: ``worlds`` (distinct, one per op) or ``0 .. n-1``."""
+        if worlds is None:
+            return list(range(n))
+        checked = world_list(worlds, len(self.worlds))
+        if len(checked) != n or len(set(checked)) != n:
+            raise RequestError(
+                PROTOCOL, f"worlds must list {n} distinct worlds, one per op, got {short_repr(worlds)}"
+            )
+        return checked
+
+    def _reply(self, ops: list[int], worlds: list[int], results: list[dict[str, Any] | None]) -> dict[str, Any]:
+        """The reply from each request position's step result (None: the op was a reset)."""
+        n = len(ops)
         obs: list[Any] = [None] * n
         infos: list[Any] = [None] * n
         reward = np.zeros(n, dtype=np.float64)
@@ -76,24 +127,23 @@ class BatchCommands:
         truncated = np.zeros(n, dtype=np.bool_)
         final: list[Any] = []
         final_types: list[Any] = []
-        for w in range(n):
-            op = ops[w]
-            world = worlds[w]
-            if op == OP_RESET:
-                obs[w], infos[w] = world.reset(seed=None, options=None)
+        for j, r in enumerate(results):
+            world = self.worlds[worlds[j]]
+            op = ops[j]
+            if r is None:
+                obs[j], infos[j] = world.reset(seed=None, options=None)
                 continue
-            r = world.step(actions[w])
-            reward[w] = r["reward"]
-            terminated[w] = r["terminated"]
-            truncated[w] = r["truncated"]
+            reward[j] = r["reward"]
+            terminated[j] = r["terminated"]
+            truncated[j] = r["truncated"]
             if op == OP_STEP_RESET or (op == OP_STEP_AUTORESET and (r["terminated"] or r["truncated"])):
-                final.append([w, r["obs"], r["info"]])
+                final.append([j, r["obs"], r["info"]])
                 final_types.append(r.get("types", {}).get("info"))
-                obs[w], infos[w] = world.reset(seed=None, options=None)
+                obs[j], infos[j] = world.reset(seed=None, options=None)
             else:
-                obs[w], infos[w] = r["obs"], r["info"]
+                obs[j], infos[j] = r["obs"], r["info"]
         # Short vectors go as msgpack lists: cheaper than arrays to encode and decode.
-        reply = {
+        reply: dict[str, Any] = {
             "obs": stack(obs),
             "reward": reward.tolist(),
             "terminated": terminated.tolist(),
@@ -104,6 +154,35 @@ class BatchCommands:
         if any(final_types):
             reply["final_types"] = final_types
         return reply
+
+
+def _plain_reply(batch: BatchResult) -> dict[str, Any]:
+    """The reply of a ``step_batch`` that stepped every world and reset none."""
+    info = batch.wire_columns()
+    if info is None:
+        info = columnar_infos([batch.world_info(j) for j in range(len(batch.reward))])
+    return {
+        "obs": batch.obs if isinstance(batch.obs, np.ndarray) else stack(batch.obs),
+        "reward": batch.reward.tolist(),
+        "terminated": batch.terminated.tolist(),
+        "truncated": [False] * len(batch.reward),
+        "info": info,
+        "final": [],
+    }
+
+
+def _per_world_results(batch: BatchResult, stepped: list[int], n: int) -> list[dict[str, Any] | None]:
+    """``batch`` (results of request positions ``stepped``) as per-position step results."""
+    results: list[dict[str, Any] | None] = [None] * n
+    for i, j in enumerate(stepped):
+        results[j] = {
+            "obs": batch.world_obs(i),
+            "reward": float(batch.reward[i]),
+            "terminated": bool(batch.terminated[i]),
+            "truncated": False,
+            "info": batch.world_info(i),
+        }
+    return results
 
 
 __all__ = ["BatchCommands"]

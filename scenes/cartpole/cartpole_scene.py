@@ -14,12 +14,14 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
 from remoteenv.sim import BaseEnv, run_scene
+from remoteenv.sim.batch_result import BatchResult
 
 MODEL_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "cartpole.xml")
 
@@ -99,6 +101,30 @@ class CartPoleEnv(BaseEnv):
         self._terminated = already or abs(x) > X_THRESHOLD or abs(theta) > THETA_THRESHOLD
         # As in CartPole-v1: +1 per step including the terminating one, 0 after it.
         return obs, 0.0 if already else 1.0, self._terminated, {}
+
+    @classmethod
+    def prepare_steps(cls, envs: Sequence[BaseEnv], actions: np.ndarray) -> None:
+        carts: Sequence[CartPoleEnv] = envs  # type: ignore[assignment]
+        if carts[0].continuous:
+            fractions = np.clip(actions[:, 0], -1.0, 1.0).astype(np.float64).tolist()
+        else:
+            fractions = np.where(actions == 1, 1.0, -1.0).tolist()
+        for env, fraction in zip(carts, fractions):
+            env.data.ctrl[0] = fraction
+
+    @classmethod
+    def post_steps(cls, envs: Sequence[BaseEnv], actions: np.ndarray) -> BatchResult:
+        """:meth:`post_step` for all worlds at once, with numpy over their stacked state."""
+        carts: Sequence[CartPoleEnv] = envs  # type: ignore[assignment]
+        state = np.array([(env.data.qpos[0], env.data.qvel[0], env.data.qpos[1], env.data.qvel[1]) for env in carts])
+        obs = state.astype(np.float32)
+        wide = obs.astype(np.float64)  # post_step compares float(obs[i]) with the thresholds
+        already = np.array([env._terminated for env in carts], dtype=np.bool_)
+        terminated = already | (np.abs(wide[:, 0]) > X_THRESHOLD) | (np.abs(wide[:, 2]) > THETA_THRESHOLD)
+        for env, ended in zip(carts, terminated.tolist()):
+            env._terminated = ended
+        reward = np.where(already, 0.0, 1.0)
+        return BatchResult(obs, reward, terminated, {})
 
     def _obs(self) -> np.ndarray:
         d = self.data

@@ -12,12 +12,14 @@ Run by the launcher as ``python reacher_scene.py --address ... --seed ...``.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
 from remoteenv.sim import BaseEnv, run_scene
+from remoteenv.sim.batch_result import BatchResult
 
 MODEL_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "reacher.xml")
 
@@ -75,6 +77,38 @@ class ReacherEnv(BaseEnv):
         reward_ctrl = -ctrl * np.float32(self.reward_control_weight)
         info = {"reward_dist": reward_dist, "reward_ctrl": reward_ctrl}
         return self._obs(vec), reward_dist + reward_ctrl, False, info
+
+    @classmethod
+    def prepare_steps(cls, envs: Sequence[BaseEnv], actions: np.ndarray) -> None:
+        for env, action in zip(envs, actions):
+            env.data.ctrl[:] = action
+
+    @classmethod
+    def post_steps(cls, envs: Sequence[BaseEnv], actions: np.ndarray) -> BatchResult:
+        """:meth:`post_step` for all worlds at once, with numpy over their stacked state."""
+        reachers: Sequence[ReacherEnv] = envs  # type: ignore[assignment]
+        tip, target = reachers[0]._fingertip, reachers[0]._target
+        qpos = np.array([env.data.qpos for env in reachers])
+        qvel = np.array([env.data.qvel for env in reachers])
+        vec = np.array([env.data.xpos[tip] - env.data.xpos[target] for env in reachers])
+        dist_w = np.array([env.reward_dist_weight for env in reachers])
+        ctrl_w = np.array([env.reward_control_weight for env in reachers])
+        # The same operations in the same order as post_step, so the numbers match exactly.
+        x, y, z = vec[:, 0], vec[:, 1], vec[:, 2]
+        reward_dist = -np.sqrt(x * x + y * y + z * z) * dist_w
+        reward_ctrl = -np.square(actions).sum(axis=1).astype(np.float64) * ctrl_w
+        obs = np.empty((len(reachers), 10))
+        obs[:, 0:2] = np.cos(qpos[:, :2])
+        obs[:, 2:4] = np.sin(qpos[:, :2])
+        obs[:, 4:6] = qpos[:, 2:]
+        obs[:, 6:8] = qvel[:, :2]
+        obs[:, 8:10] = vec[:, :2]
+        return BatchResult(
+            obs,
+            reward_dist + reward_ctrl,
+            np.zeros(len(reachers), dtype=np.bool_),
+            {"reward_dist": reward_dist, "reward_ctrl": reward_ctrl},
+        )
 
     def _obs(self, tip_minus_target: np.ndarray | None = None) -> np.ndarray:
         qpos, qvel = self.data.qpos, self.data.qvel

@@ -1,0 +1,73 @@
+"""One control tick for many worlds of one process: batched hooks, threaded physics.
+
+Runs in the sim process (lock-step, no action delay). :class:`WorldsStepper`
+drives a ``step_batch`` request's stepped worlds as
+:meth:`BaseEnv.prepare_steps` -> physics of every world on threads
+(:class:`~remoteenv.sim.batch_physics.PhysicsThreads`) -> :meth:`BaseEnv.post_steps`.
+Scenes that keep the per-world hooks get the same sequence per world
+(``BaseEnv``'s default batched hooks loop over them), so every scene's
+physics runs off the GIL; scenes that override the batched hooks also drop
+the per-world Python.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from remoteenv.sim.base_env import BaseEnv
+from remoteenv.sim.batch_physics import PhysicsThreads, default_threads
+from remoteenv.sim.batch_result import BatchResult
+
+
+def steps_together(envs: Sequence[Any]) -> bool:
+    """Whether ``envs`` can be stepped as one batch: ``BaseEnv`` worlds of one
+    class and frame skip, that keep BaseEnv's ``step`` and have no viewer
+    window (which wants a sync after every world's step)."""
+    if not envs or not all(isinstance(env, BaseEnv) for env in envs):
+        return False
+    cls = type(envs[0])
+    return (
+        cls.step is BaseEnv.step
+        and all(type(env) is cls and env.frame_skip == envs[0].frame_skip for env in envs)
+        and all(getattr(env, "_viewer", None) is None for env in envs)
+    )
+
+
+class WorldsStepper:
+    """Steps any subset of ``envs`` (one class, see :func:`steps_together`) by one tick.
+
+    Args:
+        envs: the process's worlds, in world order.
+        threads: physics threads (default :func:`~remoteenv.sim.batch_physics.default_threads`).
+    """
+
+    def __init__(self, envs: Sequence[BaseEnv], threads: int | None = None) -> None:
+        if not steps_together(envs):
+            raise ValueError("WorldsStepper needs BaseEnv worlds of one class and frame skip, without viewer")
+        self.envs = list(envs)
+        self._cls = type(self.envs[0])
+        self._models = [env.model for env in self.envs]
+        self._datas = [env.data for env in self.envs]
+        self._frame_skip = self.envs[0].frame_skip
+        self._all = list(range(len(self.envs)))
+        self.physics = PhysicsThreads(threads if threads is not None else default_threads(len(self.envs)))
+
+    def step(self, worlds: Sequence[int], actions: Any) -> BatchResult:
+        """One tick of worlds ``worlds`` (indices, in order) with ``actions[j]``
+        for ``worlds[j]`` (checked and stacked, see :meth:`BaseEnv.prepare_steps`)."""
+        if list(worlds) == self._all:
+            envs, models, datas = self.envs, self._models, self._datas
+        else:
+            envs = [self.envs[w] for w in worlds]
+            models = [self._models[w] for w in worlds]
+            datas = [self._datas[w] for w in worlds]
+        self._cls.prepare_steps(envs, actions)
+        self.physics.step(models, datas, self._frame_skip)
+        return self._cls.post_steps(envs, actions)
+
+    def close(self) -> None:
+        self.physics.close()
+
+
+__all__ = ["WorldsStepper", "steps_together"]
