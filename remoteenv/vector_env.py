@@ -40,6 +40,7 @@ from remoteenv.agent.reset_args import is_int_seed, split_reset_mask, world_seed
 from remoteenv.agent.restart import RestartBudget, restarted_info
 from remoteenv.agent.session import SimSession, choose_group, scene_label
 from remoteenv.agent.sim_group import LaunchSpec, SimGroup
+from remoteenv.agent.vector_async import AsyncWorlds, assemble_chunks
 from remoteenv.agent.vector_requests import VectorRequests
 from remoteenv.agent.vector_results import ObsBatch, assemble
 from remoteenv.wire.actions import check_actions
@@ -113,6 +114,8 @@ class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
             group when it closes.
         attach: a launch-info path (or :class:`~remoteenv.agent.attach.AttachedSims`):
             drive every world of those sims (see :meth:`attach`).
+        batch_size: worlds :meth:`recv` returns (EnvPool's asynchronous API,
+            lock-step only); default ``num_envs``.
 
     World ``i`` is world ``i % K`` of process ``i // K``. ``reset(seed=s)``
     seeds world ``i`` with ``s + i``, so a vector env and N single envs with
@@ -156,6 +159,7 @@ class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
         max_restarts: int = 3,
         launcher: SimGroup | None = None,
         attach: Any = None,
+        batch_size: int | None = None,
         **scene_kwargs: Any,
     ) -> None:
         self.startup_timeout = startup_timeout
@@ -181,6 +185,10 @@ class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
             )
         if max_episode_steps is not None and max_episode_steps < 1:
             raise ValueError(f"max_episode_steps must be >= 1 or None, got {max_episode_steps}")
+        if batch_size is not None and not 1 <= batch_size <= num_envs:
+            raise ValueError(f"batch_size must be in [1, num_envs={num_envs}], got {batch_size}")
+        #: Worlds :meth:`recv` returns.
+        self.batch_size = int(batch_size or num_envs)
         self.num_envs = int(num_envs)
         self.envs_per_process = min(int(envs_per_process), self.num_envs)
         self.autoreset_mode = AutoresetMode(autoreset_mode)
@@ -235,6 +243,8 @@ class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
             real_time=self.real_time,
             same_step=self.autoreset_mode == AutoresetMode.SAME_STEP,
         )
+        self._async = AsyncWorlds(self._session, self.slices, self.num_envs)
+        self._pending_step: tuple[np.ndarray, Any, dict[int, int], float] | None = None
         self.latency_stats = LatencyStats()
         self._pauser = Pauser(self._session)
         self._reach = SceneReach(self._session)
@@ -330,6 +340,8 @@ class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
         N) only the masked ones; the others keep their current obs. ``seed``: an
         int seeds world ``i`` with ``seed + i``; a list gives one seed (or None)
         per world. Other options go to every reset world's scene."""
+        if self._pending_step is not None or self._async.busy:
+            raise StateError("reset() while steps are in flight: step_wait() or recv() them first")
         if is_int_seed(seed):
             super().reset(seed=int(seed))  # type: ignore[arg-type]
         seeds = world_seeds(seed, self.num_envs)
@@ -356,19 +368,70 @@ class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every world once (or autoreset it, see ``autoreset_mode``)."""
+        self.step_async(actions)
+        return self.step_wait()
+
+    def step_async(self, actions: Any) -> None:
+        """Send the actions of every world and return at once; :meth:`step_wait`
+        gathers the results (together the same as :meth:`step`)."""
         if not self._has_reset or self._session.closed:
             raise StateError("step() before reset() or after close(): reset() an open RemoteVectorEnv first")
-        acts = self._check_actions(actions)
-        mode, limit = self.autoreset_mode, self.max_episode_steps
-        ops = plan_ops(mode, self._autoreset, self._elapsed, limit)
+        if self._pending_step is not None or self._async.busy:
+            raise StateError("a step is in flight: call step_wait() (or recv() what send() sent) first")
+        acts = self._check_actions(actions, self.num_envs)
+        ops = plan_ops(self.autoreset_mode, self._autoreset, self._elapsed, self.max_episode_steps)
         started = time.perf_counter()
-        results = self._requests.step(ops, acts, self._obs, self._obs_batch)
+        self._pending_step = (ops, acts, self._requests.start_step(ops, acts), started)
+
+    def step_wait(self) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """The results of the step :meth:`step_async` sent, as :meth:`step` returns them."""
+        if self._pending_step is None:
+            raise StateError("step_wait() without step_async(): nothing is in flight")
+        ops, acts, pending, started = self._pending_step
+        self._pending_step = None
+        results = self._requests.finish_step(pending, ops, acts, self._obs, self._obs_batch)
         round_trip = time.perf_counter() - started
         obs, rewards, terminated, truncated, infos = assemble(results, self.slices, self._obs_batch, self._add_info)
+        mode, limit = self.autoreset_mode, self.max_episode_steps
         truncated, self._elapsed, self._autoreset = after_step(mode, ops, terminated, truncated, self._elapsed, limit)
         self._obs = obs
         self.latency_stats.record_vector(infos, round_trip)
         return self._obs_batch.for_gym(obs), rewards, terminated, truncated, infos
+
+    def send(self, actions: Any, env_ids: Any = None) -> None:
+        """EnvPool's asynchronous step: send ``actions[j]`` to world ``env_ids[j]``
+        (default: every world) and return at once; :meth:`recv` returns results.
+
+        A world must not be in flight (sent and not yet received). Lock-step
+        only; a failing sim raises (restarts cover :meth:`step` only)."""
+        if not self._has_reset or self._session.closed:
+            raise StateError("send() before reset() or after close(): reset() an open RemoteVectorEnv first")
+        if self.real_time:
+            raise StateError("send()/recv() need lock-step sims; real-time worlds step with step()")
+        if self._pending_step is not None:
+            raise StateError("a step is in flight: call step_wait() first")
+        ids = np.arange(self.num_envs) if env_ids is None else np.asarray(env_ids, dtype=np.intp).reshape(-1)
+        if len(ids) == 0 or ids.min() < 0 or ids.max() >= self.num_envs or len(np.unique(ids)) != len(ids):
+            raise ValueError(f"env_ids must be distinct world indices in [0, {self.num_envs}), got {ids[:8]!r}")
+        acts = self._check_actions(actions, len(ids))
+        ops = plan_ops(self.autoreset_mode, self._autoreset[ids], self._elapsed[ids], self.max_episode_steps)
+        self._async.send(ids, ops, acts)
+
+    def recv(self) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """The first ``batch_size`` worlds to finish after :meth:`send`:
+        ``(obs, rewards, terminated, truncated, infos)`` with ``batch_size`` rows,
+        world ``infos["env_id"][j]`` in row ``j``, autoreset as in :meth:`step`."""
+        chunks = self._async.recv(self.batch_size)
+        ids, ops, obs, rewards, terminated, truncated, infos = assemble_chunks(
+            chunks, ObsBatch(self.single_observation_space, self.batch_size), self._add_info
+        )
+        truncated, elapsed, needs_reset = after_step(
+            self.autoreset_mode, ops, terminated, truncated, self._elapsed[ids], self.max_episode_steps
+        )
+        self._elapsed[ids], self._autoreset[ids] = elapsed, needs_reset
+        self._obs_batch.put(self._obs, ids, obs)
+        out_obs = ObsBatch(self.single_observation_space, self.batch_size).for_gym(obs)
+        return out_obs, rewards, terminated, truncated, infos
 
     def render(self) -> tuple[Any, ...] | None:
         """With ``render_mode="rgb_array"``: one uint8 H x W x 3 frame per world."""
@@ -396,15 +459,15 @@ class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
 
     # ------------------------------------------------------------ helpers
 
-    def _check_actions(self, actions: Any) -> Any:
-        """The N actions in wire form, indexable by world; ValueError names the world."""
-        n = self.num_envs
+    def _check_actions(self, actions: Any, n: int) -> Any:
+        """``n`` actions in wire form, indexable by world; ValueError names the world."""
         space = self.single_action_space
         if self._box_act:
             return check_actions(space, np.asarray(actions), n)
         if isinstance(space, gym.spaces.Discrete) and isinstance(actions, np.ndarray) and actions.dtype.kind in "iu":
             return check_actions(space, actions, n)  # one vectorised range check
-        checked = check_actions(space, list(iterate(self.action_space, actions)), n)
+        batched = self.action_space if n == self.num_envs else batch_space(space, n)
+        checked = check_actions(space, list(iterate(batched, actions)), n)
         if isinstance(space, gym.spaces.Discrete):
             return np.asarray(checked, dtype=np.int64)
         return checked

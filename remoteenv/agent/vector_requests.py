@@ -94,31 +94,42 @@ class VectorRequests:
         """Step (or reset, per ``ops``) every world with ``actions``; returns each
         process's result in ``step_batch`` form. ``last_obs`` is the batch the
         previous call returned (for the worlds of a relaunched process)."""
-        if self.plain_steps:
-            return self._step_single_worlds(ops, actions, last_obs, obs_batch)
+        return self.finish_step(self.start_step(ops, actions), ops, actions, last_obs, obs_batch)
+
+    def start_step(self, ops: np.ndarray, actions: Any) -> dict[int, int]:
+        """Send the requests of a vector step (see :meth:`step`); returns ``{process: seq}``."""
         conns = self.session.conns
+        if self.plain_steps:
+            pending = {}
+            for p, (lo, _) in enumerate(self.slices):
+                if ops[lo] == OP_RESET:
+                    pending[p] = conns[p].send("reset", seed=None, options=None)
+                else:
+                    pending[p] = conns[p].send("step", action=actions[lo])
+            return pending
         ops_list = ops.tolist()
-        pending = {
+        return {
             p: conns[p].send("step_batch", ops=ops_list[lo:hi], actions=actions[lo:hi])
             for p, (lo, hi) in enumerate(self.slices)
         }
+
+    def finish_step(
+        self, pending: dict[int, int], ops: np.ndarray, actions: Any, last_obs: Any, obs_batch: ObsBatch
+    ) -> dict[int, dict[str, Any]]:
+        """Gather the replies of a vector step :meth:`start_step` sent (see :meth:`step`)."""
+        if self.plain_steps:
+            return self._finish_single_worlds(pending, ops, last_obs, obs_batch)
         results, failed = self.gather(pending, "step_batch")
         for p, err in failed.items():
             results[p] = self._restarted_results(p, err, last_obs, obs_batch)
         return results
 
-    def _step_single_worlds(
-        self, ops: np.ndarray, actions: Any, last_obs: Any, obs_batch: ObsBatch
+    def _finish_single_worlds(
+        self, pending: dict[int, int], ops: np.ndarray, last_obs: Any, obs_batch: ObsBatch
     ) -> dict[int, dict[str, Any]]:
-        """One world per process: plain ``step``/``reset`` requests, then a
-        ``reset`` for each world whose op asks for one after its step."""
+        """One world per process: gather the plain ``step``/``reset`` replies, then
+        send a ``reset`` to each world whose op asks for one after its step."""
         conns = self.session.conns
-        pending = {}
-        for p, (lo, _) in enumerate(self.slices):
-            if ops[lo] == OP_RESET:
-                pending[p] = conns[p].send("reset", seed=None, options=None)
-            else:
-                pending[p] = conns[p].send("step", action=actions[lo])
         replies, failed = self.gather(pending, "step")
         results = {p: self._restarted_results(p, e, last_obs, obs_batch) for p, e in failed.items()}
         resets: dict[int, int] = {}

@@ -90,7 +90,8 @@ class ReacherEnv(BaseEnv):
         tip, target = reachers[0]._fingertip, reachers[0]._target
         qpos = np.array([env.data.qpos for env in reachers])
         qvel = np.array([env.data.qvel for env in reachers])
-        vec = np.array([env.data.xpos[tip] - env.data.xpos[target] for env in reachers])
+        xpos = np.array([env.data.xpos for env in reachers])
+        vec = xpos[:, tip] - xpos[:, target]
         dist_w = np.array([env.reward_dist_weight for env in reachers])
         ctrl_w = np.array([env.reward_control_weight for env in reachers])
         # The same operations in the same order as post_step, so the numbers match exactly.
