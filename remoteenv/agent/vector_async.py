@@ -161,18 +161,18 @@ def split_reply(reply: dict[str, Any], cut: int) -> tuple[dict[str, Any], dict[s
         tail_info = {"columns": {k: [v[cut:], m[cut:]] for k, (v, m) in info["columns"].items()}}
     else:
         head_info, tail_info = {"maps": info["maps"][:cut]}, {"maps": info["maps"][cut:]}
-    head, tail = {"info": head_info, "final": []}, {"info": tail_info, "final": []}
+    head_final: list[Any] = []
+    tail_final: list[Any] = []
+    head: dict[str, Any] = {"info": head_info, "final": head_final}
+    tail: dict[str, Any] = {"info": tail_info, "final": tail_final}
     for key in ("obs", "reward", "terminated", "truncated"):
         head[key], tail[key] = reply[key][:cut], reply[key][cut:]
     for j, fobs, finfo in reply["final"]:
         if j < cut:
-            head["final"].append([j, fobs, finfo])
+            head_final.append([j, fobs, finfo])
         else:
-            tail["final"].append([j - cut, fobs, finfo])
+            tail_final.append([j - cut, fobs, finfo])
     return head, tail
-
-
-
 
 
 def assemble_chunks(
@@ -194,4 +194,6 @@ def assemble_chunks(
     ops = np.concatenate([chunk[1] for chunk in chunks])
     infos["env_id"] = ids
     return ids, ops, obs, rewards, terminated, truncated, infos
+
+
 __all__ = ["AsyncWorlds", "Chunk", "assemble_chunks", "split_reply"]

@@ -1,4 +1,5 @@
-"""``python -m remoteenv bench``: throughput (default), ``--real-time`` pacing, ``--soak``."""
+"""``python -m remoteenv bench``: throughput (default), ``--batched`` (batched stepping
+next to EnvPool and the physics limit), ``--real-time`` pacing, ``--soak``."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import importlib
 from typing import Any
 
 #: Benchmark modules in remoteenv.benchmarks; the default one first.
-BENCHMARKS = {"throughput": None, "pacing": "--real-time", "soak": "--soak"}
+BENCHMARKS = {"throughput": None, "batched": "--batched", "pacing": "--real-time", "soak": "--soak"}
 
 
 def add_parser(sub: Any) -> None:
@@ -16,6 +17,7 @@ def add_parser(sub: Any) -> None:
         help="measure remoteenv against in-process Gymnasium",
         description="Benchmarks, each measured side by side in one run on this machine. "
         "Without a mode flag: steps/s of remote envs next to in-process Gymnasium. "
+        "--batched: batched stepping next to EnvPool and MuJoCo's physics limit, in alternating rounds. "
         "--real-time: pacing and action-application delay of real-time mode. "
         "--soak: a long run that reports agent and sim memory.",
     )

@@ -112,9 +112,7 @@ class BatchCommands:
             return list(range(n))
         checked = world_list(worlds, len(self.worlds))
         if len(checked) != n or len(set(checked)) != n:
-            raise RequestError(
-                PROTOCOL, f"worlds must list {n} distinct worlds, one per op, got {short_repr(worlds)}"
-            )
+            raise RequestError(PROTOCOL, f"worlds must list {n} distinct worlds, one per op, got {short_repr(worlds)}")
         return checked
 
     def _reply(self, ops: list[int], worlds: list[int], results: list[dict[str, Any] | None]) -> dict[str, Any]:

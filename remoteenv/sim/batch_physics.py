@@ -95,9 +95,7 @@ class PhysicsThreads:
             self._pool = None
 
 
-def _step_range(
-    models: Sequence[mujoco.MjModel], datas: Sequence[mujoco.MjData], nstep: int, lo: int, hi: int
-) -> None:
+def _step_range(models: Sequence[mujoco.MjModel], datas: Sequence[mujoco.MjData], nstep: int, lo: int, hi: int) -> None:
     step = mujoco.mj_step
     for i in range(lo, hi):
         step(models[i], datas[i], nstep=nstep)

@@ -1,0 +1,244 @@
+"""``python -m remoteenv bench --batched``: batched stepping next to its anchors.
+
+Agent side; it launches sims. Reacher at N = 16 and 64 (``--batched-n``):
+the physics limit (raw ``mj_step``, one thread per CPU,
+:class:`~remoteenv.benchmarks.anchors.PhysicsLimit`), EnvPool's
+``Reacher-v5`` (skipped with a note when EnvPool is not installed),
+remoteenv's batched ``RemoteVectorEnv`` (default K) stepped with ``step``
+and with ``send``/``recv`` (``batch_size`` = N / 2), Gymnasium's
+``SyncVectorEnv``; and at N = 1 a single remote env next to
+``AsyncVectorEnv(1)``. Every contender is built first, then all are timed
+in ``--rounds`` alternating rounds of ``--batched-duration`` seconds each, so
+load that comes and goes hits them alike; the table shows each contender's
+median and the ratios the project targets (issue 13). ``--hog`` runs CPU
+hogs beside the measurement. It measures and prints; it asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from remoteenv.benchmarks.anchors import CpuHog, PhysicsLimit, make_envpool
+
+REMOTE_ID = "remoteenv/Reacher-v0"
+GYM_ID = "Reacher-v5"
+#: (ratio name, numerator contender, denominator contender, N, target)
+TARGETS = [
+    ("batched / EnvPool", "remoteenv batched", "EnvPool", 64, 1.0),
+    ("batched / physics limit", "remoteenv batched", "physics limit", 64, 0.6),
+    ("batched / SyncVectorEnv", "remoteenv batched", "SyncVectorEnv", 16, 2.0),
+    ("single remote / AsyncVectorEnv(1)", "remoteenv single", "AsyncVectorEnv", 1, 2.0),
+    ("send-recv / EnvPool", "remoteenv send/recv", "EnvPool", 64, None),
+    ("batched / EnvPool", "remoteenv batched", "EnvPool", 16, None),
+    ("EnvPool / physics limit", "EnvPool", "physics limit", 64, None),
+]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("batched benchmark (--batched)")
+    g.add_argument("--batched-n", default="16,64", help="comma-separated vector sizes N (default 16,64)")
+    g.add_argument("--batched-duration", type=float, default=1.0, help="seconds per contender per round (default 1)")
+    g.add_argument("--rounds", type=int, default=5, help="alternating rounds; medians are shown (default 5)")
+    g.add_argument(
+        "--hog", type=int, nargs="?", const=1, default=0, help="run this many CPU hogs beside it (default 1 if given)"
+    )
+
+
+# ---------------------------------------------------------------- contenders
+
+
+class Contender:
+    """A named thing to time: ``tick()`` advances ``per_tick`` env steps."""
+
+    def __init__(self, name: str, n: int, env: Any, tick: Callable[[int], None], per_tick: int) -> None:
+        self.name, self.n, self.env, self.tick, self.per_tick = name, n, env, tick, per_tick
+        self.rates: list[float] = []
+
+    def measure(self, duration: float) -> None:
+        calls = 0
+        start = time.perf_counter()
+        end = start + duration
+        now = start
+        while now < end:
+            for _ in range(10):
+                self.tick(calls)
+                calls += 1
+            now = time.perf_counter()
+        self.rates.append(calls * self.per_tick / (now - start))
+
+    def close(self) -> None:
+        close = getattr(self.env, "close", None)
+        if close is not None:
+            close()
+
+
+def _box_actions(n: int, count: int = 64) -> list[np.ndarray]:
+    rng = np.random.default_rng(0)
+    return [rng.uniform(-1, 1, size=(n, 2)).astype(np.float32) for _ in range(count)]
+
+
+def _vector(name: str, n: int, env: Any) -> Contender:
+    actions = _box_actions(n)
+    env.reset(seed=0)
+    return Contender(name, n, env, lambda i: env.step(actions[i & 63]), n)
+
+
+def _send_recv(n: int) -> Contender:
+    env: Any = gym.make_vec(REMOTE_ID, num_envs=n, vectorization_mode="vector_entry_point", batch_size=n // 2)
+    actions = _box_actions(n // 2)
+    env.reset(seed=0)
+    env.send(np.zeros((n, 2), dtype=np.float32))
+
+    def tick(i: int) -> None:
+        info = env.recv()[4]
+        env.send(actions[i & 63], info["env_id"])
+
+    return Contender("remoteenv send/recv", n, env, tick, n // 2)
+
+
+def _single(name: str, env: Any) -> Contender:
+    actions = _box_actions(1)
+    env.reset(seed=0)
+    vector = hasattr(env, "num_envs")
+
+    def tick(i: int) -> None:
+        a = actions[i & 63]
+        if vector:
+            env.step(a)
+        else:
+            _, _, terminated, truncated, _ = env.step(a[0])
+            if terminated or truncated:
+                env.reset()
+
+    return Contender(name, 1, env, tick, 1)
+
+
+def _physics_tick(physics: PhysicsLimit) -> Callable[[int], None]:
+    return lambda i: physics.step()
+
+
+def build(ns: list[int], log: Callable[[str], None]) -> list[Contender]:
+    """Every contender, ready to time (EnvPool skipped with a note if it is missing)."""
+    import remoteenv
+
+    model = os.path.join(os.path.dirname(remoteenv.scene_path("reacher")), "reacher.xml")
+    out: list[Contender] = []
+    for n in ns:
+        physics = PhysicsLimit(model, n, frame_skip=2)
+        out.append(Contender("physics limit", n, physics, _physics_tick(physics), n))
+        try:
+            out.append(_vector("EnvPool", n, make_envpool(GYM_ID, n)))
+        except ImportError:
+            log("  EnvPool is not installed (pip install 'remoteenv[bench]'): its rows are skipped")
+        out.append(_vector("remoteenv batched", n, gym.make_vec(REMOTE_ID, n, vectorization_mode="vector_entry_point")))
+        if n >= 2:
+            out.append(_send_recv(n))
+        out.append(_vector("SyncVectorEnv", n, gym.make_vec(GYM_ID, n, vectorization_mode="sync")))
+    out.append(_single("remoteenv single", gym.make(REMOTE_ID)))
+    out.append(_vector("AsyncVectorEnv", 1, gym.make_vec(GYM_ID, 1, vectorization_mode="async")))
+    return out
+
+
+# ---------------------------------------------------------------- run
+
+
+def measure(
+    ns: list[int], duration: float, rounds: int, hog: int, log: Callable[[str], None] = print
+) -> dict[str, Any]:
+    contenders = build(ns, log)
+    loads = []
+    try:
+        with CpuHog(hog):
+            for c in contenders:  # warm up
+                c.measure(min(0.2, duration))
+                c.rates.clear()
+            for r in range(rounds):
+                for c in contenders:
+                    c.measure(duration)
+                loads.append(os.getloadavg()[0])
+                log(f"  round {r + 1}/{rounds} done, load average {loads[-1]:.2f}")
+    finally:
+        for c in contenders:
+            c.close()
+    rows = [
+        {"name": c.name, "num_envs": c.n, "median": statistics.median(c.rates), "rates": c.rates} for c in contenders
+    ]
+    return {
+        "date": time.strftime("%Y-%m-%d %H:%M %Z"),
+        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version()},
+        "load_avg_per_round": loads,
+        "hogs": hog,
+        "duration_s": duration,
+        "rounds": rounds,
+        "rows": rows,
+        "ratios": ratios(rows),
+    }
+
+
+def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The target ratios of medians, where both contenders were measured."""
+    median = {(r["name"], r["num_envs"]): r["median"] for r in rows}
+    out = []
+    for what, num, den, n, target in TARGETS:
+        a, b = median.get((num, n)), median.get((den, n))
+        if a and b:
+            out.append({"ratio": f"{what}, N={n}", "value": a / b, "target": target})
+    return out
+
+
+def format_table(result: dict[str, Any]) -> str:
+    lines = [f"{'contender':22s} {'N':>3s} {'median steps/s':>15s}   rounds"]
+    for r in result["rows"]:
+        rounds = " ".join(f"{x:.0f}" for x in r["rates"])
+        lines.append(f"{r['name']:22s} {r['num_envs']:>3d} {r['median']:>15.0f}   {rounds}")
+    lines += ["", f"{'ratio of medians':40s} {'value':>6s} {'target':>10s}"]
+    for r in result["ratios"]:
+        target = (
+            "" if r["target"] is None else f">={r['target']:.1f} {'met' if r['value'] >= r['target'] else 'MISSED'}"
+        )
+        lines.append(f"{r['ratio']:40s} {r['value']:6.2f} {target:>10s}")
+    m = result["machine"]
+    loads = ", ".join(f"{x:.2f}" for x in result["load_avg_per_round"])
+    lines += [
+        "",
+        f"{result['date']}; {m['cpus']} CPUs, {m['platform']}, Python {m['python']}; "
+        f"{result['rounds']} rounds x {result['duration_s']:g} s per contender; CPU hogs: {result['hogs']}; "
+        f"load average after each round: {loads}",
+    ]
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        ns = [int(x) for x in args.batched_n.split(",") if x.strip()]
+    except ValueError:
+        raise SystemExit(f"--batched-n must be comma-separated integers, got {args.batched_n!r}") from None
+    if not ns or min(ns) < 2:
+        raise SystemExit(f"--batched-n must be integers >= 2, got {args.batched_n!r}")
+    if args.batched_duration <= 0 or args.rounds < 1 or args.hog < 0:
+        raise SystemExit("--batched-duration must be > 0 s, --rounds >= 1 and --hog >= 0")
+    to_stdout = args.json == "-"
+    log = (lambda s: print(s, file=sys.stderr)) if to_stdout else print
+    result = measure(ns, args.batched_duration, args.rounds, args.hog, log=log)
+    if to_stdout:
+        json.dump(result, sys.stdout, indent=2)
+        print()
+        return 0
+    print()
+    print(format_table(result))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(result, f, indent=2)
+        print(f"\nwrote {args.json}")
+    return 0
