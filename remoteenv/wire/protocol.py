@@ -111,12 +111,14 @@ paused is answered after the resume.
 "options": map | nil}`` -> ``{"obs", "info": infos}`` (lock-step sims only):
 resets the listed worlds in order, world ``worlds[j]`` with ``seeds[j]``.
 
-``step_batch`` ``{"ops": [int, ...], "actions"}`` -> ``{"obs", "reward":
-[float, ...], "terminated": [bool, ...], "truncated": [bool, ...], "info":
-infos, "final": [[world, obs, info], ...]}`` (lock-step sims only): one
-request for worlds ``0 .. n-1`` with ``n = len(ops)``; ``actions`` holds their
+``step_batch`` ``{"ops": [int, ...], "actions", "worlds": [int, ...] | nil}``
+-> ``{"obs", "reward": [float, ...], "terminated": [bool, ...], "truncated":
+[bool, ...], "info": infos, "final": [[position, obs, info], ...]}``
+(lock-step sims only): one request for ``n = len(ops)`` worlds, ``0 .. n-1``
+or, when ``worlds`` is given, the ``n`` distinct worlds it lists (position
+``j`` of ops, actions and every reply field is world ``worlds[j]``); ``actions`` holds their
 ``n`` actions, stacked in one array (Box: shape ``(n, *shape)``; Discrete:
-ints of shape ``(n,)``) or as a list. ``ops[w]`` says what world ``w`` does:
+ints of shape ``(n,)``) or as a list. ``ops[j]`` says what its world does:
 0 step; 1 reset (action ignored; reward 0, not terminated, not truncated,
 info = the reset's info); 2 step, then reset if the step terminated or
 truncated; 3 step, then reset (the agent's time limit ends the episode). A
