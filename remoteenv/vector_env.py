@@ -31,7 +31,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, iterate
 
 from remoteenv.agent.autoreset import after_reset, after_step, plan_ops
-from remoteenv.agent.errors import RemoteEnvError, StateError
+from remoteenv.agent.errors import StateError
 from remoteenv.agent.forwarding import SceneReach, VectorAttributes
 from remoteenv.agent.latency import LatencyStats
 from remoteenv.agent.pausing import Pausable, Pauser
@@ -41,29 +41,13 @@ from remoteenv.agent.restart import RestartBudget, restarted_info
 from remoteenv.agent.session import SimSession, choose_group, scene_label
 from remoteenv.agent.sim_group import LaunchSpec, SimGroup
 from remoteenv.agent.vector_async import AsyncWorlds, assemble_chunks
+from remoteenv.agent.vector_layout import check_sims, default_envs_per_process
 from remoteenv.agent.vector_requests import VectorRequests
 from remoteenv.agent.vector_results import ObsBatch, assemble
 from remoteenv.wire.actions import check_actions
 from remoteenv.wire.batch import merge_infos
 from remoteenv.wire.delays import DelaySpec
 from remoteenv.wire.handshake import Handshake
-
-
-def default_envs_per_process(num_envs: int) -> int:
-    """K when ``envs_per_process`` is not given: at least 8 worlds per process,
-    and no more processes than CPUs: ``max(8, ceil(N / cpu_count))``, capped at N.
-
-    Every extra process costs a round trip per vector step (on a virtual
-    machine, mostly the wake-up of a sleeping process, 20-40 us each) and its
-    share of the agent's decoding; a second process pays off once it takes
-    enough physics off the first. Measured side by side on the 2-core
-    reference machine (Reacher, lock-step, one run): N = 4 and 8 stepped
-    fastest in one process (K = N beat K = N/2 by 1.3x and 1.1x); N = 16
-    fastest in two (K = 8 beat K = 16 by 1.15x); K = 1 was slowest at every
-    N > 1.
-    """
-    per_cpu = -(-num_envs // max(1, os.cpu_count() or 1))
-    return min(num_envs, max(8, per_cpu))
 
 
 class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
@@ -270,22 +254,7 @@ class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
         self._box_act = isinstance(self.single_action_space, gym.spaces.Box)
 
     def _check_sims(self, handshakes: Sequence[Handshake]) -> None:
-        """Refuse sims that cannot serve this env's slices (e.g. a server other
-        than the reference one, named in a launch-info file)."""
-        batches = not (self.real_time or self.envs_per_process == 1)
-        for hs, (lo, hi) in zip(handshakes, self.slices):
-            if hi - lo > hs.num_worlds:
-                problem = f"hosts {hs.num_worlds} world(s), not {hi - lo}"
-            elif batches and not hs.offers("step_batch"):
-                problem = "does not answer step_batch, which drives several worlds per process"
-            else:
-                continue
-            raise RemoteEnvError(
-                f"sim instance {hs.instance} {problem}; drive it with envs_per_process=1 "
-                f"or with sims that host {hi - lo} worlds each",
-                kind="protocol",
-                instance=hs.instance,
-            )
+        check_sims(handshakes, self.slices, batches=not (self.real_time or self.envs_per_process == 1))
 
     @classmethod
     def attach(cls, launch_info: str | os.PathLike[str], **kwargs: Any) -> RemoteVectorEnv:
@@ -406,8 +375,8 @@ class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
         only; a failing sim raises (restarts cover :meth:`step` only)."""
         if not self._has_reset or self._session.closed:
             raise StateError("send() before reset() or after close(): reset() an open RemoteVectorEnv first")
-        if self.real_time:
-            raise StateError("send()/recv() need lock-step sims; real-time worlds step with step()")
+        if self.real_time or not all(hs.offers("step_batch") for hs in self._session.handshakes):
+            raise StateError("send()/recv() need lock-step sims that answer step_batch; step with step()")
         if self._pending_step is not None:
             raise StateError("a step is in flight: call step_wait() first")
         ids = np.arange(self.num_envs) if env_ids is None else np.asarray(env_ids, dtype=np.intp).reshape(-1)

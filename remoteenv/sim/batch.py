@@ -88,7 +88,8 @@ class BatchCommands:
                 require_reset(self.worlds[w].has_reset, w, self.instance)
         actions = check_actions(self._space, msg.get("actions"), n)
         stepped = [j for j in range(n) if ops[j] != OP_RESET]
-        if self.stepper is not None and stepped:
+        # Actions sent as a list reach the hooks as sent (e.g. floats, not float32): per world.
+        if self.stepper is not None and stepped and isinstance(actions, np.ndarray):
             if len(stepped) < n:
                 picked = actions[stepped] if isinstance(actions, np.ndarray) else [actions[j] for j in stepped]
             else:

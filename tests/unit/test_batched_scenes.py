@@ -60,7 +60,8 @@ def _requests(space, steps: int, seed: int):
         ops = rng.choice([OP_STEP, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET, OP_RESET], size=n).tolist()
         if t % 4 == 0:
             ops = [OP_STEP_AUTORESET] * n  # the SAME_STEP common case
-        msg = {"ops": ops, "actions": _actions(space, n, rng)}
+        actions = _actions(space, n, rng)
+        msg = {"ops": ops, "actions": actions.tolist() if t % 7 == 0 else actions}
         if t % 5 == 0:
             msg["worlds"] = rng.permutation(K)[:n].tolist()
         yield msg
