@@ -11,7 +11,8 @@ and with ``send``/``recv`` (``batch_size`` = N / 2), Gymnasium's
 in ``--rounds`` alternating rounds of ``--batched-duration`` seconds each, so
 load that comes and goes hits them alike; the table shows each contender's
 median and the ratios the project targets (issue 13). ``--hog`` runs CPU
-hogs beside the measurement. It measures and prints; it asserts nothing.
+hogs beside the measurement; ``--profile`` instead times each stage of one
+batched step in this process. It measures and prints; it asserts nothing.
 """
 
 from __future__ import annotations
@@ -51,6 +52,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--batched-duration", type=float, default=1.0, help="seconds per contender per round (default 1)")
     g.add_argument("--rounds", type=int, default=5, help="alternating rounds; medians are shown (default 5)")
     g.add_argument(
+        "--profile",
+        action="store_true",
+        help="instead: time each stage of one batched step in this process (no sims; see step_profile)",
+    )
+    g.add_argument(
         "--hog", type=int, nargs="?", const=1, default=0, help="run this many CPU hogs beside it (default 1 if given)"
     )
 
@@ -88,9 +94,10 @@ def _box_actions(n: int, count: int = 64) -> list[np.ndarray]:
     return [rng.uniform(-1, 1, size=(n, 2)).astype(np.float32) for _ in range(count)]
 
 
-def _vector(name: str, n: int, env: Any) -> Contender:
+def _vector(name: str, n: int, env: Any, seeded: bool = False) -> Contender:
+    """``env.step`` over N worlds; ``seeded``: the env took its seed when made (EnvPool)."""
     actions = _box_actions(n)
-    env.reset(seed=0)
+    env.reset() if seeded else env.reset(seed=0)
     return Contender(name, n, env, lambda i: env.step(actions[i & 63]), n)
 
 
@@ -138,7 +145,7 @@ def build(ns: list[int], log: Callable[[str], None]) -> list[Contender]:
         physics = PhysicsLimit(model, n, frame_skip=2)
         out.append(Contender("physics limit", n, physics, _physics_tick(physics), n))
         try:
-            out.append(_vector("EnvPool", n, make_envpool(GYM_ID, n)))
+            out.append(_vector("EnvPool", n, make_envpool(GYM_ID, n), seeded=True))
         except ImportError:
             log("  EnvPool is not installed (pip install 'remoteenv[bench]'): its rows are skipped")
         out.append(_vector("remoteenv batched", n, gym.make_vec(REMOTE_ID, n, vectorization_mode="vector_entry_point")))
@@ -219,6 +226,20 @@ def format_table(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def format_profile(ns: list[int]) -> str:
+    """The stage profile (:func:`remoteenv.benchmarks.step_profile.profile`) of each N, as a table."""
+    from remoteenv.benchmarks.step_profile import STAGES, profile
+
+    by_n = {n: profile(n) for n in ns}
+    lines = [f"{'stage (microseconds per vector step)':40s}" + "".join(f"{f'N={n}':>10s}" for n in ns)]
+    for stage in STAGES:
+        lines.append(f"{stage:40s}" + "".join(f"{by_n[n][stage]:10.1f}" for n in ns))
+    lines.append(f"{'total':40s}" + "".join(f"{sum(by_n[n].values()):10.1f}" for n in ns))
+    lines.append(f"{'total per world':40s}" + "".join(f"{sum(by_n[n].values()) / n:10.2f}" for n in ns))
+    lines.append(f"load average {os.getloadavg()[0]:.2f}; {time.strftime('%Y-%m-%d %H:%M %Z')}")
+    return "\n".join(lines)
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         ns = [int(x) for x in args.batched_n.split(",") if x.strip()]
@@ -228,6 +249,9 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"--batched-n must be integers >= 2, got {args.batched_n!r}")
     if args.batched_duration <= 0 or args.rounds < 1 or args.hog < 0:
         raise SystemExit("--batched-duration must be > 0 s, --rounds >= 1 and --hog >= 0")
+    if args.profile:
+        print(format_profile(ns))
+        return 0
     to_stdout = args.json == "-"
     log = (lambda s: print(s, file=sys.stderr)) if to_stdout else print
     result = measure(ns, args.batched_duration, args.rounds, args.hog, log=log)

@@ -97,7 +97,7 @@ class BatchCommands:
             batch = self.stepper.step([worlds[j] for j in stepped], picked)
             resets = len(stepped) < n or OP_STEP_RESET in ops or (OP_STEP_AUTORESET in ops and batch.terminated.any())
             if not resets:
-                return _plain_reply(batch)  # the scene's arrays as they are
+                return plain_step_reply(batch)  # the scene's arrays as they are
             results = _per_world_results(batch, stepped, n)
         else:
             if isinstance(actions, np.ndarray) and self._discrete:
@@ -155,7 +155,7 @@ class BatchCommands:
         return reply
 
 
-def _plain_reply(batch: BatchResult) -> dict[str, Any]:
+def plain_step_reply(batch: BatchResult) -> dict[str, Any]:
     """The reply of a ``step_batch`` that stepped every world and reset none."""
     info = batch.wire_columns()
     if info is None:
@@ -184,4 +184,4 @@ def _per_world_results(batch: BatchResult, stepped: list[int], n: int) -> list[d
     return results
 
 
-__all__ = ["BatchCommands"]
+__all__ = ["BatchCommands", "plain_step_reply"]

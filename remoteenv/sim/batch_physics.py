@@ -2,9 +2,9 @@
 
 Runs in the sim process. ``mujoco.mj_step`` releases the GIL while it
 computes, so the worlds of one process can advance on every CPU it is given:
-:class:`PhysicsThreads` splits a batch of worlds into contiguous chunks, runs
-the first on the calling thread and the others on worker threads, and
-returns when all are done. Each world keeps its own ``MjData``, so the
+:class:`PhysicsThreads` cuts a batch of worlds into small chunks that
+the calling thread and worker threads take in turn, and returns when all
+are done. Each world keeps its own ``MjData``, so the
 scene's hooks (per world or batched) read and write it as before, and a
 world's trajectory does not depend on the number of threads.
 
@@ -18,7 +18,9 @@ recomputed, and every world's ``MjData`` copied in and out each step. On the
 
 from __future__ import annotations
 
+import itertools
 import os
+import threading
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 
@@ -59,9 +61,17 @@ def default_threads(num_worlds: int) -> int:
 class PhysicsThreads:
     """Advances many ``(model, data)`` worlds by ``nstep`` substeps each, on ``threads`` threads.
 
+    The worlds are cut into small chunks that the calling thread and the
+    workers take in turn until none is left, so a worker the OS is slow to
+    wake (a loaded host) costs nothing: the caller steps its share too, and
+    waits only for chunks a worker has started.
+
     Args:
         threads: threads to use, the caller's included (1: step on the caller's thread only).
     """
+
+    #: Chunks per thread: small enough to share the work out evenly.
+    CHUNKS_PER_THREAD = 4
 
     def __init__(self, threads: int) -> None:
         if threads < 1:
@@ -72,27 +82,55 @@ class PhysicsThreads:
     def step(self, models: Sequence[mujoco.MjModel], datas: Sequence[mujoco.MjData], nstep: int) -> None:
         """``mj_step(models[i], datas[i], nstep)`` for every ``i``; returns when all are done.
 
-        An exception from any world is raised here (after the others finished)."""
+        An exception from any world is raised here (after the chunks under way finished)."""
         n = len(datas)
-        chunks = min(self.threads, n)
-        if chunks <= 1 or self._pool is None:
+        if self._pool is None or n < 2:
             _step_range(models, datas, nstep, 0, n)
             return
-        bounds = [n * c // chunks for c in range(chunks + 1)]
-        futures = [
-            self._pool.submit(_step_range, models, datas, nstep, bounds[c], bounds[c + 1]) for c in range(1, chunks)
-        ]
-        try:
-            _step_range(models, datas, nstep, bounds[0], bounds[1])
-        finally:
-            for future in futures:
-                future.result()
+        job = _Job(models, datas, nstep, max(1, n // (self.threads * self.CHUNKS_PER_THREAD)))
+        for _ in range(self.threads - 1):
+            self._pool.submit(job.work)
+        job.work()
+        job.finished.wait()
+        if job.error is not None:
+            raise job.error
 
     def close(self) -> None:
         """Stop the worker threads."""
         if self._pool is not None:
             self._pool.shutdown(wait=True)
             self._pool = None
+
+
+class _Job:
+    """One :meth:`PhysicsThreads.step` call: chunks handed out by ticket, counted as done."""
+
+    def __init__(
+        self, models: Sequence[mujoco.MjModel], datas: Sequence[mujoco.MjData], nstep: int, chunk: int
+    ) -> None:
+        self.models, self.datas, self.nstep, self.chunk = models, datas, nstep, chunk
+        self.num_chunks = -(-len(datas) // chunk)
+        self._tickets = itertools.count()  # next() is atomic under the GIL
+        self._lock = threading.Lock()
+        self._done = 0
+        self.error: BaseException | None = None
+        self.finished = threading.Event()
+
+    def work(self) -> None:
+        n = len(self.datas)
+        while True:
+            c = next(self._tickets)
+            if c >= self.num_chunks:
+                return
+            lo = c * self.chunk
+            try:
+                _step_range(self.models, self.datas, self.nstep, lo, min(lo + self.chunk, n))
+            except BaseException as exc:
+                self.error = exc
+            with self._lock:
+                self._done += 1
+                if self._done == self.num_chunks:
+                    self.finished.set()
 
 
 def _step_range(models: Sequence[mujoco.MjModel], datas: Sequence[mujoco.MjData], nstep: int, lo: int, hi: int) -> None:
