@@ -22,9 +22,11 @@ from remoteenv.sim.batch_physics import PhysicsThreads, usable_cpus
 
 class PhysicsLimit:
     """N worlds of the MJCF model at ``model_path``, stepped ``frame_skip``
-    substeps per call on one thread per usable CPU, with random controls."""
+    substeps per call on ``threads`` threads (default one per usable CPU), with random controls."""
 
-    def __init__(self, model_path: str, num_worlds: int, frame_skip: int, seed: int = 0) -> None:
+    def __init__(
+        self, model_path: str, num_worlds: int, frame_skip: int, seed: int = 0, threads: int | None = None
+    ) -> None:
         self.num_envs = num_worlds
         self.model = mujoco.MjModel.from_xml_path(model_path)
         self.datas = [mujoco.MjData(self.model) for _ in range(num_worlds)]
@@ -33,7 +35,7 @@ class PhysicsLimit:
             d.ctrl[:] = rng.uniform(-1.0, 1.0, size=self.model.nu)
         self.models = [self.model] * num_worlds
         self.frame_skip = frame_skip
-        self.physics = PhysicsThreads(usable_cpus())
+        self.physics = PhysicsThreads(threads or usable_cpus())
 
     def step(self) -> None:
         """One control tick of every world."""

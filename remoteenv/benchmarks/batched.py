@@ -2,7 +2,7 @@
 
 Agent side; it launches sims. Reacher at N = 16 and 64 (``--batched-n``):
 the physics limit (raw ``mj_step``, one thread per CPU,
-:class:`~remoteenv.benchmarks.anchors.PhysicsLimit`), EnvPool's
+:class:`~remoteenv.benchmarks.anchors.PhysicsLimit`; and on one thread), EnvPool's
 ``Reacher-v5`` (skipped with a note when EnvPool is not installed),
 remoteenv's batched ``RemoteVectorEnv`` (default K) stepped with ``step``
 and with ``send``/``recv`` (``batch_size`` = N / 2), Gymnasium's
@@ -43,6 +43,7 @@ TARGETS = [
     ("send-recv / EnvPool", "remoteenv send/recv", "EnvPool", 64, None),
     ("batched / EnvPool", "remoteenv batched", "EnvPool", 16, None),
     ("EnvPool / physics limit", "EnvPool", "physics limit", 64, None),
+    ("physics limit / physics, 1 thread", "physics limit", "physics, 1 thread", 64, None),
 ]
 
 
@@ -144,6 +145,8 @@ def build(ns: list[int], log: Callable[[str], None]) -> list[Contender]:
     for n in ns:
         physics = PhysicsLimit(model, n, frame_skip=2)
         out.append(Contender("physics limit", n, physics, _physics_tick(physics), n))
+        serial = PhysicsLimit(model, n, frame_skip=2, threads=1)
+        out.append(Contender("physics, 1 thread", n, serial, _physics_tick(serial), n))
         try:
             out.append(_vector("EnvPool", n, make_envpool(GYM_ID, n), seeded=True))
         except ImportError:
@@ -231,11 +234,13 @@ def format_profile(ns: list[int]) -> str:
     from remoteenv.benchmarks.step_profile import STAGES, profile
 
     by_n = {n: profile(n) for n in ns}
-    lines = [f"{'stage (microseconds per vector step)':40s}" + "".join(f"{f'N={n}':>10s}" for n in ns)]
+    head = "".join(f"{f'N={n} wall':>12s}{f'N={n} CPU':>12s}" for n in ns)
+    lines = [f"{'stage (microseconds per vector step)':40s}{head}"]
     for stage in STAGES:
-        lines.append(f"{stage:40s}" + "".join(f"{by_n[n][stage]:10.1f}" for n in ns))
-    lines.append(f"{'total':40s}" + "".join(f"{sum(by_n[n].values()):10.1f}" for n in ns))
-    lines.append(f"{'total per world':40s}" + "".join(f"{sum(by_n[n].values()) / n:10.2f}" for n in ns))
+        lines.append(f"{stage:40s}" + "".join(f"{by_n[n][0][stage]:12.1f}{by_n[n][1][stage]:12.1f}" for n in ns))
+    totals = {n: (sum(by_n[n][0].values()), sum(by_n[n][1].values())) for n in ns}
+    lines.append(f"{'total':40s}" + "".join(f"{totals[n][0]:12.1f}{totals[n][1]:12.1f}" for n in ns))
+    lines.append(f"{'total per world':40s}" + "".join(f"{totals[n][0] / n:12.2f}{totals[n][1] / n:12.2f}" for n in ns))
     lines.append(f"load average {os.getloadavg()[0]:.2f}; {time.strftime('%Y-%m-%d %H:%M %Z')}")
     return "\n".join(lines)
 
