@@ -372,7 +372,9 @@ class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
         (default: every world) and return at once; :meth:`recv` returns results.
 
         A world must not be in flight (sent and not yet received). Lock-step
-        only; a failing sim raises (restarts cover :meth:`step` only)."""
+        only. A failing sim raises from :meth:`recv`, which then forgets what
+        was in flight: call :meth:`reset` before stepping again (restarts
+        cover :meth:`step` only)."""
         if not self._has_reset or self._session.closed:
             raise StateError("send() before reset() or after close(): reset() an open RemoteVectorEnv first")
         if self.real_time or not all(hs.offers("step_batch") for hs in self._session.handshakes):

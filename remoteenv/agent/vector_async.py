@@ -13,7 +13,8 @@ step the others.
 
 Replies come per request: a process's worlds of one request finish
 together. Failures are raised (``restart_on_failure`` covers ``step`` and
-``step_wait`` only).
+``step_wait`` only) after everything in flight is forgotten: the worlds'
+state is then unknown, and the env needs a ``reset()``.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from typing import Any
 import numpy as np
 import zmq
 
-from remoteenv.agent.errors import RemoteEnvTimeout, StateError
+from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout, StateError
 from remoteenv.agent.session import SimSession
 from remoteenv.agent.sim_connection import LIVENESS_CHECK_S
 from remoteenv.agent.vector_results import ObsBatch, assemble
@@ -88,7 +89,11 @@ class AsyncWorlds:
                 f"recv() needs {batch_size} worlds in flight or received, but only "
                 f"{int(self.in_flight.sum())} are: send() actions for more worlds first"
             )
-        self._wait_for(batch_size)
+        try:
+            self._wait_for(batch_size)
+        except RemoteEnvError:
+            self.abandon()
+            raise
         out: list[Chunk] = []
         need = batch_size
         while need:
@@ -102,6 +107,15 @@ class AsyncWorlds:
             self._ready_count -= len(ids)
             self.in_flight[ids] = False
         return out
+
+    def abandon(self) -> None:
+        """Forget every request in flight and every reply not yet returned (after a
+        failure; replies that come later are stale and dropped)."""
+        for queue in self._queues:
+            queue.clear()
+        self._ready.clear()
+        self._ready_count = 0
+        self.in_flight[:] = False
 
     # ------------------------------------------------------------ waiting
 

@@ -26,8 +26,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import mujoco
 
-#: Environment variable that fixes the number of physics threads of every
-#: sim process (an int >= 1); unset, :func:`default_threads` decides.
+#: Environment variable that sets the number of physics threads of every sim
+#: process (an int >= 1; see :func:`default_threads`). Sims inherit it from the agent.
 THREADS_ENV = "REMOTEENV_SIM_THREADS"
 #: Fewest worlds per thread worth a thread of its own: below it the hand-off
 #: (~10-30 us) costs more than the physics it moves.
@@ -43,19 +43,29 @@ def usable_cpus() -> int:
 
 
 def default_threads(num_worlds: int) -> int:
-    """Physics threads for a process hosting ``num_worlds`` worlds: one per
-    usable CPU, but no more than one per :data:`MIN_WORLDS_PER_THREAD` worlds;
-    the environment variable :data:`THREADS_ENV` overrides."""
+    """Physics threads for a process hosting ``num_worlds`` worlds: the
+    environment variable :data:`THREADS_ENV` if set, else 1.
+
+    One by default because that measured fastest where it matters: the
+    default layout already runs at least one sim process per CPU once N is
+    large, and on a loaded 2-core host (load average 7) a second thread per
+    process cut Reacher's batched steps/s by a third (N = 64, K = 32:
+    20.5k with one thread, 13.2k with two; N = 16, K = 8: 5.2k and 3.2k;
+    medians of 5 alternating rounds, docs/performance.md). Set it to the
+    CPUs a process may use when one sim process hosts many worlds on an
+    otherwise idle machine (e.g. a remote host serving one agent), capped at
+    one thread per :data:`MIN_WORLDS_PER_THREAD` worlds.
+    """
     fixed = os.environ.get(THREADS_ENV)
-    if fixed:
-        try:
-            value = int(fixed)
-        except ValueError:
-            raise ValueError(f"{THREADS_ENV} must be an int >= 1, got {fixed[:20]!r}") from None
-        if value < 1:
-            raise ValueError(f"{THREADS_ENV} must be an int >= 1, got {value}")
-        return value
-    return max(1, min(usable_cpus(), num_worlds // MIN_WORLDS_PER_THREAD))
+    if not fixed:
+        return 1
+    try:
+        value = int(fixed)
+    except ValueError:
+        raise ValueError(f"{THREADS_ENV} must be an int >= 1, got {fixed[:20]!r}") from None
+    if value < 1:
+        raise ValueError(f"{THREADS_ENV} must be an int >= 1, got {value}")
+    return max(1, min(value, num_worlds // MIN_WORLDS_PER_THREAD))
 
 
 class PhysicsThreads:

@@ -52,9 +52,10 @@ def test_an_error_in_a_worker_chunk_is_raised_to_the_caller() -> None:
 
 def test_default_threads(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv(THREADS_ENV, raising=False)
-    assert default_threads(1) == 1
+    assert default_threads(64) == 1
     monkeypatch.setenv(THREADS_ENV, "3")
-    assert default_threads(1) == 3
+    assert default_threads(64) == 3
+    assert default_threads(9) == 1  # at most one thread per 8 worlds
     monkeypatch.setenv(THREADS_ENV, "0")
     with pytest.raises(ValueError, match=THREADS_ENV):
         default_threads(8)
