@@ -5,13 +5,17 @@ Agent side (benchmarks only). :class:`PhysicsLimit` is the ceiling: raw
 usable CPU, no env logic at all. :func:`make_envpool` is the fastest
 in-process alternative a user could pick (EnvPool's C++ thread pool;
 optional: ``pip install remoteenv[bench]``). :class:`CpuHog` keeps CPUs busy
-beside a measurement, as training does beside stepping.
+beside a measurement, as training does beside stepping; :func:`cpu_seconds`
+counts the CPU a contender's processes use, which on a shared host says
+more about a design's cost than its steps per wall second.
 """
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
+import time
 from typing import Any
 
 import mujoco
@@ -56,6 +60,30 @@ def make_envpool(task_id: str, num_envs: int, batch_size: int | None = None) -> 
     return envpool.make_gymnasium(task_id, **kwargs)
 
 
+def cpu_seconds(exclude: frozenset[int] = frozenset()) -> float:
+    """CPU seconds (user + system) used so far by this process and its live
+    child processes (the sims, Gymnasium's workers), except the pids in
+    ``exclude``; children are read from /proc (Linux), else left out."""
+    total = time.process_time()
+    me = os.getpid()
+    tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return total
+    for entry in entries:
+        if not entry.isdigit() or int(entry) in exclude:
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if int(fields[1]) == me:  # fields[1] is the ppid; utime and stime are the 12th and 13th after ")"
+            total += (int(fields[11]) + int(fields[12])) / tick
+    return total
+
+
 class CpuHog:
     """``count`` processes spinning on the CPU until :meth:`stop` (a context manager)."""
 
@@ -70,6 +98,10 @@ class CpuHog:
     def __exit__(self, *exc: object) -> None:
         self.stop()
 
+    @property
+    def pids(self) -> frozenset[int]:
+        return frozenset(proc.pid for proc in self._procs)
+
     def stop(self) -> None:
         for proc in self._procs:
             proc.kill()
@@ -77,4 +109,4 @@ class CpuHog:
         self._procs = []
 
 
-__all__ = ["CpuHog", "PhysicsLimit", "make_envpool"]
+__all__ = ["CpuHog", "PhysicsLimit", "cpu_seconds", "make_envpool"]

@@ -30,7 +30,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from remoteenv.benchmarks.anchors import CpuHog, PhysicsLimit, make_envpool
+from remoteenv.benchmarks.anchors import CpuHog, PhysicsLimit, cpu_seconds, make_envpool
 
 REMOTE_ID = "remoteenv/Reacher-v0"
 GYM_ID = "Reacher-v5"
@@ -71,9 +71,13 @@ class Contender:
     def __init__(self, name: str, n: int, env: Any, tick: Callable[[int], None], per_tick: int) -> None:
         self.name, self.n, self.env, self.tick, self.per_tick = name, n, env, tick, per_tick
         self.rates: list[float] = []
+        self.cpu_us: list[float] = []
 
-    def measure(self, duration: float) -> None:
+    def measure(self, duration: float, exclude: frozenset[int] = frozenset()) -> None:
+        """Time ``tick`` for ``duration`` s; record steps/s and CPU microseconds per step
+        (this process and its children but ``exclude``)."""
         calls = 0
+        cpu = cpu_seconds(exclude)
         start = time.perf_counter()
         end = start + duration
         now = start
@@ -82,7 +86,9 @@ class Contender:
                 self.tick(calls)
                 calls += 1
             now = time.perf_counter()
-        self.rates.append(calls * self.per_tick / (now - start))
+        steps = calls * self.per_tick
+        self.rates.append(steps / (now - start))
+        self.cpu_us.append((cpu_seconds(exclude) - cpu) / steps * 1e6)
 
     def close(self) -> None:
         close = getattr(self.env, "close", None)
@@ -169,20 +175,28 @@ def measure(
     contenders = build(ns, log)
     loads = []
     try:
-        with CpuHog(hog):
+        with CpuHog(hog) as hogs:
             for c in contenders:  # warm up
-                c.measure(min(0.2, duration))
+                c.measure(min(0.2, duration), hogs.pids)
                 c.rates.clear()
+                c.cpu_us.clear()
             for r in range(rounds):
                 for c in contenders:
-                    c.measure(duration)
+                    c.measure(duration, hogs.pids)
                 loads.append(os.getloadavg()[0])
                 log(f"  round {r + 1}/{rounds} done, load average {loads[-1]:.2f}")
     finally:
         for c in contenders:
             c.close()
     rows = [
-        {"name": c.name, "num_envs": c.n, "median": statistics.median(c.rates), "rates": c.rates} for c in contenders
+        {
+            "name": c.name,
+            "num_envs": c.n,
+            "median": statistics.median(c.rates),
+            "rates": c.rates,
+            "cpu_us_per_step": statistics.median(c.cpu_us),
+        }
+        for c in contenders
     ]
     return {
         "date": time.strftime("%Y-%m-%d %H:%M %Z"),
@@ -197,27 +211,35 @@ def measure(
 
 
 def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The target ratios of medians, where both contenders were measured."""
+    """The target ratios of medians, where both contenders were measured; then
+    the same pairs' CPU cost per step, inverted so that > 1 means "cheaper"."""
     median = {(r["name"], r["num_envs"]): r["median"] for r in rows}
+    cpu = {(r["name"], r["num_envs"]): r["cpu_us_per_step"] for r in rows}
     out = []
     for what, num, den, n, target in TARGETS:
         a, b = median.get((num, n)), median.get((den, n))
         if a and b:
             out.append({"ratio": f"{what}, N={n}", "value": a / b, "target": target})
+    for what, num, den, n, _ in TARGETS:
+        a, b = cpu.get((num, n)), cpu.get((den, n))
+        if a and b:
+            out.append({"ratio": f"CPU/step: {what}, N={n}", "value": b / a, "target": None})
     return out
 
 
 def format_table(result: dict[str, Any]) -> str:
-    lines = [f"{'contender':22s} {'N':>3s} {'median steps/s':>15s}   rounds"]
+    lines = [f"{'contender':22s} {'N':>3s} {'median steps/s':>15s} {'CPU us/step':>12s}   rounds (steps/s)"]
     for r in result["rows"]:
         rounds = " ".join(f"{x:.0f}" for x in r["rates"])
-        lines.append(f"{r['name']:22s} {r['num_envs']:>3d} {r['median']:>15.0f}   {rounds}")
-    lines += ["", f"{'ratio of medians':40s} {'value':>6s} {'target':>10s}"]
+        lines.append(
+            f"{r['name']:22s} {r['num_envs']:>3d} {r['median']:>15.0f} {r['cpu_us_per_step']:>12.1f}   {rounds}"
+        )
+    lines += ["", f"{'ratio of medians (> 1: numerator better)':48s} {'value':>6s} {'target':>10s}"]
     for r in result["ratios"]:
         target = (
             "" if r["target"] is None else f">={r['target']:.1f} {'met' if r['value'] >= r['target'] else 'MISSED'}"
         )
-        lines.append(f"{r['ratio']:40s} {r['value']:6.2f} {target:>10s}")
+        lines.append(f"{r['ratio']:48s} {r['value']:6.2f} {target:>10s}")
     m = result["machine"]
     loads = ", ".join(f"{x:.2f}" for x in result["load_avg_per_round"])
     lines += [
