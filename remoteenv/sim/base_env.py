@@ -135,7 +135,7 @@ class BaseEnv:
     def prepare_steps(cls, envs: Sequence[BaseEnv], actions: Any) -> None:
         """Optional batched :meth:`prepare_step`: apply ``actions[i]`` to ``envs[i]``.
 
-        A lock-step sim without action delay steps the worlds of one
+        A lock-step sim without action or observation delays steps the worlds of one
         ``step_batch`` request together: ``prepare_steps``, then the physics of
         every world on threads (:mod:`remoteenv.sim.batch_physics`), then
         :meth:`post_steps`. ``envs`` are worlds of this class; ``actions``

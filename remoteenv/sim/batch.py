@@ -8,7 +8,7 @@ vector step instead of K. The wire form of both commands is specified in
 let the agent's vector env keep Gymnasium's autoreset semantics without a
 second round trip.
 
-Without an action delay the stepped worlds advance together
+Without action or observation delays the stepped worlds advance together
 (:class:`~remoteenv.sim.batch_step.WorldsStepper`: the scene's batched
 hooks, physics on threads); with one, or for worlds that cannot be stepped
 together, each world steps through its :class:`LockStepper`. Both give the
@@ -57,7 +57,7 @@ class BatchCommands:
         self._space = action_space
         self._discrete = isinstance(action_space, spaces.Discrete)
         envs = [w.env for w in worlds]
-        together = all(w.action_delay == 0 for w in worlds) and steps_together(envs)
+        together = all(w.delays.is_zero for w in worlds) and steps_together(envs)
         self.stepper = WorldsStepper(envs, threads) if together else None
 
     def close(self) -> None:

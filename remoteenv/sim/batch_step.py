@@ -1,6 +1,6 @@
 """One control tick for many worlds of one process: batched hooks, threaded physics.
 
-Runs in the sim process (lock-step, no action delay). :class:`WorldsStepper`
+Runs in the sim process (lock-step, no action or observation delay). :class:`WorldsStepper`
 drives a ``step_batch`` request's stepped worlds as
 :meth:`BaseEnv.prepare_steps` -> physics of every world on threads
 (:class:`~remoteenv.sim.batch_physics.PhysicsThreads`) -> :meth:`BaseEnv.post_steps`.
