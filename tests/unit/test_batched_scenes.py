@@ -123,3 +123,16 @@ def test_step_batch_refuses_repeated_worlds() -> None:
         commands.close()
         for w in commands.worlds:
             w.env.close()
+
+
+@pytest.mark.parametrize("delays", [{"action_delay": 1}, {"obs_delay": 2}])
+def test_worlds_with_delays_step_one_by_one(delays) -> None:
+    """Delays live in each world's LockStepper: such worlds never take the batched path."""
+    envs = [Reacher() for _ in range(2)]
+    lock = LockStepping(envs, **delays)
+    commands = BatchCommands(lock.worlds, envs[0].action_space, 0)
+    try:
+        assert commands.stepper is None
+    finally:
+        for env in envs:
+            env.close()
