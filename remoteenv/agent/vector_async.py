@@ -168,7 +168,8 @@ class AsyncWorlds:
 
 def split_reply(reply: dict[str, Any], cut: int) -> tuple[dict[str, Any], dict[str, Any]]:
     """A ``step_batch`` reply of ``n`` request positions as two: positions
-    ``0 .. cut-1`` and ``cut .. n-1`` (the second's positions renumbered from 0)."""
+    ``0 .. cut-1`` and ``cut .. n-1`` (the second's positions renumbered from
+    0), each ``final`` entry with its ``final_types`` entry."""
     info = reply["info"]
     if "columns" in info:
         head_info = {"columns": {k: [v[:cut], m[:cut]] for k, (v, m) in info["columns"].items()}}
@@ -181,11 +182,20 @@ def split_reply(reply: dict[str, Any], cut: int) -> tuple[dict[str, Any], dict[s
     tail: dict[str, Any] = {"info": tail_info, "final": tail_final}
     for key in ("obs", "reward", "terminated", "truncated"):
         head[key], tail[key] = reply[key][:cut], reply[key][cut:]
-    for j, fobs, finfo in reply["final"]:
+    given = reply.get("final_types")
+    typed = isinstance(given, list) and len(given) == len(reply["final"])
+    types: list[Any] = list(given) if isinstance(given, list) and typed else [None] * len(reply["final"])
+    head_types: list[Any] = []
+    tail_types: list[Any] = []
+    for k, (j, fobs, finfo) in enumerate(reply["final"]):
         if j < cut:
             head_final.append([j, fobs, finfo])
+            head_types.append(types[k])
         else:
             tail_final.append([j - cut, fobs, finfo])
+            tail_types.append(types[k])
+    if typed:
+        head["final_types"], tail["final_types"] = head_types, tail_types
     return head, tail
 
 

@@ -32,6 +32,7 @@ from remoteenv.wire.actions import check_actions
 from remoteenv.wire.batch import columnar_infos, stack
 from remoteenv.wire.errors import PROTOCOL, short_repr
 from remoteenv.wire.protocol import OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET, OPS
+from remoteenv.wire.scalar_types import describe_scalars
 
 
 class BatchCommands:
@@ -174,13 +175,15 @@ def _per_world_results(batch: BatchResult, stepped: list[int], n: int) -> list[d
     """``batch`` (results of request positions ``stepped``) as per-position step results."""
     results: list[dict[str, Any] | None] = [None] * n
     for i, j in enumerate(stepped):
-        results[j] = {
-            "obs": batch.world_obs(i),
-            "reward": float(batch.reward[i]),
-            "terminated": bool(batch.terminated[i]),
-            "truncated": False,
-            "info": batch.world_info(i),
-        }
+        results[j] = describe_scalars(
+            {
+                "obs": batch.world_obs(i),
+                "reward": batch.reward[i],
+                "terminated": bool(batch.terminated[i]),
+                "truncated": False,
+                "info": batch.world_info(i),
+            }
+        )
     return results
 
 

@@ -26,40 +26,50 @@ class BatchResult:
         obs: ``(n, *obs_shape)`` array, or a list of ``n`` obs.
         reward: float64 array ``(n,)``.
         terminated: bool array ``(n,)``.
-        infos: a list of ``n`` info maps, or columns: ``{key: array (n,)}`` of
-            bool, int or float, every world having every key.
+        infos: a list of ``n`` info maps, or columns, every world having
+            every key: ``{key: values}`` with ``values`` a numpy array ``(n,)``
+            of a bool, int or float dtype (world ``w``'s value is then the
+            numpy scalar ``values[w]``, as a per-world hook returning numpy
+            scalars gives it) or a list of ``n`` python bools, ints or floats.
     """
 
     obs: Any
     reward: np.ndarray
     terminated: np.ndarray
-    infos: list[dict[str, Any]] | dict[str, np.ndarray]
+    infos: list[dict[str, Any]] | dict[str, Any]
 
     def world_obs(self, w: int) -> Any:
         """World ``w``'s obs (a fresh array for an array batch)."""
         return self.obs[w].copy() if isinstance(self.obs, np.ndarray) else self.obs[w]
 
     def world_info(self, w: int) -> dict[str, Any]:
-        """World ``w``'s info map, with python scalars where columns hold numpy ones."""
+        """World ``w``'s info map (numpy scalars from array columns, python ones from lists)."""
         if isinstance(self.infos, list):
             return self.infos[w]
-        return {key: column[w].item() for key, column in self.infos.items()}
+        return {key: column[w] for key, column in self.infos.items()}
 
     def wire_columns(self) -> dict[str, Any] | None:
-        """The infos in the wire's column form (see :func:`remoteenv.wire.batch.columnar_infos`),
-        or None if they are maps or a column is not bool, int or float."""
+        """The infos in the wire's column form, exactly as
+        :func:`remoteenv.wire.batch.columnar_infos` encodes the per-world maps
+        (an array column goes as an array of its dtype, a list as a list), or
+        None if they are maps or a column is not bool, int or float."""
         if isinstance(self.infos, list):
             return None
         n = len(self.reward)
         present = [True] * n
         columns: dict[str, Any] = {}
         for key, column in self.infos.items():
-            column = np.asarray(column)
-            kind = _COLUMN_KINDS.get(column.dtype.kind)
-            if kind is None or column.shape != (n,):
+            if isinstance(column, np.ndarray):
+                if column.dtype.kind not in _COLUMN_KINDS or column.shape != (n,):
+                    return None
+                columns[key] = [np.ascontiguousarray(column), present]
+                continue
+            if len(column) != n or not all(type(v) in (bool, int, float) for v in column):
                 return None
-            wide = column.astype(np.float64 if kind is float else np.int64 if kind is int else np.bool_, copy=False)
-            columns[key] = [wide.tolist(), present]
+            kinds = {type(v) for v in column}
+            if len(kinds) > 1:
+                return None
+            columns[key] = [list(column), present]
         return {"columns": columns}
 
 

@@ -15,6 +15,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.batch_physics import PhysicsThreads, default_threads
 from remoteenv.sim.batch_result import BatchResult
@@ -64,7 +66,21 @@ class WorldsStepper:
             datas = [self._datas[w] for w in worlds]
         self._cls.prepare_steps(envs, actions)
         self.physics.step(models, datas, self._frame_skip)
-        return self._cls.post_steps(envs, actions)
+        result = self._cls.post_steps(envs, actions)
+        self._check_obs(result.obs)
+        return result
+
+    def _check_obs(self, obs: Any) -> None:
+        """What :meth:`BaseEnv.finish_tick` checks per world: a stacked batch's
+        dtype and row shape once (every row shares them), each row's bounds
+        when the scene asks for bounds; other batches world by world."""
+        env = self.envs[0]
+        if isinstance(obs, np.ndarray) and obs.ndim >= 1 and not env.check_obs_bounds:
+            rows = obs[:1]
+        else:
+            rows = obs
+        for row in rows:
+            env._check_obs(row, "post_steps")
 
     def close(self) -> None:
         self.physics.close()

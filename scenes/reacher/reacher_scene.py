@@ -93,11 +93,11 @@ class ReacherEnv(BaseEnv):
         xpos = np.array([env.data.xpos for env in reachers])
         vec = xpos[:, tip] - xpos[:, target]
         dist_w = np.array([env.reward_dist_weight for env in reachers])
-        ctrl_w = np.array([env.reward_control_weight for env in reachers])
-        # The same operations in the same order as post_step, so the numbers match exactly.
-        x, y, z = vec[:, 0], vec[:, 1], vec[:, 2]
-        reward_dist = -np.sqrt(x * x + y * y + z * z) * dist_w
-        reward_ctrl = -np.square(actions).sum(axis=1).astype(np.float64) * ctrl_w
+        ctrl_w = np.array([env.reward_control_weight for env in reachers], dtype=np.float32)
+        # The same operations as post_step, so the numbers (and types) match
+        # exactly: a stacked matmul is the dot product np.linalg.norm takes.
+        reward_dist = -np.sqrt(np.matmul(vec[:, None, :], vec[:, :, None])[:, 0, 0]) * dist_w
+        reward_ctrl = -np.square(actions, dtype=np.float32).sum(axis=1) * ctrl_w
         obs = np.empty((len(reachers), 10))
         obs[:, 0:2] = np.cos(qpos[:, :2])
         obs[:, 2:4] = np.sin(qpos[:, :2])

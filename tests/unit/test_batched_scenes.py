@@ -103,7 +103,8 @@ def test_plain_batch_reply_is_the_scenes_arrays() -> None:
         reply = commands.step_batch({"ops": [OP_STEP] * K, "actions": actions}, None, None)
         assert reply["obs"].shape == (K, 10) and reply["final"] == []
         assert sorted(reply["info"]["columns"]) == ["reward_ctrl", "reward_dist"]
-        assert reply["info"]["columns"]["reward_ctrl"] == [[-0.0] * K, [True] * K]
+        values, present = reply["info"]["columns"]["reward_ctrl"]
+        assert values.dtype == np.float32 and not values.any() and present == [True] * K  # Reacher-v5's type
     finally:
         commands.close()
         for w in commands.worlds:
@@ -134,5 +135,28 @@ def test_worlds_with_delays_step_one_by_one(delays) -> None:
     try:
         assert commands.stepper is None
     finally:
+        for env in envs:
+            env.close()
+
+
+def test_batched_observations_are_checked_against_the_space() -> None:
+    """The batched path checks what post_steps returns, as finish_tick does per world."""
+    from remoteenv.sim.obs_check import ObservationError
+
+    class WrongDtype(Reacher):  # type: ignore[misc,valid-type]
+        @classmethod
+        def post_steps(cls, envs, actions):
+            result = super().post_steps(envs, actions)
+            result.obs = result.obs.astype(np.float32)
+            return result
+
+    envs = [WrongDtype() for _ in range(2)]
+    commands = BatchCommands(LockStepping(envs).worlds, envs[0].action_space, 0)
+    try:
+        commands.reset_batch({"worlds": [0, 1]}, None, None)
+        with pytest.raises(ObservationError, match="post_steps"):
+            commands.step_batch({"ops": [0, 0], "actions": np.zeros((2, 2), np.float32)}, None, None)
+    finally:
+        commands.close()
         for env in envs:
             env.close()
