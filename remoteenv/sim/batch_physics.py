@@ -46,15 +46,15 @@ def default_threads(num_worlds: int) -> int:
     """Physics threads for a process hosting ``num_worlds`` worlds: the
     environment variable :data:`THREADS_ENV` if set, else 1.
 
-    One by default because that measured fastest where it matters: the
-    default layout already runs at least one sim process per CPU once N is
-    large, and on a loaded 2-core host (load average 7) a second thread per
-    process cut Reacher's batched steps/s by a third (N = 64, K = 32:
-    20.5k with one thread, 13.2k with two; N = 16, K = 8: 5.2k and 3.2k;
-    medians of 5 alternating rounds, docs/performance.md). Set it to the
-    CPUs a process may use when one sim process hosts many worlds on an
-    otherwise idle machine (e.g. a remote host serving one agent), capped at
-    one thread per :data:`MIN_WORLDS_PER_THREAD` worlds.
+    One by default because that measured fastest: the default layout
+    already runs at least one sim process per CPU once N is large. On the
+    2-core reference machine, quiet, N = 64 stepped at 58.9k steps/s with
+    K = 32 and one thread against 52.7k with K = 64 and two; on the same
+    machine loaded (load average 7) a second thread per process cost a third
+    (docs/performance.md). Set it to the CPUs a process may use when one
+    sim process hosts many worlds on an otherwise idle machine (e.g. a
+    remote host serving one agent); it is capped at one thread per
+    :data:`MIN_WORLDS_PER_THREAD` worlds.
     """
     fixed = os.environ.get(THREADS_ENV)
     if not fixed:
