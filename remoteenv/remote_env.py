@@ -24,18 +24,18 @@ from remoteenv.agent.forwarding import SceneReach
 from remoteenv.agent.latency import LatencyStats
 from remoteenv.agent.pausing import Pausable, Pauser
 from remoteenv.agent.pickling import RebuildOnUnpickle, remember_init_args
-from remoteenv.agent.restart import RestartBudget, restarted_info
+from remoteenv.agent.restart import restarted_info
 from remoteenv.agent.session import SimSession, choose_group, scene_label
+from remoteenv.agent.session_attributes import SessionAttributes
 from remoteenv.agent.sim_group import LaunchSpec, SimGroup
 from remoteenv.wire.actions import check_action
 from remoteenv.wire.delays import DelaySpec
-from remoteenv.wire.handshake import Handshake
 from remoteenv.wire.scalar_types import restore_scalars
 
 __all__ = ["OpenAIRemoteEnv", "check_action"]
 
 
-class OpenAIRemoteEnv(Pausable, RebuildOnUnpickle, gym.Env):
+class OpenAIRemoteEnv(SessionAttributes, Pausable, RebuildOnUnpickle, gym.Env):
     """A Gymnasium env served by a sim process that this env launches.
 
     Usually created with ``gymnasium.make("remoteenv/CartPole-v0", ...)``;
@@ -206,30 +206,10 @@ class OpenAIRemoteEnv(Pausable, RebuildOnUnpickle, gym.Env):
     # ------------------------------------------------------------ state
 
     @property
-    def handshake(self) -> Handshake:
-        """The sim's handshake (the latest, after a restart); ``hs["key"]`` reads the raw reply."""
-        return self._session.handshake
-
-    @property
-    def restarts(self) -> RestartBudget:
-        """The :class:`~remoteenv.agent.restart.RestartBudget` (``.count`` restarts so far)."""
-        return self._session.restarts
-
-    @property
-    def call_timeouts(self) -> dict[str, float | None]:
-        """Per-command timeouts (seconds) overriding ``timeout``; may be edited."""
-        return self._session.call_timeouts
-
-    @property
     def pid(self) -> int | None:
         """Process id of the sim process (None once closed)."""
         pids = self._session.pids
         return pids[0] if pids else None
-
-    @property
-    def launcher(self) -> SimGroup | None:
-        """The group of the sim (None once closed)."""
-        return None if self._session.closed else self._session.group
 
     @property
     def _conn(self) -> Any:

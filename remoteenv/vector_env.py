@@ -37,8 +37,9 @@ from remoteenv.agent.latency import LatencyStats
 from remoteenv.agent.pausing import Pausable, Pauser
 from remoteenv.agent.pickling import RebuildOnUnpickle, remember_init_args
 from remoteenv.agent.reset_args import is_int_seed, split_reset_mask, world_seeds
-from remoteenv.agent.restart import RestartBudget, restarted_info
+from remoteenv.agent.restart import restarted_info
 from remoteenv.agent.session import SimSession, choose_group, scene_label
+from remoteenv.agent.session_attributes import SessionAttributes
 from remoteenv.agent.sim_group import LaunchSpec, SimGroup
 from remoteenv.agent.vector_async import AsyncWorlds, assemble_chunks
 from remoteenv.agent.vector_layout import check_sims, default_envs_per_process
@@ -50,7 +51,7 @@ from remoteenv.wire.delays import DelaySpec
 from remoteenv.wire.handshake import Handshake
 
 
-class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
+class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
     """``num_envs`` worlds of one scene in sim processes, with Gymnasium 1.x vector semantics.
 
     Usually created with ``gymnasium.make_vec("remoteenv/Reacher-v0",
@@ -273,29 +274,9 @@ class RemoteVectorEnv(VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
     # ------------------------------------------------------------ state
 
     @property
-    def handshake(self) -> Handshake:
-        """The handshake of the first sim process; ``hs["key"]`` reads the raw reply."""
-        return self._session.handshake
-
-    @property
-    def restarts(self) -> RestartBudget:
-        """The :class:`~remoteenv.agent.restart.RestartBudget` (``.count`` restarts so far)."""
-        return self._session.restarts
-
-    @property
-    def call_timeouts(self) -> dict[str, float | None]:
-        """Per-command timeouts (seconds) overriding ``timeout``; may be edited."""
-        return self._session.call_timeouts
-
-    @property
     def pids(self) -> list[int | None]:
         """Process ids of the sim processes (empty once closed)."""
         return self._session.pids
-
-    @property
-    def launcher(self) -> SimGroup | None:
-        """The group of the sims (None once closed)."""
-        return None if self._session.closed else self._session.group
 
     # ------------------------------------------------------------ gym API
 

@@ -19,20 +19,18 @@ from __future__ import annotations
 import select
 import time
 import traceback
-from collections.abc import Sequence
 from typing import Any
 
 import zmq
 
 from remoteenv.sim.attributes import AttributeCommands
 from remoteenv.sim.base_env import BaseEnv
-from remoteenv.sim.batch import BatchCommands
 from remoteenv.sim.channels import Channel, Outgoing, PipeChannel, ZmqChannel
 from remoteenv.sim.checks import RequestError
+from remoteenv.sim.client_keys import start_client_key_check
 from remoteenv.sim.commands import Commands, Handler
 from remoteenv.sim.lifecycle import exit_on_sigterm, remove_ipc_file, write_ready_file
 from remoteenv.sim.limits import configure_router, raise_fd_limit
-from remoteenv.sim.lock_step import LockStepping
 from remoteenv.sim.orphan import (
     CHECK_INTERVAL_S,
     ParentWatch,
@@ -41,8 +39,8 @@ from remoteenv.sim.orphan import (
     remove_private_files,
     start_guard,
 )
-from remoteenv.sim.real_time import Clock, RealTimeStepping
-from remoteenv.sim.stepping import Stepping
+from remoteenv.sim.real_time import Clock
+from remoteenv.sim.stepping_modes import stepping_and_commands
 from remoteenv.wire import protocol
 from remoteenv.wire.addresses import is_loopback
 from remoteenv.wire.delays import DelaySpec
@@ -128,7 +126,7 @@ class RemoteControlledAgent:
         self.orphaned = False
         self._pipe_ended = False
         self._pipe = PipeChannel(pipe_fd) if pipe_fd is not None else None
-        self.stepping, mode_commands = _stepping_and_commands(
+        self.stepping, mode_commands = stepping_and_commands(
             envs,
             instance,
             real_time=real_time,
@@ -151,7 +149,7 @@ class RemoteControlledAgent:
         configure_router(self.socket)
         if curve_secret_key is not None:
             if curve_client_keys is not None:
-                self._authenticator = _start_client_key_check(self._ctx, curve_client_keys)
+                self._authenticator = start_client_key_check(self._ctx, curve_client_keys)
             self.socket.curve_server = True
             self.socket.curve_secretkey = curve_secret_key
         elif not is_loopback(address):
@@ -375,53 +373,6 @@ class RemoteControlledAgent:
         if self._authenticator is not None:
             self._authenticator.stop()
         remove_ipc_file(self.endpoint)
-
-
-def _stepping_and_commands(
-    envs: Sequence[BaseEnv],
-    instance: int,
-    *,
-    real_time: bool,
-    real_time_factor: float,
-    action_delay: DelaySpec | int,
-    obs_delay: DelaySpec | int,
-    link_delay: DelaySpec | float | None,
-    seed: int | None,
-    clock: Clock,
-) -> tuple[Stepping, dict[str, Handler]]:
-    """The stepping of the requested mode and the commands only that mode answers:
-    ``timing``, ``pause`` and ``resume`` in real time, ``reset_batch`` and
-    ``step_batch`` in lock-step."""
-    if real_time:
-        for name, value in (("action_delay", action_delay), ("obs_delay", obs_delay)):
-            if isinstance(value, DelaySpec) and not value.is_zero or not isinstance(value, DelaySpec) and value:
-                raise ValueError(
-                    f"{name} is lock-step's reproducible twin of real_time; use one or the other "
-                    "(an emulated link in real time is link_delay)"
-                )
-        real = RealTimeStepping(envs, real_time_factor=real_time_factor, clock=clock, link_delay=link_delay, seed=seed)
-        return real, {"timing": real.timing, "pause": real.pause, "resume": real.resume}
-    if link_delay:
-        raise ValueError("link_delay emulates a network in real time; in lock-step use action_delay/obs_delay")
-    lock = LockStepping(envs, action_delay=action_delay, obs_delay=obs_delay, seed=seed)
-    batch = BatchCommands(lock.worlds, envs[0].action_space, instance)
-    return lock, {"reset_batch": batch.reset_batch, "step_batch": batch.step_batch}
-
-
-def _start_client_key_check(ctx: zmq.Context[Any], client_keys: list[bytes]) -> Any:
-    """Run a ZAP handler thread that admits only CURVE clients whose public key is listed."""
-    from zmq.auth.thread import ThreadAuthenticator
-
-    allowed = frozenset(bytes(k).strip() for k in client_keys)
-
-    class _Allowed:
-        def callback(self, domain: str, key: bytes) -> bool:
-            return bytes(key) in allowed
-
-    auth = ThreadAuthenticator(ctx)
-    auth.start()
-    auth.configure_curve_callback("*", credentials_provider=_Allowed())
-    return auth
 
 
 __all__ = ["DEADLINE_SPIN_S", "SIM_SPIN_S", "RemoteControlledAgent"]
