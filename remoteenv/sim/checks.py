@@ -91,8 +91,8 @@ def require_driver(owner: Any, sender: Any, world: int, instance: int, cmd: str)
         raise RequestError(
             STATE,
             f"'{cmd}' refused: world {world} of real-time sim instance {instance} is driven by another "
-            "connection (the launching agent, or the one that reset it last); only that one may step "
-            "or reset it. Read-only commands (handshake, render, timing) are open to all.",
+            "connection (the launching agent, or the one that reset it last); only that one may step, "
+            "reset, pause or resume it. Read-only commands (handshake, render, timing) are open to all.",
         )
 
 

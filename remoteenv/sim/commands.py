@@ -106,6 +106,18 @@ class Commands:
             "commands": list(self.advertised),
         }
 
+    def driven_only(self, cmd: str, handler: Handler) -> Handler:
+        """``handler`` for a command that acts on every world (``pause``, ``resume``): in
+        real time it is refused to a connection other than the one driving them."""
+
+        def guarded(msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
+            if self._exclusive:
+                for world, owner in enumerate(self._drivers):
+                    require_driver(owner, (channel, reply_to), world, self.instance, cmd)
+            return handler(msg, channel, reply_to)
+
+        return guarded
+
     def reset(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
         world = world_index(msg, len(self.envs))
         seed = seed_value(msg.get("seed"))

@@ -141,6 +141,9 @@ class RemoteControlledAgent:
         self._handlers: dict[str, Handler] = common.handlers()
         self._handlers.update(AttributeCommands(envs, instance).handlers())
         self._handlers.update(mode_commands)
+        for name in ("pause", "resume"):  # they stop or start every world's clock
+            if name in self._handlers:
+                self._handlers[name] = common.driven_only(name, self._handlers[name])
         common.advertised = sorted(self._handlers)
         self._authenticator: Any = None
         raise_fd_limit()

@@ -74,3 +74,22 @@ def test_without_a_launching_pipe_the_last_resetter_drives():
             other.close()
     finally:
         env.close()
+
+
+def test_a_second_client_cannot_pause_or_resume_the_drivers_clock():
+    env = OpenAIRemoteEnv(scene_path("cartpole"), real_time=True, timeout=10.0, startup_timeout=120.0)
+    try:
+        env.reset(seed=0)
+        other = ZmqConnection(env.launcher.sims[0].endpoint, timeout=10.0)
+        try:
+            for cmd in ("pause", "resume"):
+                with pytest.raises(StateError, match="driven by another connection"):
+                    other.request(cmd)
+        finally:
+            other.close()
+        env.unwrapped.pause()  # the driver may
+        assert env.unwrapped.is_paused
+        env.unwrapped.resume()
+        env.step(env.action_space.sample())
+    finally:
+        env.close()
