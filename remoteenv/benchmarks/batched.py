@@ -1,6 +1,7 @@
 """``python -m remoteenv bench --batched``: batched stepping next to its anchors.
 
-Agent side; it launches sims. Reacher at N = 16 and 64 (``--batched-n``):
+Agent side; it launches sims. Reacher at N = 16 and 64 (``--batched-n``), and
+the hexapod (the heavy, contact-rich scene) next to its own physics limit:
 the physics limit (raw ``mj_step``, one thread per CPU,
 :class:`~remoteenv.benchmarks.anchors.PhysicsLimit`; and on one thread), EnvPool's
 ``Reacher-v5`` (skipped with a note when EnvPool is not installed),
@@ -34,6 +35,8 @@ from remoteenv.benchmarks.anchors import CpuHog, PhysicsLimit, cpu_seconds, make
 
 REMOTE_ID = "remoteenv/Reacher-v0"
 GYM_ID = "Reacher-v5"
+#: The heavy, contact-rich case: 18 servos, six feet on a floor (no in-process twin to compare).
+HEAVY_ID = "remoteenv/Hexapod-v0"
 #: (ratio name, numerator contender, denominator contender, N, target)
 TARGETS = [
     ("batched / EnvPool", "remoteenv batched", "EnvPool", 64, 1.0),
@@ -44,6 +47,8 @@ TARGETS = [
     ("batched / EnvPool", "remoteenv batched", "EnvPool", 16, None),
     ("EnvPool / physics limit", "EnvPool", "physics limit", 64, None),
     ("physics limit / physics, 1 thread", "physics limit", "physics, 1 thread", 64, None),
+    ("hexapod batched / hexapod physics limit", "hexapod batched", "hexapod physics limit", 16, None),
+    ("hexapod batched / hexapod physics limit", "hexapod batched", "hexapod physics limit", 64, None),
 ]
 
 
@@ -57,6 +62,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="instead: time each stage of one batched step in this process (no sims; see step_profile)",
     )
+    g.add_argument("--no-heavy", action="store_true", help="skip the hexapod rows (the heavy, contact-rich scene)")
     g.add_argument(
         "--hog", type=int, nargs="?", const=1, default=0, help="run this many CPU hogs beside it (default 1 if given)"
     )
@@ -96,14 +102,15 @@ class Contender:
             close()
 
 
-def _box_actions(n: int, count: int = 64) -> list[np.ndarray]:
+def _box_actions(n: int, count: int = 64, dim: int = 2) -> list[np.ndarray]:
     rng = np.random.default_rng(0)
-    return [rng.uniform(-1, 1, size=(n, 2)).astype(np.float32) for _ in range(count)]
+    return [rng.uniform(-1, 1, size=(n, dim)).astype(np.float32) for _ in range(count)]
 
 
-def _vector(name: str, n: int, env: Any, seeded: bool = False) -> Contender:
-    """``env.step`` over N worlds; ``seeded``: the env took its seed when made (EnvPool)."""
-    actions = _box_actions(n)
+def _vector(name: str, n: int, env: Any, seeded: bool = False, dim: int = 2) -> Contender:
+    """``env.step`` over N worlds with ``dim`` action entries each; ``seeded``: the env
+    took its seed when made (EnvPool)."""
+    actions = _box_actions(n, dim=dim)
     env.reset() if seeded else env.reset(seed=0)
     return Contender(name, n, env, lambda i: env.step(actions[i & 63]), n)
 
@@ -142,8 +149,9 @@ def _physics_tick(physics: PhysicsLimit) -> Callable[[int], None]:
     return lambda i: physics.step()
 
 
-def build(ns: list[int], log: Callable[[str], None]) -> list[Contender]:
-    """Every contender, ready to time (EnvPool skipped with a note if it is missing)."""
+def build(ns: list[int], log: Callable[[str], None], heavy: bool = True) -> list[Contender]:
+    """Every contender, ready to time (EnvPool skipped with a note if it is missing;
+    ``heavy``: also the hexapod's physics limit and batched remote env)."""
     import remoteenv
 
     model = os.path.join(os.path.dirname(remoteenv.scene_path("reacher")), "reacher.xml")
@@ -161,6 +169,13 @@ def build(ns: list[int], log: Callable[[str], None]) -> list[Contender]:
         if n >= 2:
             out.append(_send_recv(n))
         out.append(_vector("SyncVectorEnv", n, gym.make_vec(GYM_ID, n, vectorization_mode="sync")))
+    if heavy:
+        hexapod = os.path.join(os.path.dirname(remoteenv.scene_path("hexapod")), "hexapod.xml")
+        for n in ns:
+            physics = PhysicsLimit(hexapod, n, frame_skip=4)
+            out.append(Contender("hexapod physics limit", n, physics, _physics_tick(physics), n))
+            env = gym.make_vec(HEAVY_ID, n, vectorization_mode="vector_entry_point")
+            out.append(_vector("hexapod batched", n, env, dim=18))
     out.append(_single("remoteenv single", gym.make(REMOTE_ID)))
     out.append(_vector("AsyncVectorEnv", 1, gym.make_vec(GYM_ID, 1, vectorization_mode="async")))
     return out
@@ -170,9 +185,9 @@ def build(ns: list[int], log: Callable[[str], None]) -> list[Contender]:
 
 
 def measure(
-    ns: list[int], duration: float, rounds: int, hog: int, log: Callable[[str], None] = print
+    ns: list[int], duration: float, rounds: int, hog: int, log: Callable[[str], None] = print, heavy: bool = True
 ) -> dict[str, Any]:
-    contenders = build(ns, log)
+    contenders = build(ns, log, heavy)
     loads = []
     try:
         with CpuHog(hog) as hogs:
@@ -281,7 +296,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     to_stdout = args.json == "-"
     log = (lambda s: print(s, file=sys.stderr)) if to_stdout else print
-    result = measure(ns, args.batched_duration, args.rounds, args.hog, log=log)
+    result = measure(ns, args.batched_duration, args.rounds, args.hog, log=log, heavy=not args.no_heavy)
     if to_stdout:
         json.dump(result, sys.stdout, indent=2)
         print()
