@@ -181,6 +181,12 @@ def pause(p: Probe) -> str:
         fail_unless(ok, f"{cmd} sim_time must be a list of {hs.num_worlds} numbers, got {short_repr(times)}")
         return times  # type: ignore[return-value]
 
+    # In real time only the connection driving the worlds may pause them: take them over.
+    for world in range(hs.num_worlds):
+        reply = p.call("reset", world=world, seed=0, options=None)
+        if not reply["ok"] and reply["error"].get("kind") == STATE:
+            raise CheckSkipped(f"world {world} is driven by another connection: {reply['error'].get('message')}")
+        fail_unless(reply["ok"], f"reset of world {world} failed: {short_repr(reply.get('error'))}")
     paused = sim_times(p.ok("pause"), "pause")
     time.sleep(0.05)
     again = sim_times(p.ok("pause"), "pause")

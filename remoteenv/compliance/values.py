@@ -141,6 +141,13 @@ def infos_problem(infos: Any, n: int) -> str | None:
         if not (isinstance(column, list) and len(column) == 2):
             return f"info column {short_repr(key)} must be [values, present], got {short_repr(column)}"
         values, present = column
+        if isinstance(values, np.ndarray):  # the spec also allows an array of a numpy dtype
+            if values.shape != (n,) or values.dtype.kind not in "biuf":
+                return (
+                    f"info column {short_repr(key)}: values must be a list of {n} or a numeric array of shape "
+                    f"({n},), got {short_repr(values)}"
+                )
+            values = values.tolist()
         if not (isinstance(values, list) and len(values) == n):
             return f"info column {short_repr(key)}: values must be a list of {n}, got {short_repr(values)}"
         if not (isinstance(present, list) and len(present) == n and all(isinstance(p, bool) for p in present)):

@@ -53,9 +53,9 @@ def _running(cmd: list[str], out: Path) -> Iterator[subprocess.Popen]:
         proc.stderr.close()  # type: ignore[union-attr]
 
 
-def _launch(tmp_path: Path, *args: str) -> contextlib.AbstractContextManager:
+def _launch(tmp_path: Path, *args: str, scene: str = "cartpole") -> contextlib.AbstractContextManager:
     out = tmp_path / "launch.json"
-    return _running([sys.executable, "-m", "remoteenv", "launch", "cartpole", "--out", str(out), *args], out)
+    return _running([sys.executable, "-m", "remoteenv", "launch", scene, "--out", str(out), *args], out)
 
 
 def _independent(tmp_path: Path, *args: str) -> contextlib.AbstractContextManager:
@@ -97,6 +97,17 @@ class TestReferenceLockStep(ComplianceTests):
     def compliance_launch_info(cls, tmp_path_factory):
         tmp = tmp_path_factory.mktemp("lock_step")
         with _launch(tmp, "--worlds", "2", "--transport", "tcp", "--curve"):
+            yield tmp / "launch.json"
+
+
+class TestReferenceReacher(ComplianceTests):
+    """Reacher's info (reward_dist, reward_ctrl: numpy scalars) travels as typed info columns."""
+
+    @pytest.fixture(scope="class")
+    @classmethod
+    def compliance_launch_info(cls, tmp_path_factory):
+        tmp = tmp_path_factory.mktemp("reacher")
+        with _launch(tmp, "--worlds", "2", scene="reacher"):
             yield tmp / "launch.json"
 
 
