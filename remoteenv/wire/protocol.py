@@ -181,45 +181,16 @@ see :mod:`remoteenv.wire.spaces`.
 
 from __future__ import annotations
 
-import math
 import struct
 from typing import Any
 
 import msgpack
-import numpy as np
 
+from remoteenv.wire.arrays import ARRAY_DTYPES, _default, _ext_hook, wire_dtype
 from remoteenv.wire.errors import ProtocolError, short_repr
+from remoteenv.wire.frame_limits import MAX_ERROR_CHARS, MAX_MESSAGE_BYTES, MAX_REQUEST_ITEMS, FrameTooLarge
 
 PROTOCOL_VERSION = 1
-
-#: Largest frame either side sends or accepts (bytes), on ZeroMQ and on the pipe.
-MAX_MESSAGE_BYTES = 32 * 1024 * 1024
-#: Most entries of one msgpack array or map inside a request.
-MAX_REQUEST_ITEMS = 1 << 20
-#: Longest ``message`` of an error reply (characters); the traceback is capped alike.
-MAX_ERROR_CHARS = 4000
-
-_EXT_NDARRAY = 1
-
-#: The only dtypes that may appear on the wire.
-ARRAY_DTYPES = frozenset(
-    np.dtype(t).newbyteorder("<").str if np.dtype(t).itemsize > 1 else np.dtype(t).str
-    for t in (
-        np.bool_,
-        np.int8,
-        np.int16,
-        np.int32,
-        np.int64,
-        np.uint8,
-        np.uint16,
-        np.uint32,
-        np.uint64,
-        np.float16,
-        np.float32,
-        np.float64,
-    )
-)
-_MAX_NDIM = 32
 
 
 #: ``step_batch`` operations, one per world (see the spec above).
@@ -232,92 +203,6 @@ OP_STEP_AUTORESET = 2
 #: Step, then reset regardless (the agent's time limit truncates this step).
 OP_STEP_RESET = 3
 OPS = (OP_STEP, OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET)
-
-
-def wire_dtype(dtype: np.dtype) -> str:
-    d = dtype.newbyteorder("<") if dtype.itemsize > 1 else dtype
-    s = d.str
-    if s not in ARRAY_DTYPES:
-        raise TypeError(f"numpy dtype {dtype} cannot be sent; allowed: {sorted(ARRAY_DTYPES)}")
-    return s
-
-
-#: numpy dtype for each allowed wire dtype string (native byte order on decode).
-_DTYPES = {t: np.dtype(t) for t in ARRAY_DTYPES}
-_SHAPE_FORMATS = [struct.Struct(f"<{n}Q") for n in range(_MAX_NDIM + 1)]
-#: Encoded array headers by (dtype string, shape); arrays of one shape recur every step.
-_HEADERS: dict[tuple[str, tuple[int, ...]], bytes] = {}
-
-
-def _array_header(dtype: str, shape: tuple[int, ...]) -> bytes:
-    key = (dtype, shape)
-    head = _HEADERS.get(key)
-    if head is None:
-        if len(shape) > _MAX_NDIM:
-            raise TypeError(f"arrays of more than {_MAX_NDIM} dimensions cannot be sent")
-        name = dtype.encode("ascii")
-        head = bytes([len(name)]) + name + bytes([len(shape)]) + _SHAPE_FORMATS[len(shape)].pack(*shape)
-        if len(_HEADERS) < 4096:
-            _HEADERS[key] = head
-    return head
-
-
-def _default(obj: Any) -> Any:
-    if isinstance(obj, np.ndarray):
-        if obj.nbytes > MAX_MESSAGE_BYTES:  # refuse before copying it
-            raise FrameTooLarge(obj.nbytes, "a numpy array")
-        dtype = obj.dtype.str
-        if dtype not in _DTYPES or not obj.flags.c_contiguous:
-            dtype = wire_dtype(obj.dtype)
-            obj = np.asarray(obj, dtype=_DTYPES[dtype], order="C")  # keeps 0-d arrays 0-d
-        return msgpack.ExtType(_EXT_NDARRAY, _array_header(dtype, obj.shape) + obj.tobytes())
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.floating):
-        return float(obj)
-    if isinstance(obj, (tuple, set, frozenset)):
-        return list(obj)
-    if isinstance(obj, int):  # msgpack hands over the ints it cannot hold
-        raise ValueError(f"integer {short_repr(obj)} is outside the wire's range [-2**63, 2**64)")
-    raise TypeError(f"cannot send a {type(obj).__name__} on the wire: {short_repr(obj)}")
-
-
-def _ext_hook(code: int, data: bytes) -> Any:
-    if code != _EXT_NDARRAY:
-        raise ProtocolError(f"unknown msgpack extension type {code}")
-    try:
-        n = data[0]
-        dtype = data[1 : 1 + n].decode("ascii")
-        ndim = data[1 + n]
-        offset = 2 + n
-        shape = _SHAPE_FORMATS[ndim].unpack_from(data, offset)
-    except (IndexError, UnicodeDecodeError, struct.error) as exc:
-        raise ProtocolError(f"malformed array header: {exc}") from None
-    dt = _DTYPES.get(dtype)
-    if dt is None:
-        raise ProtocolError(f"array dtype {dtype!r} is not allowed")
-    offset += 8 * ndim
-    count = math.prod(shape)
-    if count * dt.itemsize != len(data) - offset:
-        raise ProtocolError(
-            f"array of dtype {dtype} and shape {list(shape)} needs {count * dt.itemsize} "
-            f"bytes, got {len(data) - offset}"
-        )
-    # frombuffer aliases the frame and is read-only: copy into a fresh array.
-    return np.frombuffer(data, dt, count, offset).reshape(shape).copy()
-
-
-class FrameTooLarge(ProtocolError):
-    """A frame (or a value in it) is above :data:`MAX_MESSAGE_BYTES`; nothing was sent."""
-
-    def __init__(self, size: int, what: str = "a frame") -> None:
-        super().__init__(
-            f"{what} of {size} bytes is above the wire's frame limit of {MAX_MESSAGE_BYTES} bytes "
-            f"({MAX_MESSAGE_BYTES >> 20} MiB, remoteenv.wire.protocol.MAX_MESSAGE_BYTES)"
-        )
-        self.size = size
 
 
 def pack(obj: Any) -> bytes:

@@ -37,7 +37,7 @@ import numpy as np
 import zmq
 
 PROTOCOL_VERSION = 1
-MAX_MESSAGE_BYTES = 256 * 1024 * 1024
+MAX_MESSAGE_BYTES = 32 * 1024 * 1024
 EXT_ARRAY = 1
 MAX_NDIM = 32
 WIRE_DTYPES = {"|b1", "|i1", "<i2", "<i4", "<i8", "|u1", "<u2", "<u4", "<u8", "<f2", "<f4", "<f8"}
