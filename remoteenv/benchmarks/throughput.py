@@ -14,18 +14,15 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import sys
-import tempfile
-import time
 from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
-import msgpack
-import zmq
 
 from remoteenv import SHIPPED_SCENES
+from remoteenv.benchmarks.timing import timed as _timed
+from remoteenv.benchmarks.transport_floor import pipe_floor, zmq_floor
 
 #: remoteenv scene -> (remoteenv id, Gymnasium id to compare with)
 SCENES = {
@@ -70,22 +67,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 # ---------------------------------------------------------------- timing
 
 
-def _timed(step: Callable[[int], None], duration: float, warmup: int = 50) -> float:
-    """Calls per second of ``step(i)`` over ``duration`` seconds, after ``warmup`` calls."""
-    for i in range(warmup):
-        step(i)
-    calls = 0
-    start = time.perf_counter()
-    end = start + duration
-    now = start
-    while now < end:
-        for _ in range(20):
-            step(calls)
-            calls += 1
-        now = time.perf_counter()
-    return calls / (now - start)
-
-
 def _single_rate(env: gym.Env, duration: float, seed: int = 0) -> float:
     env.action_space.seed(seed)
     actions = [env.action_space.sample() for _ in range(256)]
@@ -120,116 +101,6 @@ def _measure(make: Callable[[], Any], rate: Callable[[Any, float], float], durat
         return rate(env, duration)
     finally:
         env.close()
-
-
-# ---------------------------------------------------------------- raw floor
-
-
-def _echo_server(address: str) -> None:
-    """Child process of :func:`zmq_floor`: answer each msgpack request with a step-sized reply."""
-    sock: zmq.Socket[bytes] = zmq.Context.instance().socket(zmq.ROUTER)
-    sock.bind(address)
-    reply_body = {
-        "obs": b"\0" * 80,
-        "reward": 0.5,
-        "terminated": False,
-        "truncated": False,
-        "info": {"reward_dist": 0.1, "reward_ctrl": 0.2},
-    }
-    while True:
-        ident, frame = sock.recv_multipart()
-        msg = msgpack.unpackb(frame)
-        if msg["cmd"] == "close":
-            sock.send_multipart([ident, frame])
-            break
-        sock.send_multipart([ident, msgpack.packb({"seq": msg["seq"], "ok": True, **reply_body})])
-    sock.close(linger=0)
-
-
-def zmq_floor(duration: float) -> float:
-    """Round trips per second of bare pyzmq DEALER/ROUTER + msgpack over ipc, with
-    messages the size of a Reacher step: what any request/reply env costs at least."""
-    workdir = tempfile.mkdtemp(prefix="remoteenv-bench-")
-    address = f"ipc://{os.path.join(workdir, 'echo.sock')}"
-    proc = subprocess.Popen(
-        [sys.executable, "-c", f"from remoteenv.benchmarks.throughput import _echo_server; _echo_server({address!r})"]
-    )
-    sock: zmq.Socket[bytes] = zmq.Context.instance().socket(zmq.DEALER)
-    sock.setsockopt(zmq.LINGER, 0)
-    sock.connect(address)
-    try:
-
-        def step(i: int) -> None:
-            sock.send(msgpack.packb({"seq": i, "cmd": "step", "action": b"\0" * 8}))
-            msgpack.unpackb(sock.recv())
-
-        step(0)  # waits for the server to bind
-        rate = _timed(step, duration)
-        sock.send(msgpack.packb({"seq": -1, "cmd": "close"}))
-        sock.recv()
-        return rate
-    finally:
-        sock.close(linger=0)
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        for f in os.listdir(workdir):
-            os.unlink(os.path.join(workdir, f))
-        os.rmdir(workdir)
-
-
-def _pipe_echo_server(fd: int) -> None:
-    """Child process of :func:`pipe_floor`: the same echo over a socketpair, blocking reads."""
-    import socket
-
-    sock = socket.socket(fileno=fd)
-    reply_body = {
-        "obs": b"\0" * 80,
-        "reward": 0.5,
-        "terminated": False,
-        "truncated": False,
-        "info": {"reward_dist": 0.1, "reward_ctrl": 0.2},
-    }
-    while True:
-        frame = sock.recv(65536)
-        if not frame:
-            break
-        msg = msgpack.unpackb(frame)
-        sock.sendall(msgpack.packb({"seq": msg["seq"], "ok": True, **reply_body}))
-    sock.close()
-
-
-def pipe_floor(duration: float) -> float:
-    """Round trips per second of a bare Unix socketpair + msgpack with Reacher-sized
-    messages and plain blocking reads (no busy-waiting): the floor of the local pipe."""
-    import socket
-
-    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            f"from remoteenv.benchmarks.throughput import _pipe_echo_server; _pipe_echo_server({theirs.fileno()})",
-        ],
-        pass_fds=(theirs.fileno(),),
-    )
-    theirs.close()
-    try:
-
-        def step(i: int) -> None:
-            ours.sendall(msgpack.packb({"seq": i, "cmd": "step", "action": b"\0" * 8}))
-            msgpack.unpackb(ours.recv(65536))
-
-        return _timed(step, duration)
-    finally:
-        ours.close()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 # ---------------------------------------------------------------- run
