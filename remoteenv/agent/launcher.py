@@ -183,12 +183,7 @@ class Launcher:
         """The layout of the started sims; None before :meth:`start`."""
         if self.spec is None:
             return None
-        return SimLayout(
-            self.spec.num_instances,
-            self.spec.worlds_per_instance,
-            self.spec.real_time,
-            source=f"the launcher of {os.path.basename(self.spec.scene)}",
-        )
+        return self.spec.layout(f"the launcher of {os.path.basename(self.spec.scene)}")
 
     def connect(self, index: int, timeout: float | None) -> SimConnection:
         """A connection to sim ``index``: its local pipe if it has one, else ZeroMQ."""

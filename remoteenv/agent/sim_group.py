@@ -102,6 +102,10 @@ class LaunchSpec:
         their wire form in JSON); empty without delays."""
         return delay_arguments(self.action_delay, self.obs_delay, self.link_delay)
 
+    def layout(self, source: str) -> SimLayout:
+        """The layout of the sims this spec starts; ``source`` names who started them, for messages."""
+        return SimLayout(self.num_instances, self.worlds_per_instance, self.real_time, source=source)
+
     def instance_seed(self, instance: int) -> int | None:
         """The seed of sim ``instance`` (of its world 0), or None."""
         return None if self.seed is None else self.seed + instance * self.worlds_per_instance

@@ -192,12 +192,7 @@ class RayLauncher:
         """The layout of the started sims; None before :meth:`start`."""
         if self.spec is None:
             return None
-        return SimLayout(
-            self.spec.num_instances,
-            self.spec.worlds_per_instance,
-            self.spec.real_time,
-            source=f"the RayLauncher of {os.path.basename(self.spec.scene)}",
-        )
+        return self.spec.layout(f"the RayLauncher of {os.path.basename(self.spec.scene)}")
 
     def connect(self, index: int, timeout: float | None) -> SimConnection:
         """A CURVE-encrypted ZeroMQ connection to sim ``index``."""
