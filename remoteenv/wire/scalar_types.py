@@ -18,11 +18,21 @@ import numpy as np
 
 from remoteenv.wire.protocol import ARRAY_DTYPES
 
+#: The numpy scalar type of each wire dtype name.
+_SCALAR_TYPE = {name: np.dtype(name).type for name in ARRAY_DTYPES}
+#: Wire dtype name (or None) by numpy dtype, filled as dtypes are met: every step sees the same few.
+_NAMES: dict[np.dtype, str | None] = {}
+
 
 def _wire_name(value: Any) -> str | None:
     if isinstance(value, (np.integer, np.floating)):  # np.bool_ stays a plain bool, as before
-        name = value.dtype.newbyteorder("<").str if value.dtype.itemsize > 1 else value.dtype.str
-        return name if name in ARRAY_DTYPES else None
+        dtype = value.dtype
+        try:
+            return _NAMES[dtype]
+        except KeyError:
+            name = dtype.newbyteorder("<").str if dtype.itemsize > 1 else dtype.str
+            _NAMES[dtype] = name if name in ARRAY_DTYPES else None
+            return _NAMES[dtype]
     return None
 
 
@@ -52,8 +62,8 @@ def restore_info(info: Any, info_types: Any) -> Any:
     dtype}``, as in a ``"types"`` map's ``"info"``) back to numpy scalars, in place."""
     if isinstance(info, dict) and isinstance(info_types, dict):
         for key, name in info_types.items():
-            if name in ARRAY_DTYPES and _is_number(info.get(key)):
-                info[key] = np.dtype(name).type(info[key])
+            if name in _SCALAR_TYPE and _is_number(info.get(key)):
+                info[key] = _SCALAR_TYPE[name](info[key])
     return info
 
 
@@ -66,8 +76,8 @@ def restore_scalars(reply: dict[str, Any]) -> dict[str, Any]:
     if not isinstance(types, dict):
         return reply
     reward = types.get("reward")
-    if reward in ARRAY_DTYPES and _is_number(reply.get("reward")):
-        reply["reward"] = np.dtype(reward).type(reply["reward"])
+    if reward in _SCALAR_TYPE and _is_number(reply.get("reward")):
+        reply["reward"] = _SCALAR_TYPE[reward](reply["reward"])
     restore_info(reply.get("info"), types.get("info"))
     return reply
 
