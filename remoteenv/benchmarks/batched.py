@@ -19,11 +19,9 @@ batched step in this process. It measures and prints; it asserts nothing.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
-import sys
 import time
 from collections.abc import Callable
 from typing import Any
@@ -32,6 +30,7 @@ import gymnasium as gym
 import numpy as np
 
 from remoteenv.benchmarks.anchors import CpuHog, PhysicsLimit, cpu_seconds, make_envpool
+from remoteenv.benchmarks.report import emit, progress_log
 
 REMOTE_ID = "remoteenv/Reacher-v0"
 GYM_ID = "Reacher-v5"
@@ -294,17 +293,7 @@ def run(args: argparse.Namespace) -> int:
     if args.profile:
         print(format_profile(ns))
         return 0
-    to_stdout = args.json == "-"
-    log = (lambda s: print(s, file=sys.stderr)) if to_stdout else print
+    log = progress_log(args.json)
     result = measure(ns, args.batched_duration, args.rounds, args.hog, log=log, heavy=not args.no_heavy)
-    if to_stdout:
-        json.dump(result, sys.stdout, indent=2)
-        print()
-        return 0
-    print()
-    print(format_table(result))
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(result, f, indent=2)
-        print(f"\nwrote {args.json}")
+    emit(result, args.json, format_table)
     return 0

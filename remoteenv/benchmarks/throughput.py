@@ -11,7 +11,6 @@ another machine. It measures and prints; it asserts nothing.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -21,6 +20,7 @@ from typing import Any
 import gymnasium as gym
 
 from remoteenv import SHIPPED_SCENES
+from remoteenv.benchmarks.report import emit, progress_log
 from remoteenv.benchmarks.timing import timed as _timed
 from remoteenv.benchmarks.transport_floor import pipe_floor, zmq_floor
 
@@ -303,17 +303,6 @@ def run(args: argparse.Namespace) -> int:
     num_envs = _parse_ints(args.num_envs, "--num-envs")
     if args.duration <= 0:
         raise SystemExit(f"--duration must be > 0 seconds, got {args.duration}")
-    to_stdout = args.json == "-"
-    log = (lambda s: print(s, file=sys.stderr)) if to_stdout else print
-    result = measure(scenes, num_envs, args.duration, args.envs_per_process, log=log)
-    if to_stdout:
-        json.dump(result, sys.stdout, indent=2)
-        print()
-    else:
-        print()
-        print(format_table(result))
-        if args.json:
-            with open(args.json, "w") as f:
-                json.dump(result, f, indent=2)
-            print(f"\nwrote {args.json}")
+    result = measure(scenes, num_envs, args.duration, args.envs_per_process, log=progress_log(args.json))
+    emit(result, args.json, format_table)
     return 0

@@ -16,25 +16,27 @@ import zmq
 
 from remoteenv.benchmarks.timing import timed
 
+#: What each echo server answers: the size and shape of a Reacher step reply.
+_REPLY_BODY = {
+    "obs": b"\0" * 80,
+    "reward": 0.5,
+    "terminated": False,
+    "truncated": False,
+    "info": {"reward_dist": 0.1, "reward_ctrl": 0.2},
+}
+
 
 def _echo_server(address: str) -> None:
     """Child process of :func:`zmq_floor`: answer each msgpack request with a step-sized reply."""
     sock: zmq.Socket[bytes] = zmq.Context.instance().socket(zmq.ROUTER)
     sock.bind(address)
-    reply_body = {
-        "obs": b"\0" * 80,
-        "reward": 0.5,
-        "terminated": False,
-        "truncated": False,
-        "info": {"reward_dist": 0.1, "reward_ctrl": 0.2},
-    }
     while True:
         ident, frame = sock.recv_multipart()
         msg = msgpack.unpackb(frame)
         if msg["cmd"] == "close":
             sock.send_multipart([ident, frame])
             break
-        sock.send_multipart([ident, msgpack.packb({"seq": msg["seq"], "ok": True, **reply_body})])
+        sock.send_multipart([ident, msgpack.packb({"seq": msg["seq"], "ok": True, **_REPLY_BODY})])
     sock.close(linger=0)
 
 
@@ -81,19 +83,12 @@ def _pipe_echo_server(fd: int) -> None:
     import socket
 
     sock = socket.socket(fileno=fd)
-    reply_body = {
-        "obs": b"\0" * 80,
-        "reward": 0.5,
-        "terminated": False,
-        "truncated": False,
-        "info": {"reward_dist": 0.1, "reward_ctrl": 0.2},
-    }
     while True:
         frame = sock.recv(65536)
         if not frame:
             break
         msg = msgpack.unpackb(frame)
-        sock.sendall(msgpack.packb({"seq": msg["seq"], "ok": True, **reply_body}))
+        sock.sendall(msgpack.packb({"seq": msg["seq"], "ok": True, **_REPLY_BODY}))
     sock.close()
 
 
