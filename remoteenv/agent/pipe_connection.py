@@ -24,7 +24,6 @@ from remoteenv.wire.hot_wait import HotWait, yield_cpu
 #: How long (seconds) to wait for a sim that closed its pipe to be reaped, so
 #: that its exit code or signal can be reported.
 _EXIT_REPORT_S = 2.0
-_PIPE_READ_BYTES = 1 << 20
 #: Longest busy-wait (seconds) for a reply on the local pipe (see :mod:`remoteenv.wire.hot_wait`).
 AGENT_SPIN_S = 200e-6
 
@@ -77,12 +76,9 @@ class PipeConnection(SimConnection):
             self._check_alive("a reply", closed=True)
         if wait_s > 0 and not self._poll.poll(wait_s * 1000):
             return
-        try:
-            data = self.pipe.recv(_PIPE_READ_BYTES, socket.MSG_DONTWAIT)
-        except (BlockingIOError, InterruptedError):
+        data = self._decoder.recv_from(self.pipe)
+        if data is None:
             return
-        except OSError:
-            data = b""
         if not data:
             self._eof = True
             self._check_alive("a reply", closed=True)

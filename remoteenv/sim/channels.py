@@ -19,8 +19,6 @@ from remoteenv.wire import protocol
 from remoteenv.wire.errors import PROTOCOL
 from remoteenv.wire.hot_wait import yield_cpu
 
-_PIPE_READ_BYTES = 1 << 20
-
 
 class Channel(Protocol):
     """Where requests come from and their replies go."""
@@ -108,12 +106,9 @@ class PipeChannel:
     def receive_nowait(self) -> list[tuple[Any, bytes]]:
         if self.closed:
             return []
-        try:
-            data = self.sock.recv(_PIPE_READ_BYTES, socket.MSG_DONTWAIT)
-        except (BlockingIOError, InterruptedError):
+        data = self._decoder.recv_from(self.sock)
+        if data is None:
             return []
-        except OSError:
-            data = b""
         if not data:
             self.closed = True
             return []

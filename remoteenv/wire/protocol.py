@@ -181,6 +181,7 @@ see :mod:`remoteenv.wire.spaces`.
 
 from __future__ import annotations
 
+import socket
 import struct
 from typing import Any
 
@@ -253,6 +254,8 @@ def decode_request(frame: bytes) -> dict[str, Any]:
 
 
 _LENGTH = struct.Struct("<I")
+#: Bytes one read from a local pipe takes at most (a frame may span several reads).
+STREAM_READ_BYTES = 1 << 18
 
 
 def stream_frame(payload: bytes) -> bytes:
@@ -272,8 +275,26 @@ class StreamDecoder:
         self._buf = bytearray()
         self._skip = 0
         self._held: list[bytes | FrameTooLarge] = []
+        self._read_buf = bytearray(STREAM_READ_BYTES)
+        self._read_view = memoryview(self._read_buf)
 
-    def items(self, data: bytes) -> list[bytes | FrameTooLarge]:
+    def recv_from(self, sock: socket.socket) -> memoryview | None:
+        """Read what has arrived on ``sock`` without waiting, into a buffer this
+        decoder reuses (valid until the next call; pass it to :meth:`items`).
+
+        Returns None when nothing has arrived, an empty view at end of file (or
+        when the socket failed). Reusing one buffer matters: ``socket.recv(n)``
+        allocates ``n`` bytes on every call, even when nothing is there.
+        """
+        try:
+            n = sock.recv_into(self._read_buf, STREAM_READ_BYTES, socket.MSG_DONTWAIT)
+        except (BlockingIOError, InterruptedError):
+            return None
+        except OSError:
+            n = 0
+        return self._read_view[:n]
+
+    def items(self, data: bytes | memoryview) -> list[bytes | FrameTooLarge]:
         """Add received bytes; return the frames now complete, in order, an
         oversize frame as a :class:`FrameTooLarge` at the place it started."""
         frames, self._held = self._held, []
@@ -304,7 +325,7 @@ class StreamDecoder:
             del buf[:start]
         return frames
 
-    def feed(self, data: bytes) -> list[bytes]:
+    def feed(self, data: bytes | memoryview) -> list[bytes]:
         """Like :meth:`items`, but raise :class:`FrameTooLarge` for an oversize
         frame once the frames before it are returned; the frames after it come
         with the next call (``feed(b"")`` if nothing more arrives)."""
