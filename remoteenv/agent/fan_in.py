@@ -21,7 +21,7 @@ import zmq
 
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout
 from remoteenv.agent.sim_connection import LIVENESS_CHECK_S, SimConnection
-from remoteenv.wire.hot_wait import HotWait, yield_cpu
+from remoteenv.wire.hot_wait import HotWait
 
 #: Longest busy-wait (seconds) of a vector call for its replies before sleeping;
 #: calls whose replies took longer sleep at once (the sims need the CPUs).
@@ -72,14 +72,14 @@ class FanIn:
         deadline = None if timeout is None else time.monotonic() + timeout
         hot = self._hot
         started = time.perf_counter()
-        hot_until = started + hot.window_s if hot.worth_it() and not unpolled else started
+        spinning = hot.worth_it() and not unpolled
         idle_wait_ms = 0 if unpolled else int(LIVENESS_CHECK_S * 1000)
         while pending:
-            # While replies have been quick, poll without sleeping first,
-            # yielding the CPU to any process that shares it.
+            # While replies have been quick and a CPU is spare, poll without
+            # sleeping first, yielding the CPU to any process that shares it.
             events = poller.poll(0)
-            while not events and time.perf_counter() < hot_until:
-                yield_cpu()
+            while not events and spinning:
+                spinning = hot.spin()
                 events = poller.poll(0)
             if not events:
                 events = poller.poll(idle_wait_ms)

@@ -19,7 +19,7 @@ from typing import Any
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.sim_connection import LIVENESS_CHECK_S, SimConnection
 from remoteenv.wire import protocol
-from remoteenv.wire.hot_wait import HotWait, yield_cpu
+from remoteenv.wire.hot_wait import HotWait
 
 #: How long (seconds) to wait for a sim that closed its pipe to be reaped, so
 #: that its exit code or signal can be reported.
@@ -92,11 +92,9 @@ class PipeConnection(SimConnection):
     def _recv_frame(self) -> bytes | None:
         if not self._frames and self._hot.worth_it():
             start = time.perf_counter()
-            end = start + self._hot.window_s
-            while not self._frames and time.perf_counter() < end:
+            self._read(0.0)
+            while not self._frames and self._hot.spin():
                 self._read(0.0)
-                if not self._frames:
-                    yield_cpu()  # let a peer that shares this CPU run
             if self._frames:
                 self._hot.waited(time.perf_counter() - start)
                 return self._frames.popleft()

@@ -9,7 +9,6 @@ arrived, each with whom to answer) and ``send``.
 from __future__ import annotations
 
 import socket
-import time
 from typing import Any, Protocol
 
 import zmq
@@ -17,7 +16,7 @@ import zmq
 from remoteenv.sim.limits import FRAMES_PER_DRAIN
 from remoteenv.wire import protocol
 from remoteenv.wire.errors import PROTOCOL
-from remoteenv.wire.hot_wait import yield_cpu
+from remoteenv.wire.hot_wait import HotWait
 
 
 class Channel(Protocol):
@@ -120,18 +119,17 @@ class PipeChannel:
                 out.append((None, frame))
         return out
 
-    def receive_spinning(self, max_s: float) -> list[tuple[Any, bytes]]:
-        """Like :meth:`receive_nowait`, but busy-wait up to ``max_s`` seconds for a frame.
+    def receive_spinning(self, hot: HotWait) -> list[tuple[Any, bytes]]:
+        """Like :meth:`receive_nowait`, but busy-wait while ``hot`` (whose
+        :meth:`~remoteenv.wire.hot_wait.HotWait.worth_it` said yes) allows.
 
         Waiting hot avoids the sleep/wake-up of a blocking wait, which on a
         virtual machine costs tens of microseconds per message.
         """
-        end = time.perf_counter() + max_s
         while True:
             frames = self.receive_nowait()
-            if frames or self.closed or time.perf_counter() > end:
+            if frames or self.closed or not hot.spin():
                 return frames
-            yield_cpu()  # let a peer that shares this CPU run
 
     def send(self, reply_to: Any, payload: bytes) -> None:
         try:

@@ -225,7 +225,7 @@ class RemoteControlledAgent:
             if deadline is None:
                 if pipe is not None and hot.worth_it():
                     # The agent has been sending its next request quickly: wait hot.
-                    frames = pipe.receive_spinning(hot.window_s)
+                    frames = pipe.receive_spinning(hot)
                     if frames:
                         hot.waited(time.perf_counter() - hot.since)
                         self._answer(pipe, frames)
