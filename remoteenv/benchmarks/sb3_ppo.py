@@ -213,6 +213,7 @@ def run_once(name: str, steps: int, seed: int) -> dict[str, Any]:
         "env_step_s": venv.seconds,
         "train_s": train_seconds,
         "other_s": total - timer.seconds - train_seconds,
+        "ppo_own_s": total - venv.seconds,
         "rollout_steps_per_s": model.num_timesteps / timer.seconds if timer.seconds > 0 else 0.0,
         "mean_return": statistics.fmean(returns) if returns else None,
         "episodes_in_mean": len(returns),
@@ -269,7 +270,7 @@ def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
         mine = [run for run in runs if run["contender"] == name]
         medians[name] = {
             key: statistics.median(run[key] for run in mine)
-            for key in ("total_s", "rollout_s", "env_step_s", "train_s", "rollout_steps_per_s", "cpu_s")
+            for key in ("total_s", "rollout_s", "env_step_s", "train_s", "ppo_own_s", "rollout_steps_per_s", "cpu_s")
         }
     ratios = []
     pairs = [("remoteenv", "SubprocVecEnv"), ("remoteenv", "DummyVecEnv"), ("DummyVecEnv", "SubprocVecEnv")]
@@ -280,16 +281,27 @@ def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
             target = TARGET if (num, den, key) == ("remoteenv", "SubprocVecEnv", "total_s") else None
             value = medians[num][key] / medians[den][key]
             ratios.append({"ratio": f"{num} / {den}, {what}", "value": value, "target": target})
-    train_share = None
+    train_share = floor_share = None
     if "SubprocVecEnv" in medians:
         sub = medians["SubprocVecEnv"]
         train_share = sub["train_s"] / sub["total_s"]
-    return {"medians": medians, "ratios": ratios, "subproc_train_share": train_share}
+        floor_share = min(m["ppo_own_s"] for m in medians.values()) / sub["total_s"]
+    return {
+        "medians": medians,
+        "ratios": ratios,
+        "subproc_train_share": train_share,
+        "ppo_floor_share": floor_share,
+    }
 
 
 def verdict(result: dict[str, Any]) -> str:
-    """What the train share means for the target, in one plain sentence."""
-    share = result["subproc_train_share"]
+    """What the measured shares mean for the target, in plain sentences.
+
+    ``subproc_train_share``: ``train()``'s share of SubprocVecEnv's learn() wall
+    time. ``ppo_floor_share``: the least time any contender spent outside
+    ``env.step`` (train, policy inference, bookkeeping), as a share of the same:
+    an env that took no time at all would still leave about that much."""
+    share, floor = result["subproc_train_share"], result.get("ppo_floor_share")
     if share is None:
         return "SubprocVecEnv was not measured: no verdict on the target."
     if share > TARGET:
@@ -298,10 +310,17 @@ def verdict(result: dict[str, Any]) -> str:
             f"no env can meet the {TARGET:g}x target with these hyperparameters, "
             "since the same PPO's gradient updates take that long whatever the env."
         )
-    return (
+    text = (
         f"train() is {share:.0%} of SubprocVecEnv's wall time: the {TARGET:g}x target is reachable "
         f"only if rollouts and the rest ({1 - share:.0%} of it) shrink to {TARGET - share:.0%} of it or less."
     )
+    if floor is not None and floor > TARGET:
+        text += (
+            f" PPO's own work outside env.step (train, policy inference, bookkeeping) took at least "
+            f"{floor:.0%} of it for every contender: no env can meet the target on this machine, "
+            "even one whose step cost nothing."
+        )
+    return text
 
 
 def format_table(result: dict[str, Any]) -> str:

@@ -41,6 +41,7 @@ def test_phases_add_up_to_at_most_the_total(result):
         assert 0 < run["train_s"]
         assert run["rollout_s"] + run["train_s"] <= run["total_s"]
         assert run["other_s"] == pytest.approx(run["total_s"] - run["rollout_s"] - run["train_s"])
+        assert run["ppo_own_s"] == pytest.approx(run["total_s"] - run["env_step_s"])
 
 
 def test_ratios_and_train_share_come_from_the_measured_medians(result):
@@ -57,6 +58,8 @@ def test_ratios_and_train_share_come_from_the_measured_medians(result):
     assert result["subproc_train_share"] == pytest.approx(
         median("SubprocVecEnv", "train_s") / median("SubprocVecEnv", "total_s")
     )
+    least_ppo_own = min(median(name, "ppo_own_s") for name in sb3_ppo.CONTENDERS)
+    assert result["ppo_floor_share"] == pytest.approx(least_ppo_own / median("SubprocVecEnv", "total_s"))
 
 
 def test_the_table_states_the_verdict_and_the_torch_threads(result):
@@ -66,7 +69,8 @@ def test_the_table_states_the_verdict_and_the_torch_threads(result):
     assert sum(line.startswith("SubprocVecEnv ") for line in table.splitlines()) == ROUNDS  # a row per run
 
 
-@pytest.mark.parametrize("share", [0.4, 0.6])
-def test_the_verdict_says_plainly_when_no_env_can_meet_the_target(share):
-    text = sb3_ppo.verdict({"subproc_train_share": share})
-    assert ("no env can meet" in text) == (share > sb3_ppo.TARGET)
+@pytest.mark.parametrize(("share", "floor"), [(0.4, 0.45), (0.4, 0.55), (0.6, 0.7)])
+def test_the_verdict_says_plainly_when_no_env_can_meet_the_target(share, floor):
+    text = sb3_ppo.verdict({"subproc_train_share": share, "ppo_floor_share": floor})
+    assert ("no env can meet" in text) == (floor > sb3_ppo.TARGET)
+    assert ("train() alone" in text) == (share > sb3_ppo.TARGET)
