@@ -32,6 +32,7 @@ the finished envs at once with ``reset(options={"reset_mask": dones})``.
 
 from __future__ import annotations
 
+import importlib
 import inspect
 from collections.abc import Iterable, Sequence
 from typing import Any, cast
@@ -227,8 +228,15 @@ class SB3VecEnv(VecEnv):
 
 
 def _takes_autoreset_mode(env_id: str) -> bool:
-    """Whether ``env_id``'s registered vector entry point has an ``autoreset_mode`` parameter."""
-    entry = gym.spec(env_id).vector_entry_point
+    """Whether ``env_id``'s registered vector entry point has an ``autoreset_mode``
+    parameter (``"module:id"`` imports the module first, as ``gym.make_vec`` does)."""
+    module, _, name = env_id.rpartition(":")
+    try:
+        if module:
+            importlib.import_module(module)
+        entry = gym.spec(name).vector_entry_point
+    except (ImportError, gym.error.Error):  # gym.make_vec will say what is wrong with the id
+        return False
     if entry is None:
         return False
     creator = load_env_creator(entry) if isinstance(entry, str) else entry

@@ -166,12 +166,13 @@ def test_adapter_gives_sb3_the_same_steps_for_same_step_and_next_step(vectorizat
     _assert_same_trajectories(same, nxt)
 
 
-def test_make_sb3_vec_env_builds_a_same_step_vector_env_unless_told_otherwise():
+@pytest.mark.parametrize("env_id", ["remoteenv/CartPole-v0", "remoteenv:remoteenv/CartPole-v0"])
+def test_make_sb3_vec_env_builds_a_same_step_vector_env_unless_told_otherwise(env_id):
     from gymnasium.vector import AutoresetMode
 
     from remoteenv.sb3 import make_sb3_vec_env
 
-    venv = make_sb3_vec_env("remoteenv/CartPole-v0", num_envs=2)
+    venv = make_sb3_vec_env(env_id, num_envs=2)
     try:
         assert venv.autoreset_mode == AutoresetMode.SAME_STEP
         assert venv.venv.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
