@@ -25,17 +25,21 @@ What SB3 expects and the adapter provides:
 
 The vector env's autoreset mode is read from its ``metadata["autoreset_mode"]``:
 with ``SAME_STEP`` the finished episode's last observation comes from
-``infos["final_obs"]``; with ``NEXT_STEP`` or ``DISABLED`` the adapter resets
+``infos["final_obs"]`` (and its last info from ``infos["final_info"]``; the
+new episode's reset info goes to ``reset_infos``); with ``NEXT_STEP`` or ``DISABLED`` the adapter resets
 the finished envs at once with ``reset(options={"reset_mask": dones})``.
 """
 
 from __future__ import annotations
 
+import importlib
+import inspect
 from collections.abc import Iterable, Sequence
 from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import load_env_creator
 from gymnasium.vector import AutoresetMode, VectorEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
@@ -128,6 +132,7 @@ class SB3VecEnv(VecEnv):
                 final_info = infos.get("final_info")
                 finals = split_infos(final_info, self.num_envs) if final_info else per_env
                 for i in np.flatnonzero(dones).tolist():
+                    self.reset_infos[i] = {k: v for k, v in per_env[i].items() if k not in ("final_obs", "final_info")}
                     per_env[i] = dict(finals[i])
                     per_env[i]["terminal_observation"] = final_obs[i]
             else:
@@ -222,10 +227,36 @@ class SB3VecEnv(VecEnv):
         return out
 
 
+def _takes_autoreset_mode(env_id: str) -> bool:
+    """Whether ``env_id``'s registered vector entry point has an ``autoreset_mode``
+    parameter (``"module:id"`` imports the module first, as ``gym.make_vec`` does)."""
+    module, _, name = env_id.rpartition(":")
+    try:
+        if module:
+            importlib.import_module(module)
+        entry = gym.spec(name).vector_entry_point
+    except (ImportError, gym.error.Error):  # gym.make_vec will say what is wrong with the id
+        return False
+    if entry is None:
+        return False
+    creator = load_env_creator(entry) if isinstance(entry, str) else entry
+    try:
+        return "autoreset_mode" in inspect.signature(creator).parameters
+    except (TypeError, ValueError):  # no signature to read
+        return False
+
+
 def make_sb3_vec_env(env_id: str, num_envs: int, **kwargs: Any) -> SB3VecEnv:
     """An SB3 ``VecEnv`` of ``num_envs`` remote envs of ``env_id``, via the id's
     registered vector entry point (:class:`remoteenv.vector_env.RemoteVectorEnv`).
-    ``kwargs`` go to the vector env (e.g. ``seed``, ``max_episode_steps`` or scene kwargs)."""
+    ``kwargs`` go to the vector env (e.g. ``seed``, ``max_episode_steps`` or scene kwargs).
+
+    Unless ``kwargs`` name an ``autoreset_mode``, the vector env is built with
+    ``SAME_STEP`` when its entry point takes that parameter: an episode's end
+    and the next episode's reset then cost one round trip, not two. SB3 sees
+    the same obs, rewards, dones and infos in either mode."""
+    if "autoreset_mode" not in kwargs and _takes_autoreset_mode(env_id):
+        kwargs["autoreset_mode"] = AutoresetMode.SAME_STEP
     venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
     return SB3VecEnv(venv)
 

@@ -1,5 +1,6 @@
 """``python -m remoteenv bench``: throughput (default), ``--batched`` (batched stepping
-next to EnvPool and the physics limit), ``--real-time`` pacing, ``--soak``."""
+next to EnvPool and the physics limit), ``--real-time`` pacing, ``--soak``, ``--sb3``
+(SB3 PPO on remote CartPole next to SubprocVecEnv)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,13 @@ import importlib
 from typing import Any
 
 #: Benchmark modules in remoteenv.benchmarks; the default one first.
-BENCHMARKS = {"throughput": None, "batched": "--batched", "pacing": "--real-time", "soak": "--soak"}
+BENCHMARKS = {
+    "throughput": None,
+    "batched": "--batched",
+    "pacing": "--real-time",
+    "soak": "--soak",
+    "sb3_ppo": "--sb3",
+}
 
 
 def add_parser(sub: Any) -> None:
@@ -19,7 +26,8 @@ def add_parser(sub: Any) -> None:
         "Without a mode flag: steps/s of remote envs next to in-process Gymnasium. "
         "--batched: batched stepping next to EnvPool and MuJoCo's physics limit, in alternating rounds. "
         "--real-time: pacing and action-application delay of real-time mode. "
-        "--soak: a long run that reports agent and sim memory.",
+        "--soak: a long run that reports agent and sim memory. "
+        "--sb3: SB3 PPO on remote CartPole next to the same PPO on SubprocVecEnv and DummyVecEnv.",
     )
     mode = p.add_mutually_exclusive_group()
     for name, flag in BENCHMARKS.items():

@@ -113,3 +113,73 @@ def test_sb3_ppo_learns_on_the_remote_vector_env():
         assert actions.shape == (4,)
     finally:
         venv.close()
+
+
+def _trajectory(venv, actions):
+    """Every step's SB3 view of ``venv`` (reset with seed 0) under ``actions``."""
+    try:
+        venv.seed(0)
+        steps = [(venv.reset(), None, None, None)]
+        for a in actions:
+            obs, rewards, dones, infos = venv.step(a)
+            finals = [(info.get("terminal_observation"), info["TimeLimit.truncated"]) for info in infos]
+            steps.append((obs, rewards, dones, finals))
+        return steps
+    finally:
+        venv.close()
+
+
+def _assert_same_trajectories(a, b):
+    dones = truncations = 0
+    for (obs_a, rew_a, done_a, fin_a), (obs_b, rew_b, done_b, fin_b) in zip(a, b, strict=True):
+        np.testing.assert_array_equal(obs_a, obs_b)
+        if rew_a is None:
+            continue
+        np.testing.assert_array_equal(rew_a, rew_b)
+        np.testing.assert_array_equal(done_a, done_b)
+        for (final_a, trunc_a), (final_b, trunc_b) in zip(fin_a, fin_b, strict=True):
+            assert trunc_a == trunc_b
+            assert (final_a is None) == (final_b is None)
+            if final_a is not None:
+                np.testing.assert_array_equal(final_a, final_b)
+        dones += int(done_a.sum())
+        truncations += sum(trunc for _, trunc in fin_a)
+    assert dones > truncations > 0, "the trajectories must hold terminations and truncations"
+
+
+@pytest.mark.parametrize("vectorization", ["sync", "remote"])
+def test_adapter_gives_sb3_the_same_steps_for_same_step_and_next_step(vectorization):
+    from gymnasium.vector import AutoresetMode
+
+    from remoteenv.sb3 import SB3VecEnv, make_sb3_vec_env
+
+    rng = np.random.default_rng(3)
+    actions = [rng.integers(0, 2, size=3) for _ in range(120)]
+
+    def build(mode):
+        if vectorization == "sync":
+            return SB3VecEnv(_sync_venv(3, mode, max_episode_steps=30))
+        return make_sb3_vec_env("remoteenv/CartPole-v0", num_envs=3, autoreset_mode=mode, max_episode_steps=30)
+
+    same = _trajectory(build(AutoresetMode.SAME_STEP), actions)
+    nxt = _trajectory(build(AutoresetMode.NEXT_STEP), actions)
+    _assert_same_trajectories(same, nxt)
+
+
+@pytest.mark.parametrize("env_id", ["remoteenv/CartPole-v0", "remoteenv:remoteenv/CartPole-v0"])
+def test_make_sb3_vec_env_builds_a_same_step_vector_env_unless_told_otherwise(env_id):
+    from gymnasium.vector import AutoresetMode
+
+    from remoteenv.sb3 import make_sb3_vec_env
+
+    venv = make_sb3_vec_env(env_id, num_envs=2)
+    try:
+        assert venv.autoreset_mode == AutoresetMode.SAME_STEP
+        assert venv.venv.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
+    finally:
+        venv.close()
+    venv = make_sb3_vec_env("remoteenv/CartPole-v0", num_envs=2, autoreset_mode="NextStep")
+    try:
+        assert venv.autoreset_mode == AutoresetMode.NEXT_STEP
+    finally:
+        venv.close()
