@@ -4,7 +4,8 @@ Runs in the agent process. A vector env sends one request to each of its sim
 processes, then :class:`FanIn` collects the replies with one ``zmq.Poller``
 over their connections, so the processes compute in parallel. While replies
 have been quick it polls without sleeping first (adaptive, see
-:mod:`remoteenv.wire.hot_wait`); stale replies (to abandoned requests) are
+:mod:`remoteenv.wire.hot_wait`); local pipes are read in turn instead, one
+blocking read per reply (fewer system calls); stale replies (to abandoned requests) are
 dropped as they come; a dead sim is reported within
 :data:`~remoteenv.agent.sim_connection.LIVENESS_CHECK_S`; after the timeout
 the connections still pending are rebuilt and :class:`remoteenv.RemoteEnvTimeout`
@@ -67,9 +68,12 @@ class FanIn:
             replies[p] = conns[p].receive(seq, timeout, what=what)
             del pending[p]
             return
+        deadline = None if timeout is None else time.monotonic() + timeout
+        if all(conns[p].waits_in_turn for p in pending):
+            self._gather_in_turn(conns, pending, what, timeout, deadline, replies)
+            return
         poller = self._poller_for(conns)
         socket_index, unpolled = self._socket_index, self._unpolled
-        deadline = None if timeout is None else time.monotonic() + timeout
         hot = self._hot
         started = time.perf_counter()
         spinning = hot.worth_it() and not unpolled
@@ -96,6 +100,30 @@ class FanIn:
         hot.waited(time.perf_counter() - started)
 
     # ------------------------------------------------------------ internals
+
+    def _gather_in_turn(
+        self,
+        conns: Sequence[SimConnection],
+        pending: dict[int, int],
+        what: str,
+        timeout: float | None,
+        deadline: float | None,
+        replies: dict[int, dict[str, Any]],
+    ) -> None:
+        """Local pipes: wait for each reply in turn, one blocking read each (the
+        processes still compute in parallel); every :data:`LIVENESS_CHECK_S`
+        without a reply, every pending sim is checked for life."""
+        for p in list(pending):
+            while True:
+                reply = conns[p].try_receive(pending[p], what, wait=True)
+                if reply is not None:
+                    replies[p] = reply
+                    del pending[p]
+                    break
+                for q in pending:
+                    conns[q].check_alive(what)
+                if deadline is not None and time.monotonic() > deadline:
+                    self._time_out(conns, pending, what, timeout)
 
     @staticmethod
     def _take(

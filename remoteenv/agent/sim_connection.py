@@ -64,6 +64,10 @@ class SimConnection:
 
     # ------------------------------------------------------------ transport
 
+    #: Whether a vector call waits for this transport's replies one connection
+    #: at a time (:meth:`try_receive` with ``wait``) rather than polling them together.
+    waits_in_turn = False
+
     @property
     def pollable(self) -> Any:
         """What to register in a ``zmq.Poller`` to learn that replies may be
@@ -157,14 +161,18 @@ class SimConnection:
         """Send ``cmd`` and wait for its reply (see :meth:`receive`)."""
         return self.receive(self.send(cmd, **args), timeout, what=f"'{cmd}'")
 
-    def try_receive(self, seq: int, what: str = "reply") -> dict[str, Any] | None:
-        """The reply to request ``seq`` if it has arrived, else None; never blocks.
+    def try_receive(self, seq: int, what: str = "reply", wait: bool = False) -> dict[str, Any] | None:
+        """The reply to request ``seq`` if it has arrived, else None; never
+        blocks, or with ``wait`` waits up to :data:`LIVENESS_CHECK_S` for a frame.
 
         Drops stale replies and raises like :meth:`receive`. Lets a caller wait
-        on many connections with one ``zmq.Poller`` on their :attr:`pollable`.
+        on many connections with one ``zmq.Poller`` on their :attr:`pollable`,
+        or on each in turn.
         """
+        first = wait
         while True:
-            frame = self._recv_frame_nowait()
+            frame = self._recv_frame() if first else self._recv_frame_nowait()
+            first = False
             if frame is None:
                 return None
             reply = self._decode(frame)

@@ -8,13 +8,16 @@ waits hot while recent waits were shorter than the window, stops when the
 peer is slow (a policy that thinks, many envs to gather), and probes again
 now and then.
 
-Waiting hot is only free while a CPU would otherwise sit idle. When more
-tasks are runnable than there are CPUs (a CPU hog beside the training, more
-sims than cores, the sims computing while the agent waits), a spinning
-process takes the CPU that the peer or another worker needs. So a hot wait
-starts, and goes on, only while the host's count of runnable tasks (Linux:
-the fourth field of ``/proc/loadavg``, which counts the spinner itself) is
-at most the number of CPUs; otherwise the wait sleeps at once.
+Waiting hot is only free while the CPUs would otherwise sit idle. Beside a
+program that keeps a CPU busy (a CPU hog, a training loop, another job), a
+spinning process keeps the CPU that the peer or that program needs, and a
+task that spins is never woken early the way a sleeping one is: when the
+scheduler lets the other program run, the spinner waits out its whole time
+slice (milliseconds), reply or not. The agent and its sims also take turns on
+shared CPUs, but in short bursts (one request's work). So a spin that finds
+itself kept off the CPU for longer than :data:`STALL_S` at once has met a
+busy neighbour: it stops, and every hot wait of the process sleeps instead
+for the next :data:`COOL_DOWN_S`, then tries again.
 """
 
 from __future__ import annotations
@@ -24,41 +27,19 @@ import time
 
 #: Re-try waiting hot once every this many cold waits.
 _PROBE_EVERY = 32
-#: Seconds between two looks at the host's run queue while spinning.
-_CONTENTION_CHECK_S = 20e-6
+#: A spin kept off the CPU this long (seconds) at once met a busy neighbour.
+STALL_S = 2.5e-3
+#: Seconds every hot wait of the process sleeps after a stall.
+COOL_DOWN_S = 0.5
 
 #: Give the CPU to another runnable process, if any, while busy-waiting.
 yield_cpu = getattr(os, "sched_yield", lambda: None)
 
 
-def _open_loadavg() -> int | None:
-    try:
-        return os.open("/proc/loadavg", os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
-    except OSError:
-        return None
+class _Neighbours:
+    """Process-wide: until when hot waits sleep because a spin stalled."""
 
-
-_LOADAVG_FD = _open_loadavg()
-_HOST_CPUS = os.cpu_count() or 1
-
-
-def runnable_tasks() -> int | None:
-    """How many tasks the host has runnable right now, the caller included
-    (None where the platform does not say)."""
-    if _LOADAVG_FD is None:
-        return None
-    try:
-        return int(os.pread(_LOADAVG_FD, 64, 0).split()[3].split(b"/")[0])
-    except (OSError, ValueError, IndexError):
-        return None
-
-
-def spare_cpu() -> bool:
-    """Whether spinning now takes no CPU another runnable task could use:
-    runnable tasks (the caller counted) at most the host's CPUs. True where
-    the platform does not report its run queue."""
-    running = runnable_tasks()
-    return running is None or running <= _HOST_CPUS
+    cool_until = 0.0
 
 
 def _usable_cpus() -> int:
@@ -89,7 +70,7 @@ class HotWait:
         self._last_wait_s = 0.0
         self._cold = 0
         self._until = 0.0
-        self._next_check = 0.0
+        self._last_spin = 0.0
         #: perf_counter() time the current wait started (set by the caller).
         self.since = time.perf_counter()
 
@@ -102,25 +83,25 @@ class HotWait:
             if self._cold < _PROBE_EVERY:
                 return False
             self._cold = 0
-        if not spare_cpu():
-            return False
         now = time.perf_counter()
+        if now < _Neighbours.cool_until:
+            return False
         self._until = now + self.window_s
-        self._next_check = now + _CONTENTION_CHECK_S
+        self._last_spin = now
         return True
 
     def spin(self) -> bool:
         """Between two polls of a hot wait: yield the CPU to any task that
-        shares it; False once the window is over or the host has no CPU to
-        spare (then the caller sleeps)."""
+        shares it; False once the window is over or the spin stalled (then
+        the caller sleeps)."""
         yield_cpu()
         now = time.perf_counter()
-        if now >= self._until:
+        stalled = now - self._last_spin > STALL_S
+        self._last_spin = now
+        if stalled:
+            _Neighbours.cool_until = now + COOL_DOWN_S
             return False
-        if now >= self._next_check:
-            self._next_check = now + _CONTENTION_CHECK_S
-            return spare_cpu()
-        return True
+        return now < self._until
 
     def waited(self, seconds: float) -> None:
         """Record how long the last wait for the peer took."""

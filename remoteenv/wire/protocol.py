@@ -278,16 +278,18 @@ class StreamDecoder:
         self._read_buf = bytearray(STREAM_READ_BYTES)
         self._read_view = memoryview(self._read_buf)
 
-    def recv_from(self, sock: socket.socket) -> memoryview | None:
-        """Read what has arrived on ``sock`` without waiting, into a buffer this
-        decoder reuses (valid until the next call; pass it to :meth:`items`).
+    def recv_from(self, sock: socket.socket, wait: bool = False) -> memoryview | None:
+        """Read what has arrived on ``sock`` into a buffer this decoder reuses
+        (valid until the next call; pass it to :meth:`items`). Without
+        ``wait`` the read never blocks; with it, it blocks as the socket does
+        (a blocking socket with ``SO_RCVTIMEO`` set waits at most that long).
 
         Returns None when nothing has arrived, an empty view at end of file (or
         when the socket failed). Reusing one buffer matters: ``socket.recv(n)``
         allocates ``n`` bytes on every call, even when nothing is there.
         """
         try:
-            n = sock.recv_into(self._read_buf, STREAM_READ_BYTES, socket.MSG_DONTWAIT)
+            n = sock.recv_into(self._read_buf, STREAM_READ_BYTES, 0 if wait else socket.MSG_DONTWAIT)
         except (BlockingIOError, InterruptedError):
             return None
         except OSError:

@@ -6,15 +6,13 @@ import pytest
 
 from remoteenv.wire import hot_wait
 from remoteenv.wire.hot_wait import HotWait
-from remoteenv.wire.hot_wait import runnable_tasks as host_runnable_tasks
 
 
 @pytest.fixture(autouse=True)
 def two_cpus(monkeypatch):
     monkeypatch.delenv("REMOTEENV_NO_SPIN", raising=False)
     monkeypatch.setattr(hot_wait, "_usable_cpus", lambda: 2)
-    monkeypatch.setattr(hot_wait, "_HOST_CPUS", 2)
-    monkeypatch.setattr(hot_wait, "runnable_tasks", lambda: 1)
+    monkeypatch.setattr(hot_wait._Neighbours, "cool_until", 0.0)
 
 
 def test_waits_hot_while_the_peer_answers_within_the_window():
@@ -45,37 +43,38 @@ def test_disabled_by_a_zero_window_one_cpu_or_the_environment(monkeypatch):
     assert single.window_s == 0.0 and not single.worth_it()
 
 
-def test_no_hot_wait_while_more_tasks_are_runnable_than_cpus(monkeypatch):
-    hot = HotWait(1e-3)
-    monkeypatch.setattr(hot_wait, "runnable_tasks", lambda: 3)  # a hog beside two peers
-    assert not hot.worth_it()
-    monkeypatch.setattr(hot_wait, "runnable_tasks", lambda: 2)
-    assert hot.worth_it()
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
 
 
-def test_a_spin_stops_when_contention_appears(monkeypatch):
-    running = [2]
-    monkeypatch.setattr(hot_wait, "runnable_tasks", lambda: running[0])
-    monkeypatch.setattr(hot_wait, "_CONTENTION_CHECK_S", 0.0)
-    hot = HotWait(10.0)
-    assert hot.worth_it()
-    assert hot.spin() and hot.spin()
-    running[0] = 3  # the peer woke up and has no CPU to run on
-    assert not hot.spin()
+@pytest.fixture
+def clock(monkeypatch):
+    fake = FakeClock()
+    monkeypatch.setattr(hot_wait.time, "perf_counter", fake)
+    monkeypatch.setattr(hot_wait, "yield_cpu", lambda: None)
+    return fake
 
 
-def test_a_spin_stops_at_the_end_of_its_window():
+def test_a_spin_goes_on_in_short_steps_until_its_window_ends(clock):
     hot = HotWait(1e-3)
     assert hot.worth_it()
-    spins = 0
-    while hot.spin():
-        spins += 1
-        assert spins < 10_000_000
+    for _ in range(9):
+        clock.now += 1e-4  # polled every 0.1 ms: never kept off the CPU for long
+        assert hot.spin()
+    clock.now += 1.5e-4
+    assert not hot.spin()  # 1.05 ms: the window is over
+    assert hot.worth_it()  # a window ending is no stall: the next wait may go hot
+
+
+def test_a_stalled_spin_stops_and_every_hot_wait_of_the_process_sleeps_for_a_while(clock):
+    hot, other = HotWait(1.0), HotWait(1.0)
+    assert hot.worth_it()
+    clock.now += hot_wait.STALL_S * 1.5  # kept off the CPU by a busy neighbour
     assert not hot.spin()
-
-
-def test_the_host_run_queue_is_read_where_linux_reports_it():
-    if hot_wait._LOADAVG_FD is None:
-        pytest.skip("no /proc/loadavg on this platform")
-    running = host_runnable_tasks()
-    assert running is not None and running >= 1  # this test itself is running
+    assert not hot.worth_it() and not other.worth_it()
+    clock.now += hot_wait.COOL_DOWN_S * 1.01
+    assert hot.worth_it() and other.worth_it()  # then they try again
