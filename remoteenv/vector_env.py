@@ -398,6 +398,9 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
     def close_extras(self, **kwargs: Any) -> None:
         """Ask every sim to exit, then make sure they have (no process or socket
         file remains). Attached sims are left running."""
+        requests = getattr(self, "_requests", None)
+        if requests is not None:
+            requests.lanes.close()
         session = getattr(self, "_session", None)
         if session is not None:
             session.close()

@@ -42,7 +42,12 @@ def connect_sim(
     pipe = getattr(sim, "pipe", None)
     if pipe is not None:
         return PipeConnection(
-            pipe, endpoint=sim.endpoint or "", instance=sim.instance, timeout=timeout, death_check=death_check
+            pipe,
+            endpoint=sim.endpoint or "",
+            instance=sim.instance,
+            timeout=timeout,
+            death_check=death_check,
+            pid=getattr(sim, "pid", None),
         )
     return ZmqConnection(
         sim.endpoint or "",

@@ -38,6 +38,7 @@ class PipeConnection(SimConnection):
         pipe: the launcher's end of the socketpair (:attr:`SimProcess.pipe`).
         endpoint: the sim's ZeroMQ endpoint, named in error messages only.
         instance, timeout, death_check: as for :class:`SimConnection`.
+        pid: the sim's process id, if known.
     """
 
     def __init__(
@@ -48,7 +49,10 @@ class PipeConnection(SimConnection):
         instance: int = 0,
         timeout: float | None = 60.0,
         death_check: Callable[[], str | None] | None = None,
+        pid: int | None = None,
     ) -> None:
+        #: The sim's process id (the region of ``shared_batch`` is read through it).
+        self.pid = pid
         super().__init__(
             endpoint or f"pipe fd {pipe.fileno()}", instance=instance, timeout=timeout, death_check=death_check
         )

@@ -22,6 +22,7 @@ from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.fan_in import FanIn
 from remoteenv.agent.restart import gather_restarting, restarted_info
 from remoteenv.agent.session import SimSession
+from remoteenv.agent.shared_lane import SharedLanes
 from remoteenv.agent.vector_results import ObsBatch, reset_reply_as_batch, step_reply_as_batch
 from remoteenv.wire.protocol import OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET
 
@@ -47,6 +48,8 @@ class VectorRequests:
         self.plain_steps = real_time or all(hi - lo == 1 for lo, hi in self.slices)
         self.same_step = same_step
         self.fan_in = FanIn()
+        #: Shared-memory regions of the local sims (batched steps).
+        self.lanes = SharedLanes()
 
     def gather(
         self, pending: dict[int, int], cmd: str, resend: Callable[[int], int] | None = None
@@ -108,10 +111,15 @@ class VectorRequests:
                     pending[p] = conns[p].send("step", action=actions[lo])
             return pending
         ops_list = ops.tolist()
-        return {
-            p: conns[p].send("step_batch", ops=ops_list[lo:hi], actions=actions[lo:hi])
-            for p, (lo, hi) in enumerate(self.slices)
-        }
+        pending = {}
+        handshakes, lanes = self.session.handshakes, self.lanes
+        for p, (lo, hi) in enumerate(self.slices):
+            acts = actions[lo:hi]
+            if lanes.put_actions(p, conns[p], handshakes[p].offers("shared_batch"), acts):
+                pending[p] = conns[p].send("step_batch", ops=ops_list[lo:hi], shared=True)
+            else:
+                pending[p] = conns[p].send("step_batch", ops=ops_list[lo:hi], actions=acts)
+        return pending
 
     def finish_step(
         self, pending: dict[int, int], ops: np.ndarray, actions: Any, last_obs: Any, obs_batch: ObsBatch
@@ -120,6 +128,10 @@ class VectorRequests:
         if self.plain_steps:
             return self._finish_single_worlds(pending, ops, last_obs, obs_batch)
         results, failed = self.gather(pending, "step_batch")
+        for p, reply in results.items():
+            if reply.get("shared") is True:
+                lo, hi = self.slices[p]
+                self.lanes.fill(p, reply, hi - lo)
         for p, err in failed.items():
             results[p] = self._restarted_results(p, err, last_obs, obs_batch)
         return results

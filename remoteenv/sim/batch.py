@@ -28,6 +28,7 @@ from remoteenv.sim.batch_step import WorldsStepper, steps_together
 from remoteenv.sim.channels import Channel
 from remoteenv.sim.checks import RequestError, options_value, require_reset, seed_list, world_list
 from remoteenv.sim.lock_step import LockStepper
+from remoteenv.sim.shared_lane import SharedLane
 from remoteenv.wire.actions import check_actions
 from remoteenv.wire.batch import columnar_infos, stack
 from remoteenv.wire.errors import PROTOCOL, short_repr
@@ -60,11 +61,22 @@ class BatchCommands:
         envs = [w.env for w in worlds]
         together = all(w.delays.is_zero for w in worlds) and steps_together(envs)
         self.stepper = WorldsStepper(envs, threads) if together else None
+        #: The local pipe's shared-memory region (``shared_batch``), for worlds stepped together.
+        self.lane = SharedLane(action_space, envs[0].observation_space, len(worlds)) if together else None
 
     def close(self) -> None:
-        """Stop the physics threads."""
+        """Stop the physics threads; unmap the shared region."""
         if self.stepper is not None:
             self.stepper.close()
+        if self.lane is not None:
+            self.lane.close()
+
+    def handlers(self) -> dict[str, Any]:
+        """The commands this object answers (``shared_batch`` when the worlds' spaces fit a region)."""
+        out: dict[str, Any] = {"reset_batch": self.reset_batch, "step_batch": self.step_batch}
+        if self.lane is not None and self.lane.offered:
+            out["shared_batch"] = self.lane.attach
+        return out
 
     def reset_batch(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
         worlds = world_list(msg.get("worlds"), len(self.worlds))
@@ -87,7 +99,13 @@ class BatchCommands:
         for j, w in enumerate(worlds):
             if ops[j] != OP_RESET:
                 require_reset(self.worlds[w].has_reset, w, self.instance)
-        actions = check_actions(self._space, msg.get("actions"), n)
+        shared = msg.get("shared") is True
+        if shared:
+            if self.lane is None or msg.get("worlds") is not None:
+                raise RequestError(PROTOCOL, "a 'shared' step_batch needs shared_batch first and no 'worlds'")
+            actions = check_actions(self._space, self.lane.actions(n, channel), n)
+        else:
+            actions = check_actions(self._space, msg.get("actions"), n)
         stepped = [j for j in range(n) if ops[j] != OP_RESET]
         # Actions sent as a list reach the hooks as sent (e.g. floats, not float32): per world.
         if self.stepper is not None and stepped and isinstance(actions, np.ndarray):
@@ -98,6 +116,10 @@ class BatchCommands:
             batch = self.stepper.step([worlds[j] for j in stepped], picked)
             resets = len(stepped) < n or OP_STEP_RESET in ops or (OP_STEP_AUTORESET in ops and batch.terminated.any())
             if not resets:
+                if shared and self.lane is not None:
+                    reply = self.lane.reply(batch, batch_infos(batch))
+                    if reply is not None:
+                        return reply
                 return plain_step_reply(batch)  # the scene's arrays as they are
             results = _per_world_results(batch, stepped, n)
         else:
@@ -156,17 +178,22 @@ class BatchCommands:
         return reply
 
 
-def plain_step_reply(batch: BatchResult) -> dict[str, Any]:
-    """The reply of a ``step_batch`` that stepped every world and reset none."""
+def batch_infos(batch: BatchResult) -> dict[str, Any]:
+    """The infos of a batch in their wire form (see :func:`columnar_infos`)."""
     info = batch.wire_columns()
     if info is None:
         info = columnar_infos([batch.world_info(j) for j in range(len(batch.reward))])
+    return info
+
+
+def plain_step_reply(batch: BatchResult) -> dict[str, Any]:
+    """The reply of a ``step_batch`` that stepped every world and reset none."""
     return {
         "obs": batch.obs if isinstance(batch.obs, np.ndarray) else stack(batch.obs),
         "reward": batch.reward.tolist(),
         "terminated": batch.terminated.tolist(),
         "truncated": [False] * len(batch.reward),
-        "info": info,
+        "info": batch_infos(batch),
         "final": [],
     }
 

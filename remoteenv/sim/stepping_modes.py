@@ -29,8 +29,8 @@ def stepping_and_commands(
     clock: Clock,
 ) -> tuple[Stepping, dict[str, Handler]]:
     """The stepping of the requested mode and the commands only that mode answers:
-    ``timing``, ``pause`` and ``resume`` in real time, ``reset_batch`` and
-    ``step_batch`` in lock-step."""
+    ``timing``, ``pause`` and ``resume`` in real time, ``reset_batch``,
+    ``step_batch`` (and ``shared_batch`` where the spaces allow) in lock-step."""
     if real_time:
         for name, value in (("action_delay", action_delay), ("obs_delay", obs_delay)):
             if isinstance(value, DelaySpec) and not value.is_zero or not isinstance(value, DelaySpec) and value:
@@ -44,4 +44,4 @@ def stepping_and_commands(
         raise ValueError("link_delay emulates a network in real time; in lock-step use action_delay/obs_delay")
     lock = LockStepping(envs, action_delay=action_delay, obs_delay=obs_delay, seed=seed)
     batch = BatchCommands(lock.worlds, envs[0].action_space, instance)
-    return lock, {"reset_batch": batch.reset_batch, "step_batch": batch.step_batch}
+    return lock, batch.handlers()

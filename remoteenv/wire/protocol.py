@@ -127,6 +127,20 @@ and its ``obs``/``info`` entries are the reset's. An optional
 ``"final_types"`` list (one entry per ``final`` entry: nil or an info
 ``{key: dtype}`` map) types their info values as ``"types"`` does (see Values).
 
+``shared_batch`` ``{}`` -> ``{"pid": int, "fd": int, "layout": {"worlds":
+int, "actions": [dtype, shape], "obs": [dtype, shape]}}`` (optional; a
+lock-step sim whose worlds step together and whose spaces fit offers it, to
+the agent that launched it, over the local pipe only; anyone else gets a
+``state`` error): the sim's shared-memory region for batched steps, an
+anonymous file the agent maps as ``/proc/<pid>/fd/<fd>``, laid out as
+:mod:`remoteenv.wire.shared_batch` says. Afterwards a ``step_batch`` on the
+pipe may carry ``"shared": true`` and no ``actions`` (nor ``worlds``): the
+actions of positions ``0 .. n-1`` are rows ``0 .. n-1`` of the region's
+actions block, checked as sent ones are. If every world steps and none
+resets, the reply then is ``{"shared": true, "info": infos, "final": []}``
+with ``obs``, ``reward``, ``terminated`` and ``truncated`` in rows ``0 .. n-1``
+of the region; any other outcome is answered in the usual form.
+
 In both, ``obs`` is one array of shape ``(n, *obs_shape)`` when every world's
 obs is an array of one shape and dtype, else a list of ``n`` obs. ``infos`` is
 ``{"columns": {key: [values, present]}}`` when every info value is a bool,

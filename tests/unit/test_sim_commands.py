@@ -79,7 +79,7 @@ def test_handshake_describes_the_worlds_and_the_stepping(server):
 
 def test_each_mode_answers_its_own_commands(server):
     common = {"close", "handshake", "render", "reset", "step", "get_attr", "set_attr", "call"}
-    extra = {"timing", "pause", "resume"} if server.real_time else {"reset_batch", "step_batch"}
+    extra = {"timing", "pause", "resume"} if server.real_time else {"reset_batch", "step_batch", "shared_batch"}
     assert set(server.commands) == common | extra
 
 

@@ -1,0 +1,164 @@
+"""The shared-memory region of a local pipe's batched steps (the spec's
+``shared_batch``, see :mod:`remoteenv.wire.protocol`). Both processes use it.
+
+A sim process serving its launching agent over the local pipe can put the
+arrays of a plain ``step_batch`` (every world stepped, none reset) in memory
+both processes map, so the pipe carries only the small rest of the request
+and reply (ops, infos). The sim creates the region (an anonymous
+``memfd``: nothing on disk, gone when both ends close it); the agent maps the
+same file through ``/proc/<sim pid>/fd/<fd>``. Layout, for ``K`` worlds, each
+block starting on a 64-byte boundary in this order:
+
+- ``actions``: ``K`` rows of the action (Box: its dtype and shape; Discrete:
+  ``<i8`` scalars), written by the agent before it sends the request;
+- ``obs``: ``K`` rows of the observation (Box: its dtype and shape);
+- ``reward``: ``K`` ``<f8``; ``terminated``, ``truncated``: ``K`` ``|b1``;
+  written by the sim before it sends the reply.
+
+Row ``j`` belongs to request position ``j``. Each side writes its blocks only
+while the other waits for the message that follows, so the pipe orders every
+access. The sim checks the actions it reads like any others; the agent reads
+numbers of a fixed dtype and shape, nothing it would interpret further.
+"""
+
+from __future__ import annotations
+
+import math
+import mmap
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from remoteenv.wire.arrays import ARRAY_DTYPES
+from remoteenv.wire.errors import ProtocolError, short_repr
+
+#: Largest region (bytes) either side creates or maps.
+MAX_SHARED_BYTES = 1 << 28
+_ALIGN = 64
+_MAX_WORLDS = 1 << 16
+_MAX_NDIM = 8
+
+
+def _aligned(n: int) -> int:
+    return (n + _ALIGN - 1) // _ALIGN * _ALIGN
+
+
+def _block(value: Any, what: str) -> tuple[str, tuple[int, ...]]:
+    """A ``[dtype, shape]`` wire pair, checked."""
+    if not (isinstance(value, list) and len(value) == 2 and isinstance(value[0], str) and isinstance(value[1], list)):
+        raise ProtocolError(f"shared_batch layout: {what} must be [dtype, shape], got {short_repr(value)}")
+    dtype, shape = value
+    if dtype not in ARRAY_DTYPES:
+        raise ProtocolError(f"shared_batch layout: {what} dtype {short_repr(dtype)} is not allowed")
+    if len(shape) > _MAX_NDIM or not all(type(d) is int and 0 < d <= MAX_SHARED_BYTES for d in shape):
+        raise ProtocolError(f"shared_batch layout: {what} shape {short_repr(shape)} is not allowed")
+    return dtype, tuple(shape)
+
+
+@dataclass(frozen=True)
+class SharedLayout:
+    """Where each block of a region lies (see the module doc)."""
+
+    worlds: int
+    action_dtype: str
+    action_shape: tuple[int, ...]
+    obs_dtype: str
+    obs_shape: tuple[int, ...]
+
+    def _blocks(self) -> list[tuple[str, str, tuple[int, ...]]]:
+        k = self.worlds
+        return [
+            ("actions", self.action_dtype, (k, *self.action_shape)),
+            ("obs", self.obs_dtype, (k, *self.obs_shape)),
+            ("reward", "<f8", (k,)),
+            ("terminated", "|b1", (k,)),
+            ("truncated", "|b1", (k,)),
+        ]
+
+    @property
+    def size(self) -> int:
+        """Bytes the region needs."""
+        total = 0
+        for _, dtype, shape in self._blocks():
+            total += _aligned(np.dtype(dtype).itemsize * math.prod(shape))
+        return total
+
+    def to_wire(self) -> dict[str, Any]:
+        return {
+            "worlds": self.worlds,
+            "actions": [self.action_dtype, list(self.action_shape)],
+            "obs": [self.obs_dtype, list(self.obs_shape)],
+        }
+
+    @classmethod
+    def from_wire(cls, value: Any) -> SharedLayout:
+        """The layout a peer sent; :class:`ProtocolError` if anything is off or too large."""
+        if not isinstance(value, dict):
+            raise ProtocolError(f"shared_batch layout must be a map, got {short_repr(value)}")
+        worlds = value.get("worlds")
+        if type(worlds) is not int or not 0 < worlds <= _MAX_WORLDS:
+            raise ProtocolError(f"shared_batch layout: worlds must be 1..{_MAX_WORLDS}, got {short_repr(worlds)}")
+        action_dtype, action_shape = _block(value.get("actions"), "actions")
+        obs_dtype, obs_shape = _block(value.get("obs"), "obs")
+        layout = cls(worlds, action_dtype, action_shape, obs_dtype, obs_shape)
+        if layout.size > MAX_SHARED_BYTES:
+            raise ProtocolError(f"shared_batch region of {layout.size} bytes exceeds {MAX_SHARED_BYTES}")
+        return layout
+
+
+class SharedArrays:
+    """numpy views of the blocks of one mapped region (see :class:`SharedLayout`)."""
+
+    def __init__(self, layout: SharedLayout, region: mmap.mmap) -> None:
+        self.layout = layout
+        self._region = region
+        offset = 0
+        views: dict[str, np.ndarray] = {}
+        for name, dtype, shape in layout._blocks():
+            dt = np.dtype(dtype)
+            views[name] = np.ndarray(shape, dtype=dt, buffer=region, offset=offset)
+            offset += _aligned(dt.itemsize * math.prod(shape))
+        self.actions = views["actions"]
+        self.obs = views["obs"]
+        self.reward = views["reward"]
+        self.terminated = views["terminated"]
+        self.truncated = views["truncated"]
+
+    def close(self) -> None:
+        """Drop the views and unmap the region (later use of the views is an error)."""
+        for name in ("actions", "obs", "reward", "terminated", "truncated"):
+            setattr(self, name, None)
+        try:
+            self._region.close()
+        except BufferError:  # a view someone kept: the mapping goes with it
+            pass
+
+
+def create_region(layout: SharedLayout) -> tuple[int, SharedArrays]:
+    """A new anonymous region for ``layout``: its file descriptor and views (sim side)."""
+    fd = os.memfd_create("remoteenv-shared-batch", getattr(os, "MFD_CLOEXEC", 0))
+    try:
+        os.ftruncate(fd, layout.size)
+        region = mmap.mmap(fd, layout.size)
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd, SharedArrays(layout, region)
+
+
+def map_region(path: str, layout: SharedLayout) -> SharedArrays:
+    """Map the region a peer created, opened by ``path`` (agent side). Raises
+    ``OSError`` if it cannot be opened or is smaller than ``layout`` needs."""
+    fd = os.open(path, os.O_RDWR | getattr(os, "O_CLOEXEC", 0))
+    try:
+        if os.fstat(fd).st_size < layout.size:
+            raise OSError(f"{path} is smaller than the {layout.size} bytes its layout needs")
+        region = mmap.mmap(fd, layout.size)
+    finally:
+        os.close(fd)
+    return SharedArrays(layout, region)
+
+
+__all__ = ["MAX_SHARED_BYTES", "SharedArrays", "SharedLayout", "create_region", "map_region"]

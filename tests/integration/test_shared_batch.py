@@ -1,0 +1,94 @@
+"""Batched steps through the local pipe's shared-memory region (``shared_batch``):
+the same results as the msgpack path, used where offered, refused off the pipe."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import remoteenv  # noqa: F401  (registers the ids)
+from remoteenv import scene_path
+from remoteenv.agent import shared_lane
+from remoteenv.agent.connection import Connection
+from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.agent.launcher import Launcher
+
+
+def _trajectory(env_id: str, n: int, steps: int, k: int, autoreset: str) -> list[tuple]:
+    env = gym.make_vec(
+        env_id,
+        num_envs=n,
+        vectorization_mode="vector_entry_point",
+        envs_per_process=k,
+        autoreset_mode=gym.vector.AutoresetMode(autoreset),
+    )
+    rng = np.random.default_rng(3)
+    try:
+        out: list[tuple] = [env.reset(seed=7)]
+        for _ in range(steps):
+            if isinstance(env.single_action_space, gym.spaces.Discrete):
+                actions = rng.integers(0, 2, size=n)
+            else:
+                actions = rng.uniform(-1, 1, size=(n, *env.single_action_space.shape)).astype(np.float32)
+            out.append(env.step(actions))
+        lanes = [arrays is not None for _, arrays in env._requests.lanes._lanes.values()]
+        out.append(("lanes", lanes))
+        return out
+    finally:
+        env.close()
+
+
+def _same(a, b) -> None:
+    if isinstance(a, dict):
+        assert a.keys() == b.keys()
+        for key in a:
+            _same(a[key], b[key])
+    elif isinstance(a, (tuple, list)):
+        assert len(a) == len(b)
+        for x, y in zip(a, b):
+            _same(x, y)
+    elif isinstance(a, np.ndarray):
+        assert isinstance(b, np.ndarray) and a.dtype == b.dtype and a.shape == b.shape
+        if a.dtype == object:  # e.g. final_obs: one entry per world
+            _same(list(a), list(b))
+        else:
+            np.testing.assert_array_equal(a, b)
+    else:
+        assert type(a) is type(b) and a == b
+
+
+@pytest.mark.parametrize(
+    "env_id, autoreset",
+    [
+        ("remoteenv/Reacher-v0", "NextStep"),
+        ("remoteenv/CartPole-v0", "NextStep"),
+        ("remoteenv/CartPole-v0", "SameStep"),
+    ],
+)
+def test_the_region_gives_the_results_of_the_msgpack_path(monkeypatch, env_id, autoreset):
+    # 120 steps cross Reacher's 50-step limit twice and end CartPole episodes.
+    shared = _trajectory(env_id, 6, 120, 3, autoreset)
+    monkeypatch.setattr(shared_lane, "attach", lambda conn: None)
+    plain = _trajectory(env_id, 6, 120, 3, autoreset)
+    assert shared[-1] == ("lanes", [True, True]) and plain[-1] == ("lanes", [False, False])
+    _same(shared[:-1], plain[:-1])
+
+
+def test_only_the_launching_pipe_gets_the_region():
+    with Launcher(scene_path("reacher"), worlds_per_instance=2, startup_timeout=120.0) as launcher:
+        sim = launcher.sims[0]
+        conn = Connection(sim.endpoint, timeout=30.0, death_check=sim.death)
+        try:
+            handshake = conn.request("handshake", protocol=1)
+            assert "shared_batch" in handshake["commands"]
+            with pytest.raises(RemoteEnvError) as info:
+                conn.request("shared_batch")
+            assert info.value.kind == "state" and "local pipe" in str(info.value)
+            conn.request("reset_batch", worlds=[0, 1])
+            with pytest.raises(RemoteEnvError) as info:
+                conn.request("step_batch", ops=[0, 0], shared=True)
+            assert info.value.kind == "state"
+            assert sim.death() is None
+        finally:
+            conn.close()
