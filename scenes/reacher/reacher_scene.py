@@ -50,6 +50,9 @@ class ReacherEnv(BaseEnv):
         self.reward_control_weight = float(reward_control_weight)
         self._fingertip = self.model.body("fingertip").id
         self._target = self.model.body("target").id
+        # Views of this world's state for the batched hooks (MjData keeps its
+        # buffers for its lifetime; each attribute access would build a new view).
+        self._qpos, self._qvel, self._xpos, self._ctrl = self.data.qpos, self.data.qvel, self.data.xpos, self.data.ctrl
 
     def reset_model(self, options: dict[str, Any] | None) -> tuple[np.ndarray, dict[str, Any]]:
         rng = self.np_random
@@ -81,16 +84,16 @@ class ReacherEnv(BaseEnv):
     @classmethod
     def prepare_steps(cls, envs: Sequence[BaseEnv], actions: np.ndarray) -> None:
         for env, action in zip(envs, actions):
-            env.data.ctrl[:] = action
+            env._ctrl[:] = action  # type: ignore[attr-defined]
 
     @classmethod
     def post_steps(cls, envs: Sequence[BaseEnv], actions: np.ndarray) -> BatchResult:
         """:meth:`post_step` for all worlds at once, with numpy over their stacked state."""
         reachers: Sequence[ReacherEnv] = envs  # type: ignore[assignment]
         tip, target = reachers[0]._fingertip, reachers[0]._target
-        qpos = np.array([env.data.qpos for env in reachers])
-        qvel = np.array([env.data.qvel for env in reachers])
-        xpos = np.array([env.data.xpos for env in reachers])
+        qpos = np.array([env._qpos for env in reachers])
+        qvel = np.array([env._qvel for env in reachers])
+        xpos = np.array([env._xpos for env in reachers])
         vec = xpos[:, tip] - xpos[:, target]
         dist_w = np.array([env.reward_dist_weight for env in reachers])
         ctrl_w = np.array([env.reward_control_weight for env in reachers], dtype=np.float32)
