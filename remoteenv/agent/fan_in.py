@@ -5,8 +5,8 @@ processes, then :class:`FanIn` collects the replies with one ``zmq.Poller``
 over their connections, so the processes compute in parallel. While replies
 have been quick it polls without sleeping first (adaptive, see
 :mod:`remoteenv.wire.hot_wait`); local pipes are read in turn instead, one
-blocking read per reply (fewer system calls); stale replies (to abandoned requests) are
-dropped as they come; a dead sim is reported within
+blocking read per reply (fewer system calls); stale replies (to abandoned
+requests) are dropped as they come; a dead sim is reported within
 :data:`~remoteenv.agent.sim_connection.LIVENESS_CHECK_S`; after the timeout
 the connections still pending are rebuilt and :class:`remoteenv.RemoteEnvTimeout`
 is raised.
@@ -79,8 +79,8 @@ class FanIn:
         spinning = hot.worth_it() and not unpolled
         idle_wait_ms = 0 if unpolled else int(LIVENESS_CHECK_S * 1000)
         while pending:
-            # While replies have been quick and a CPU is spare, poll without
-            # sleeping first, yielding the CPU to any process that shares it.
+            # While replies have been quick (and no busy neighbour stalled a
+            # spin), poll without sleeping first, yielding the CPU as we go.
             events = poller.poll(0)
             while not events and spinning:
                 spinning = hot.spin()
