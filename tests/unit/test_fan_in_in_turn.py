@@ -79,3 +79,35 @@ def test_the_whole_call_times_out_naming_the_first_pending_sim():
     with pytest.raises(RemoteEnvTimeout) as err:
         FanIn().gather(conns, pending, "'step_batch'", 0.0, replies)
     assert err.value.instance == 1 and 0 in replies and list(pending) == [1]
+
+
+class LyingSim(InTurn):
+    """Answers every request as if it had used a shared region it never gave."""
+
+    def _send_frame(self, payload: bytes) -> None:
+        seq = protocol.unpack(payload)["seq"]
+        self.frames.append(protocol.pack({"seq": seq, "ok": True, "shared": True, "info": {"columns": {}}}))
+
+
+def test_a_shared_reply_to_a_request_sent_over_the_wire_is_a_protocol_error():
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from remoteenv.agent.restart import RestartBudget
+    from remoteenv.agent.vector_requests import VectorRequests
+    from remoteenv.agent.vector_results import ObsBatch
+
+    conns = [LyingSim(0)]
+    session = SimpleNamespace(
+        conns=conns,
+        handshakes=[SimpleNamespace(offers=lambda cmd: cmd != "shared_batch")],  # no region offered
+        restarts=RestartBudget(False, 0),
+        timeout_for=lambda cmd: 5.0,
+    )
+    requests = VectorRequests(session, [(0, 2)], real_time=False, same_step=False)  # type: ignore[arg-type]
+    ops = np.zeros(2, dtype=np.int64)
+    pending = requests.start_step(ops, np.zeros((2, 1), np.float32))
+    with pytest.raises(RemoteEnvError) as err:
+        requests.finish_step(pending, ops, None, None, ObsBatch(None, 2))  # type: ignore[arg-type]
+    assert err.value.kind == "protocol" and "shared region" in str(err.value)
