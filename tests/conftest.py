@@ -58,6 +58,15 @@ def no_leftover_sims():
 
 
 @pytest.fixture
+def closing():
+    """Register envs to close after the test, whatever happens."""
+    envs = []
+    yield envs.append
+    for env in envs:
+        env.close()
+
+
+@pytest.fixture
 def scene_path():
     return remoteenv.scene_path
 

@@ -19,14 +19,6 @@ REACHER = "remoteenv/Reacher-v0"
 CARTPOLE = "remoteenv/CartPole-v0"
 
 
-@pytest.fixture
-def closing():
-    envs = []
-    yield envs.append
-    for env in envs:
-        env.close()
-
-
 def _action(env_id: str, world: int, t: int) -> np.ndarray:
     """A fixed action for world ``world``'s ``t``-th step (so any order of steps gives the same)."""
     rng = np.random.default_rng(1000 * world + t)

@@ -21,15 +21,6 @@ CARTPOLE = "remoteenv/CartPole-v0"
 REACHER = "remoteenv/Reacher-v0"
 
 
-@pytest.fixture
-def closing():
-    """Register envs to close after the test, whatever happens."""
-    envs = []
-    yield envs.append
-    for env in envs:
-        env.close()
-
-
 def assert_same(a, b, where="value"):
     """Deep equality of obs/info structures (arrays, object arrays, dicts, scalars)."""
     if isinstance(a, dict):
