@@ -61,27 +61,35 @@ def make_envpool(task_id: str, num_envs: int, batch_size: int | None = None) -> 
 
 
 def cpu_seconds(exclude: frozenset[int] = frozenset()) -> float:
-    """CPU seconds (user + system) used so far by this process and its live
-    child processes (the sims, Gymnasium's workers), except the pids in
-    ``exclude``; children are read from /proc (Linux), else left out."""
+    """CPU seconds (user + system) used so far by this process and every live
+    process below it (the sims, Gymnasium's or SB3's workers, also those a
+    forkserver started), except the pids in ``exclude`` and what runs below
+    them; descendants are read from /proc (Linux), else left out."""
     total = time.process_time()
-    me = os.getpid()
     tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
     try:
-        entries = os.listdir("/proc")
+        entries = [e for e in os.listdir("/proc") if e.isdigit()]
     except OSError:
         return total
+    parent: dict[int, int] = {}
+    used: dict[int, float] = {}
     for entry in entries:
-        if not entry.isdigit() or int(entry) in exclude:
-            continue
         try:
             with open(f"/proc/{entry}/stat") as f:
                 fields = f.read().rsplit(")", 1)[1].split()
         except (OSError, IndexError):
             continue
-        if int(fields[1]) == me:  # fields[1] is the ppid; utime and stime are the 12th and 13th after ")"
-            total += (int(fields[11]) + int(fields[12])) / tick
-    return total
+        # After ")": state, ppid, ...; utime and stime are the 12th and 13th.
+        parent[int(entry)] = int(fields[1])
+        used[int(entry)] = (int(fields[11]) + int(fields[12])) / tick
+    me = os.getpid()
+    below = {me}
+    grew = True
+    while grew:
+        new = {pid for pid, ppid in parent.items() if ppid in below and pid not in below and pid not in exclude}
+        below |= new
+        grew = bool(new)
+    return total + sum(used[pid] for pid in below if pid != me)
 
 
 class CpuHog:

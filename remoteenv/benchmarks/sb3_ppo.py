@@ -33,6 +33,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from remoteenv.benchmarks.anchors import cpu_seconds
 from remoteenv.benchmarks.report import emit, progress_log
 
 GYM_ID = "CartPole-v1"
@@ -71,36 +72,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 # ---------------------------------------------------------------- measuring
-
-
-def tree_cpu_seconds() -> float:
-    """CPU seconds (user + system) used so far by this process and every live
-    process below it (sims, SubprocVecEnv's workers under the forkserver);
-    descendants are read from /proc (Linux), else left out."""
-    total = time.process_time()
-    tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-    try:
-        entries = [e for e in os.listdir("/proc") if e.isdigit()]
-    except OSError:
-        return total
-    parent: dict[int, int] = {}
-    used: dict[int, float] = {}
-    for entry in entries:
-        try:
-            with open(f"/proc/{entry}/stat") as f:
-                fields = f.read().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
-            continue
-        # After ")": state, ppid, ...; utime and stime are the 12th and 13th.
-        parent[int(entry)] = int(fields[1])
-        used[int(entry)] = (int(fields[11]) + int(fields[12])) / tick
-    below = {os.getpid()}
-    grew = True
-    while grew:
-        new = {pid for pid, ppid in parent.items() if ppid in below and pid not in below}
-        below |= new
-        grew = bool(new)
-    return total + sum(used[pid] for pid in below if pid != os.getpid())
 
 
 def _linear(initial: float) -> Callable[[float], float]:
@@ -196,11 +167,11 @@ def run_once(name: str, steps: int, seed: int) -> dict[str, Any]:
 
         model.train = timed_train  # type: ignore[method-assign]
         timer = RolloutTimer()
-        cpu0 = tree_cpu_seconds()
+        cpu0 = cpu_seconds()
         t0 = time.perf_counter()
         model.learn(steps, callback=timer)
         total = time.perf_counter() - t0
-        cpu = tree_cpu_seconds() - cpu0  # before close: the workers still count
+        cpu = cpu_seconds() - cpu0  # before close: the workers still count
         returns = [float(ep["r"]) for ep in model.ep_info_buffer or ()]
     finally:
         venv.close()
