@@ -21,7 +21,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from remoteenv.sim.batch_physics import PhysicsThreads, usable_cpus
+from remoteenv.sim.batch_physics import PhysicsThreads
+from remoteenv.wire.hot_wait import usable_cpus
 
 
 class PhysicsLimit:

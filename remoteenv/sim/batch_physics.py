@@ -34,14 +34,6 @@ THREADS_ENV = "REMOTEENV_SIM_THREADS"
 MIN_WORLDS_PER_THREAD = 8
 
 
-def usable_cpus() -> int:
-    """CPUs this process may run on (its affinity mask where the OS has one)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
-
-
 def default_threads(num_worlds: int) -> int:
     """Physics threads for a process hosting ``num_worlds`` worlds: the
     environment variable :data:`THREADS_ENV` if set, else 1.
@@ -149,4 +141,4 @@ def _step_range(models: Sequence[mujoco.MjModel], datas: Sequence[mujoco.MjData]
         step(models[i], datas[i], nstep=nstep)
 
 
-__all__ = ["MIN_WORLDS_PER_THREAD", "THREADS_ENV", "PhysicsThreads", "default_threads", "usable_cpus"]
+__all__ = ["MIN_WORLDS_PER_THREAD", "THREADS_ENV", "PhysicsThreads", "default_threads"]

@@ -42,7 +42,8 @@ class _Neighbours:
     cool_until = 0.0
 
 
-def _usable_cpus() -> int:
+def usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask where the OS has one)."""
     try:
         return len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
@@ -64,7 +65,7 @@ class HotWait:
     """
 
     def __init__(self, window_s: float) -> None:
-        if _usable_cpus() < 2 or os.environ.get("REMOTEENV_NO_SPIN"):
+        if usable_cpus() < 2 or os.environ.get("REMOTEENV_NO_SPIN"):
             window_s = 0.0
         self.window_s = window_s
         self._last_wait_s = 0.0

@@ -11,7 +11,7 @@ from remoteenv.wire.hot_wait import HotWait
 @pytest.fixture(autouse=True)
 def two_cpus(monkeypatch):
     monkeypatch.delenv("REMOTEENV_NO_SPIN", raising=False)
-    monkeypatch.setattr(hot_wait, "_usable_cpus", lambda: 2)
+    monkeypatch.setattr(hot_wait, "usable_cpus", lambda: 2)
     monkeypatch.setattr(hot_wait._Neighbours, "cool_until", 0.0)
 
 
@@ -35,9 +35,9 @@ def test_stops_when_the_peer_is_slow_and_probes_every_32_waits():
 
 def test_disabled_by_a_zero_window_one_cpu_or_the_environment(monkeypatch):
     assert not HotWait(0.0).worth_it()
-    monkeypatch.setattr(hot_wait, "_usable_cpus", lambda: 1)
+    monkeypatch.setattr(hot_wait, "usable_cpus", lambda: 1)
     assert HotWait(1e-3).window_s == 0.0
-    monkeypatch.setattr(hot_wait, "_usable_cpus", lambda: 2)
+    monkeypatch.setattr(hot_wait, "usable_cpus", lambda: 2)
     monkeypatch.setenv("REMOTEENV_NO_SPIN", "1")
     single = HotWait(1e-3)
     assert single.window_s == 0.0 and not single.worth_it()
