@@ -6,6 +6,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from equality import assert_same
 
 import remoteenv  # noqa: F401  (registers the ids)
 from remoteenv import scene_path
@@ -39,25 +40,6 @@ def _trajectory(env_id: str, n: int, steps: int, k: int, autoreset: str) -> list
         env.close()
 
 
-def _same(a, b) -> None:
-    if isinstance(a, dict):
-        assert a.keys() == b.keys()
-        for key in a:
-            _same(a[key], b[key])
-    elif isinstance(a, (tuple, list)):
-        assert len(a) == len(b)
-        for x, y in zip(a, b):
-            _same(x, y)
-    elif isinstance(a, np.ndarray):
-        assert isinstance(b, np.ndarray) and a.dtype == b.dtype and a.shape == b.shape
-        if a.dtype == object:  # e.g. final_obs: one entry per world
-            _same(list(a), list(b))
-        else:
-            np.testing.assert_array_equal(a, b)
-    else:
-        assert type(a) is type(b) and a == b
-
-
 @pytest.mark.parametrize(
     "env_id, autoreset",
     [
@@ -72,7 +54,7 @@ def test_the_region_gives_the_results_of_the_msgpack_path(monkeypatch, env_id, a
     monkeypatch.setattr(shared_lane, "attach", lambda conn: None)
     plain = _trajectory(env_id, 6, 120, 3, autoreset)
     assert shared[-1] == ("lanes", [True, True]) and plain[-1] == ("lanes", [False, False])
-    _same(shared[:-1], plain[:-1])
+    assert_same(shared[:-1], plain[:-1], "trajectory")
 
 
 def test_only_the_launching_pipe_gets_the_region():

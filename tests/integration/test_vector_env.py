@@ -12,6 +12,7 @@ import os
 import gymnasium as gym
 import numpy as np
 import pytest
+from equality import assert_same
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import remoteenv
@@ -19,24 +20,6 @@ from remoteenv import RemoteVectorEnv
 
 CARTPOLE = "remoteenv/CartPole-v0"
 REACHER = "remoteenv/Reacher-v0"
-
-
-def assert_same(a, b, where="value"):
-    """Deep equality of obs/info structures (arrays, object arrays, dicts, scalars)."""
-    if isinstance(a, dict):
-        assert isinstance(b, dict) and set(a) == set(b), f"{where}: keys {sorted(a)} != {sorted(b)}"
-        for k in a:
-            assert_same(a[k], b[k], f"{where}[{k!r}]")
-    elif isinstance(a, np.ndarray) and a.dtype == object:
-        assert isinstance(b, np.ndarray) and a.shape == b.shape, f"{where}: {a!r} != {b!r}"
-        for i, (x, y) in enumerate(zip(a, b)):
-            assert_same(x, y, f"{where}[{i}]")
-    elif isinstance(a, np.ndarray):
-        assert isinstance(b, np.ndarray), f"{where}: {type(b)} is not an array"
-        assert a.dtype == b.dtype and a.shape == b.shape, f"{where}: {a.dtype}{a.shape} != {b.dtype}{b.shape}"
-        np.testing.assert_array_equal(a, b, err_msg=where)
-    else:
-        assert a == b, f"{where}: {a!r} != {b!r}"
 
 
 def reference_vector(env_id, num_envs, max_episode_steps, mode, **kwargs):

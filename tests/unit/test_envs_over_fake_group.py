@@ -15,6 +15,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+from equality import assert_same
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from remoteenv import OpenAIRemoteEnv, RemoteVectorEnv
@@ -387,22 +388,6 @@ def reference(num_envs: int, limit: int | None, mode: AutoresetMode) -> SyncVect
         return gym.wrappers.TimeLimit(env, limit) if limit else env
 
     return SyncVectorEnv([one] * num_envs, autoreset_mode=mode)
-
-
-def assert_same(a: Any, b: Any, where: str) -> None:
-    if isinstance(a, dict):
-        assert isinstance(b, dict) and set(a) == set(b), f"{where}: {sorted(a)} != {sorted(b)}"
-        for key in a:
-            assert_same(a[key], b[key], f"{where}[{key!r}]")
-    elif isinstance(a, np.ndarray) and a.dtype == object:
-        assert isinstance(b, np.ndarray) and a.shape == b.shape, where
-        for i, (x, y) in enumerate(zip(a, b)):
-            assert_same(x, y, f"{where}[{i}]")
-    elif isinstance(a, np.ndarray):
-        assert isinstance(b, np.ndarray) and a.dtype == b.dtype and a.shape == b.shape, f"{where}: {a!r} {b!r}"
-        np.testing.assert_array_equal(a, b, err_msg=where)
-    else:
-        assert a == b, f"{where}: {a!r} != {b!r}"
 
 
 @pytest.mark.parametrize("mode", list(AutoresetMode))
