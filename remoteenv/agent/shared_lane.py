@@ -44,6 +44,8 @@ class SharedLanes:
 
     def __init__(self) -> None:
         self._lanes: dict[int, tuple[SimConnection, SharedArrays | None]] = {}
+        #: The processes whose last actions went through their region.
+        self._written: set[int] = set()
 
     def get(self, p: int, conn: SimConnection, offered: bool) -> SharedArrays | None:
         """Process ``p``'s region (``conn`` is its connection; ``offered``: its
@@ -60,6 +62,7 @@ class SharedLanes:
     def put_actions(self, p: int, conn: SimConnection, offered: bool, actions: Any) -> bool:
         """Write ``actions`` (one array for positions ``0 .. n-1``) into process
         ``p``'s region; False (nothing written) if it has none or they do not fit."""
+        self._written.discard(p)
         arrays = self.get(p, conn, offered)
         if arrays is None or not isinstance(actions, np.ndarray):
             return False
@@ -68,15 +71,20 @@ class SharedLanes:
         if actions.dtype != block.dtype or actions.shape[1:] != block.shape[1:] or not 0 < n <= len(block):
             return False
         block[:n] = actions
+        self._written.add(p)
         return True
 
     def fill(self, p: int, reply: dict[str, Any], n: int) -> None:
         """Put the arrays of a shared reply for ``n`` positions into ``reply``
-        (fresh copies, as a decoded reply would hold them)."""
-        arrays = self._lanes[p][1]
+        (fresh copies, as a decoded reply would hold them). A shared reply to
+        actions that did not go through the region is a ``protocol`` error."""
+        arrays = self._lanes[p][1] if p in self._written else None
         if arrays is None:
             raise RemoteEnvError(
-                f"sim instance {p} answered from a shared region it never gave", kind="protocol", instance=p
+                f"sim instance {p} answered a step_batch sent over the wire as if it used "
+                "the shared region; its reply is off the protocol",
+                kind="protocol",
+                instance=p,
             )
         reply["obs"] = arrays.obs[:n].copy()
         reply["reward"] = arrays.reward[:n].copy()
