@@ -17,6 +17,7 @@ COMMANDS = {
     "launch": "launch",
     "check": "check",
     "latency-sweep": "latency_sweep",
+    "latency-study": "latency_study",
 }
 
 

@@ -1,0 +1,122 @@
+"""``python -m remoteenv latency-study``: does a policy that sees its actions in
+flight keep its return as the action delay grows, where a delay-unaware one
+collapses?
+
+For every delay (constant ``k`` ticks, and ``Uniform(0, k)``), every variant
+(``plain``: the observation only; ``history``: the observation followed by the
+last ``k`` actions sent, plus the last step's latency under random delays)
+and every seed, it trains Stable-Baselines3 PPO in lock-step (so every run
+repeats from its seed) and evaluates the deterministic policy at the delay it
+was trained under. Then it runs trained policies in real time with a think
+time, records the latency every action had, replays the recordings in
+lock-step, and compares the two return distributions.
+
+Outputs in ``--out``: ``delay_effect.json`` (every record, rewritten after
+each finished run; ``--resume`` continues an interrupted study),
+``delay_effect.png`` (per-seed points, mean ± std), ``delay_effect.md`` (the
+table) and ``rt_replay.json``. The defaults are the study of docs/latency.md::
+
+    python -m remoteenv latency-study --out docs/latency
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+from typing import Any
+
+from remoteenv.cli.latency_sweep import int_list
+
+DEFAULT_ENV = "remoteenv/CartPole-v0"
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "latency-study",
+        help="train PPO with and without the actions in flight across action delays; plot the effect",
+        description=__doc__.split("\n\n")[1] if __doc__ else None,
+    )
+    p.add_argument("--env", default=DEFAULT_ENV, help=f"a registered Gymnasium id (default {DEFAULT_ENV})")
+    p.add_argument(
+        "--env-kwargs",
+        default=None,
+        help="JSON map for the env (default '{\"continuous\": true}' for the default env, else {})",
+    )
+    p.add_argument("--delays", default="0,4,8,12", help="constant action delays in ticks (default 0,4,8,12)")
+    p.add_argument(
+        "--random-delays", default="4,8,12", help="k of the Uniform(0, k) delays in ticks; '' for none (default 4,8,12)"
+    )
+    p.add_argument("--seeds", default="0,1,2", help="training seeds (default 0,1,2)")
+    p.add_argument("--steps", type=int, default=300_000, help="environment steps per training run (default 300000)")
+    p.add_argument("--eval-episodes", type=int, default=10, help="evaluation episodes per policy (default 10)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=min(2, os.cpu_count() or 1),
+        help="training runs in parallel, one per core (default min(2, CPUs))",
+    )
+    p.add_argument("--out", default="latency-study", help="output directory (default ./latency-study)")
+    p.add_argument("--resume", action="store_true", help="keep the finished runs of an interrupted study in --out")
+    p.add_argument("--no-plot", action="store_true", help="skip the figure (no matplotlib needed)")
+    p.add_argument("--rt-episodes", type=int, default=20, help="real-time episodes per policy for the twin check")
+    p.add_argument("--no-rt-replay", action="store_true", help="skip the real-time / lock-step replay comparison")
+    p.set_defaults(run=run)
+
+
+def _config(args: argparse.Namespace) -> Any:
+    from remoteenv.latency_study.design import StudyConfig
+
+    if args.env_kwargs is None:
+        kwargs: Any = {"continuous": True} if args.env == DEFAULT_ENV else {}
+    else:
+        try:
+            kwargs = json.loads(args.env_kwargs)
+        except json.JSONDecodeError as exc:
+            raise SystemExit(f"--env-kwargs is not JSON: {exc}") from None
+        if not isinstance(kwargs, dict):
+            raise SystemExit("--env-kwargs must be a JSON map")
+    if args.steps < 1 or args.eval_episodes < 1 or args.workers < 1 or args.rt_episodes < 1:
+        raise SystemExit("--steps, --eval-episodes, --workers and --rt-episodes must be >= 1")
+    random_delays = int_list(args.random_delays, "--random-delays") if args.random_delays.strip() else []
+    return StudyConfig(
+        env_id=args.env,
+        env_kwargs=kwargs,
+        delays=tuple(int_list(args.delays, "--delays")),
+        random_delays=tuple(random_delays),
+        seeds=tuple(int_list(args.seeds, "--seeds")),
+        steps=args.steps,
+        eval_episodes=args.eval_episodes,
+    )
+
+
+def _check_writable(folder: str) -> None:
+    """Fail now, not after an hour of training, if ``folder`` cannot take the outputs."""
+    os.makedirs(folder, exist_ok=True)
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".write-check-"):
+            pass
+    except OSError as exc:
+        raise SystemExit(f"--out {folder!r} is not writable: {exc.strerror}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    from remoteenv.latency_study.results import markdown_table, plot
+    from remoteenv.latency_study.runner import run_study
+
+    config = _config(args)
+    _check_writable(args.out)
+    json_path = os.path.join(args.out, "delay_effect.json")
+    with tempfile.TemporaryDirectory(prefix="remoteenv-study-policies-") as policy_dir:
+        data = run_study(config, json_path, workers=args.workers, resume=args.resume, policy_dir=policy_dir)
+        table = markdown_table(data["records"])
+        with open(os.path.join(args.out, "delay_effect.md"), "w") as f:
+            f.write(table + "\n")
+        if not args.no_plot:
+            seeds = f"{len(config.seeds)} seed{'s' if len(config.seeds) > 1 else ''}"
+            title = f"{config.env_id}: PPO, {config.steps} steps per run, {seeds}"
+            plot(data["records"], os.path.join(args.out, "delay_effect.png"), title)
+        print(table)
+        print(f"wrote {json_path} (training wall time {data['wall_s']:.0f} s on {data['host']['cpus']} CPUs)")
+    return 0

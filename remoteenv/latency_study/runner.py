@@ -1,0 +1,98 @@
+"""Run every cell of a delay-effect study, in parallel worker processes, with
+a progress bar, writing ``delay_effect.json`` after every finished cell
+(agent side; needs Stable-Baselines3, torch and tqdm).
+
+Each worker is a fresh (spawned) Python process that trains one cell at a
+time with one torch thread; each cell starts its own sim process. Use one
+worker per CPU core: PPO's updates and the sims then share the cores evenly.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import platform
+import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import Any
+
+from remoteenv.latency_study.design import Cell, StudyConfig, cells
+from remoteenv.latency_study.results import load_records, record_key, write_json
+
+
+def host_facts() -> dict[str, Any]:
+    """What a reader needs to compare wall times: CPUs, load, versions."""
+    import mujoco
+    import stable_baselines3
+    import torch
+
+    return {
+        "cpus": os.cpu_count(),
+        "load_average": list(os.getloadavg()),
+        "python": platform.python_version(),
+        "mujoco": mujoco.__version__,
+        "torch": torch.__version__,
+        "stable_baselines3": stable_baselines3.__version__,
+    }
+
+
+def _run_cell(config: StudyConfig, cell: Cell, policy_dir: str | None) -> dict[str, Any]:
+    from remoteenv.latency_study.training import run_cell
+
+    return run_cell(config, cell, policy_dir)
+
+
+def run_study(
+    config: StudyConfig,
+    json_path: str,
+    workers: int = 2,
+    resume: bool = False,
+    policy_dir: str | None = None,
+    on_record: Callable[[dict[str, Any]], None] | None = None,
+) -> dict[str, Any]:
+    """Train and evaluate every cell of ``config`` not yet in ``json_path``
+    (with ``resume``; otherwise all of them) and return the study's data.
+
+    Args:
+        config: the study.
+        json_path: where ``delay_effect.json`` is written after each cell.
+        workers: worker processes (1 runs the cells in this process).
+        resume: keep the records of an earlier run of the same configuration.
+        policy_dir: if given, each trained policy is saved there (SB3 zip).
+        on_record: called in this process with each finished record.
+    """
+    from tqdm import tqdm
+
+    records = load_records(json_path, config) if resume else []
+    done = {record_key(r) for r in records}
+    todo = [c for c in cells(config) if c.key not in done]
+    started = time.perf_counter()
+    data: dict[str, Any] = {"config": config.to_json(), "wall_s": None, "host": host_facts(), "records": records}
+    write_json(json_path, data)
+
+    def finished(record: dict[str, Any]) -> None:
+        records.append(record)
+        write_json(json_path, data)
+        if on_record is not None:
+            on_record(record)
+
+    with tqdm(total=len(todo), unit="run", desc="delay study") as bar:
+        if workers <= 1:
+            for cell in todo:
+                bar.set_postfix_str(cell.label())
+                finished(_run_cell(config, cell, policy_dir))
+                bar.update(1)
+        else:
+            context = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+                futures = {pool.submit(_run_cell, config, cell, policy_dir): cell for cell in todo}
+                for future in as_completed(futures):
+                    record = future.result()
+                    finished(record)
+                    bar.set_postfix_str(f"{futures[future].label()}: {record['mean_return']:.0f}")
+                    bar.update(1)
+    data["wall_s"] = time.perf_counter() - started
+    data["host"]["load_average_end"] = list(os.getloadavg())
+    write_json(json_path, data)
+    return data

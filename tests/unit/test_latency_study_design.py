@@ -1,0 +1,91 @@
+"""The delay-effect study's grid, configuration and results helpers (no training here)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from remoteenv.delays import Uniform
+from remoteenv.latency_study.design import PPO_SETTINGS, Cell, StudyConfig, cells
+from remoteenv.latency_study.results import load_records, markdown_table, summarize, write_json
+
+
+def test_cells_cover_every_variant_delay_and_seed_once_in_a_fixed_order():
+    config = StudyConfig(delays=(0, 8), random_delays=(8,), seeds=(0, 1))
+    grid = list(cells(config))
+    assert len(grid) == (2 + 1) * 2 * 2
+    assert len({c.key for c in grid}) == len(grid)
+    assert grid[0] == Cell("plain", "constant", 0, 0)
+    assert grid[-1] == Cell("history", "uniform", 8, 1)
+    assert list(cells(config)) == grid
+
+
+def test_a_cell_says_what_the_policy_sees_and_which_delay_the_env_gets():
+    assert Cell("plain", "constant", 8, 0).history_length == 0
+    assert Cell("history", "constant", 8, 0).history_length == 8
+    assert not Cell("history", "constant", 8, 0).include_latency
+    assert Cell("history", "uniform", 8, 0).include_latency
+    assert not Cell("plain", "uniform", 8, 0).include_latency
+    assert Cell("history", "constant", 0, 0).uses_wrapper is False
+    assert Cell("plain", "constant", 4, 0).delay_spec() == 4
+    assert Cell("plain", "uniform", 4, 0).delay_spec() == Uniform(0, 4)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"delays": (-1,)},
+        {"seeds": ()},
+        {"delays": (), "random_delays": ()},
+        {"steps": 0},
+        {"eval_episodes": 0},
+        {"ppo": {"learning_rat": 1e-3}},
+        {"delays": (True,)},
+    ],
+)
+def test_a_bad_configuration_is_refused(kwargs):
+    with pytest.raises(ValueError):
+        StudyConfig(**kwargs)
+
+
+def test_the_configuration_round_trips_through_json_and_keeps_the_ppo_overrides():
+    config = StudyConfig(delays=(0, 4), random_delays=(), seeds=(3,), steps=1000, ppo={"gamma": 0.99})
+    again = StudyConfig.from_json(json.loads(json.dumps(config.to_json())))
+    assert again == config
+    assert again.ppo_settings["gamma"] == 0.99
+    assert again.ppo_settings["n_steps"] == PPO_SETTINGS["n_steps"]
+
+
+def _record(variant, kind, delay, seed, mean):
+    return {"variant": variant, "kind": kind, "delay": delay, "seed": seed, "mean_return": mean}
+
+
+def test_summary_and_table_give_each_variant_its_mean_spread_and_seeds():
+    records = [
+        _record("plain", "constant", 8, 0, 20.0),
+        _record("plain", "constant", 8, 1, 40.0),
+        _record("history", "constant", 8, 0, 500.0),
+        _record("history", "constant", 8, 1, 480.0),
+        _record("history", "uniform", 4, 0, 300.0),
+    ]
+    summary = summarize(records)
+    plain = next(s for s in summary if s["variant"] == "plain")
+    assert plain["mean"] == 30.0 and plain["min"] == 20.0 and plain["max"] == 40.0 and plain["seeds"] == 2
+    assert np.isclose(plain["std"], 10.0)
+    table = markdown_table(records)
+    assert "| 8 | 30 (20–40) | 20, 40 | 490 (480–500) | 500, 480 |" in table
+    assert "| Uniform(0, 4) | – | – | 300 (300–300) | 300 |" in table
+
+
+def test_resume_keeps_records_of_the_same_configuration_only(tmp_path):
+    config = StudyConfig(delays=(0,), random_delays=(), seeds=(0,), steps=10)
+    path = str(tmp_path / "delay_effect.json")
+    assert load_records(path, config) == []
+    write_json(path, {"config": config.to_json(), "records": [_record("plain", "constant", 0, 0, 9.0)]})
+    assert load_records(path, config)[0]["mean_return"] == 9.0
+    other = StudyConfig(delays=(0,), random_delays=(), seeds=(0,), steps=20)
+    with pytest.raises(ValueError, match="another configuration"):
+        load_records(path, other)
+    assert [p.name for p in tmp_path.iterdir()] == ["delay_effect.json"]  # no temporary file left
