@@ -8,6 +8,8 @@ replays the same timing in lock-step, where it repeats exactly:
 - :class:`LatencyRecorder` wraps a real-time env and turns every step's
   reply into the delays of the lock-step ticks it spanned. Each episode is
   saved as a plain :class:`remoteenv.delays.Trace` file (:meth:`LatencyRecorder.save`).
+  :class:`LatencyRecorderVector` does the same per world of a real-time
+  :class:`remoteenv.RemoteVectorEnv`.
 - :func:`make_twin` launches the lock-step env with ``action_delay=Trace(...)``
   of one recorded episode and wraps it in :class:`LockStepTwin`, whose
   ``step`` is one elastic step: it holds the agent's decision for the ticks
@@ -20,23 +22,26 @@ real-time step ``j`` whose action took effect ``L_j`` control ticks after the
 observation it was computed from (``info["latency_ticks"]``, fractional:
 sim time from that observation to the physics substep where the action took
 effect) is answered at the end of that tick, so its reply reports
-``ticks_elapsed = floor(L_j) + 1``. The twin gives the same decision the
-lock-step latency ``m_j = ticks_elapsed - 1 = floor(L_j)``: the agent's
-action is in force from the start of the tick in which real time applied it
-mid-tick, and the decision is held for ``m_j + 1`` ticks, re-sent each tick
-with the countdown delays ``m_j, m_j - 1, ..., 0``, all due at the same tick
-(docs/latency.md: the newest of them is in force, the older copies are
-dropped). So the trace of an episode is the concatenated countdowns, one
-value per tick, and the hold lengths are read back from the values alone
-(:func:`decision_ticks`). Reproduced exactly: which ticks each decision
-spans, the observation the agent sees (the state at the end of the first
-tick its action acted in), the reward summed over those ticks, and each
-action's tick of effect. Not reproduced: within that tick, real time ran
-the first ``frac(L_j)`` of it (``round(frac(L_j) * frame_skip)`` physics
-substeps) on the previous action; the twin runs the whole tick on the new
-one. A step whose action never took effect (the episode ended while the
-agent thought) becomes the countdown ``ticks_elapsed, ..., 1``: due one tick
-after the episode ended.
+``ticks_elapsed = floor(L_j) + 1``. The twin holds the same decision for
+those ``ticks_elapsed`` lock-step ticks, re-sending it each tick with the
+countdown delays ``L'_j, L'_j - 1, ...``, so that every copy is due at the
+same tick (docs/latency.md: the newest due copy is in force, older ones are
+dropped) and the action starts at a whole tick ``L'_j`` after the
+observation. ``L'_j`` is ``L_j`` rounded to the nearest tick (default) or
+down (``rounding="floor"``; see :func:`twin_latency`). The trace of an
+episode is its countdowns, one value per tick, and the hold lengths are read
+back from the values alone (:func:`decision_ticks`).
+
+Reproduced exactly: the ticks each decision spans and so the sim time of
+every observation the agent sees, the reward summed over those ticks, and
+the tick each action's effect starts at, to within half a tick of real
+time. Not reproduced: real time switched actions at a physics substep
+inside a tick; the twin switches at the nearest tick boundary (so with
+``"nearest"`` an action real time applied in the second half of the last
+tick of its step starts in the next tick, after the reply, and one that is
+then overtaken by the next action never acts, as it barely did). A step
+whose action never took effect (the episode ended while the agent thought)
+gets ``L' = ticks_elapsed``: due one tick after the end.
 """
 
 from remoteenv.latency_twin.compare import (
@@ -50,10 +55,12 @@ from remoteenv.latency_twin.compare import (
 from remoteenv.latency_twin.recorder import LatencyRecorder, RecordedEpisode, save_episode
 from remoteenv.latency_twin.replay import LockStepTwin, make_twin
 from remoteenv.latency_twin.trace import ROUNDINGS, decision_ticks, twin_latency, twin_values
+from remoteenv.latency_twin.vector_recorder import LatencyRecorderVector
 
 __all__ = [
     "DEFAULT_RELATIVE_TOLERANCE",
     "LatencyRecorder",
+    "LatencyRecorderVector",
     "LockStepTwin",
     "ROUNDINGS",
     "RecordedEpisode",

@@ -90,6 +90,59 @@ class RecordedEpisode:
         }
 
 
+class EpisodeLog:
+    """The episodes of one world as they happen (the bookkeeping of
+    :class:`LatencyRecorder` and of each world of :class:`LatencyRecorderVector
+    <remoteenv.latency_twin.vector_recorder.LatencyRecorderVector>`).
+
+    Attributes:
+        episodes: the recorded episodes, oldest first (clear it at will).
+        current: the episode in progress (None before the first reset and
+            after an episode ended).
+    """
+
+    def __init__(self, rounding: str = "nearest") -> None:
+        if rounding not in ROUNDINGS:
+            raise ValueError(f"rounding must be one of {ROUNDINGS}, got {rounding!r}")
+        self.rounding = rounding
+        self.episodes: list[RecordedEpisode] = []
+        self.current: RecordedEpisode | None = None
+        self._seed: int | None = None
+        self._since_seed = 0
+
+    def start(self, seed: int | None) -> None:
+        """A reset, with its seed (None: unseeded); an episode in progress is kept, cut short."""
+        if self.current is not None and self.current.steps:
+            self.episodes.append(self.current)
+        if seed is not None:
+            self._seed, self._since_seed = int(seed), 0
+        elif self.current is not None or self.episodes:
+            self._since_seed += 1
+        self.current = RecordedEpisode(self._seed, self._since_seed, rounding=self.rounding)
+
+    def record(self, ticks_elapsed: int, latency_ticks: float | None, reward: float) -> None:
+        """One real-time step (``latency_ticks`` None: its action never took effect)."""
+        if self.current is None:
+            raise RuntimeError("a real-time step outside an episode: call reset() first")
+        self.current.ticks_elapsed.append(int(ticks_elapsed))
+        self.current.latency_ticks.append(None if latency_ticks is None else float(latency_ticks))
+        self.current.rewards.append(float(reward))
+
+    def finish(self, terminated: bool, truncated: bool) -> None:
+        """The episode in progress ended."""
+        if self.current is not None:
+            self.current.terminated, self.current.truncated = bool(terminated), bool(truncated)
+            self.episodes.append(self.current)
+            self.current = None
+
+
+def check_real_time(env: Any, who: str) -> None:
+    """Refuse an env whose handshake says lock-step."""
+    handshake = getattr(getattr(env, "unwrapped", env), "handshake", None)
+    if handshake is not None and not handshake.real_time:
+        raise ValueError(f"{who} records the latencies of a real-time run: make the env with real_time=True")
+
+
 class LatencyRecorder(gym.Wrapper):
     """Records every real-time episode for its lock-step twin.
 
@@ -107,52 +160,39 @@ class LatencyRecorder(gym.Wrapper):
             :func:`~remoteenv.latency_twin.twin_latency`).
 
     Attributes:
-        episodes: the recorded episodes, oldest first (clear it at will).
-        current: the episode in progress (None before the first reset and
-            after an episode ended).
+        log: the :class:`EpisodeLog`; ``episodes`` and ``current`` are its.
     """
 
     def __init__(self, env: gym.Env, rounding: str = "nearest") -> None:
         super().__init__(env)
-        if rounding not in ROUNDINGS:
-            raise ValueError(f"rounding must be one of {ROUNDINGS}, got {rounding!r}")
-        handshake = getattr(env.unwrapped, "handshake", None)
-        if handshake is not None and not handshake.real_time:
-            raise ValueError(
-                "LatencyRecorder records the latencies of a real-time run: make the env with real_time=True"
-            )
-        self.rounding = rounding
-        self.episodes: list[RecordedEpisode] = []
-        self.current: RecordedEpisode | None = None
-        self._seed: int | None = None
-        self._since_seed = 0
+        check_real_time(env, "LatencyRecorder")
+        self.log = EpisodeLog(rounding)
+
+    @property
+    def episodes(self) -> list[RecordedEpisode]:
+        """The recorded episodes, oldest first."""
+        return self.log.episodes
+
+    @property
+    def current(self) -> RecordedEpisode | None:
+        """The episode in progress, if any."""
+        return self.log.current
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
-        if self.current is not None and self.current.steps:
-            self.episodes.append(self.current)  # cut short by this reset
-        if seed is not None:
-            self._seed, self._since_seed = int(seed), 0
-        elif self.current is not None or self.episodes:
-            self._since_seed += 1
-        self.current = RecordedEpisode(self._seed, self._since_seed, rounding=self.rounding)
+        self.log.start(seed)
         return obs, info
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
-        episode = self.current
-        if episode is None:
+        if self.log.current is None:
             raise RuntimeError("LatencyRecorder.step outside an episode: call reset() first")
         obs, reward, terminated, truncated, info = self.env.step(action)
         if "ticks_elapsed" not in info or "action_sim_time" not in info:
             raise ValueError("this env's step info has no ticks_elapsed/action_sim_time: is it real_time=True?")
         applied = info["action_sim_time"] is not None and info.get("latency_ticks") is not None
-        episode.ticks_elapsed.append(int(info["ticks_elapsed"]))
-        episode.latency_ticks.append(float(info["latency_ticks"]) if applied else None)
-        episode.rewards.append(float(reward))
+        self.log.record(info["ticks_elapsed"], info["latency_ticks"] if applied else None, float(reward))
         if terminated or truncated:
-            episode.terminated, episode.truncated = bool(terminated), bool(truncated)
-            self.episodes.append(episode)
-            self.current = None
+            self.log.finish(terminated, truncated)
         return obs, reward, terminated, truncated, info
 
     def save(self, path: str | os.PathLike[str], episode: int = -1) -> str:
@@ -183,4 +223,4 @@ def save_episode(
     return write_trace_file(path, rec.values(rounding), header)
 
 
-__all__ = ["LatencyRecorder", "RecordedEpisode", "save_episode"]
+__all__ = ["EpisodeLog", "LatencyRecorder", "RecordedEpisode", "check_real_time", "save_episode"]

@@ -19,7 +19,7 @@ import numpy as np
 import remoteenv  # noqa: F401
 from remoteenv.controllers import cartpole_continuous
 from remoteenv.delays import Trace
-from remoteenv.latency_twin import LatencyRecorder, decision_ticks, make_twin
+from remoteenv.latency_twin import LatencyRecorder, LatencyRecorderVector, decision_ticks, make_twin
 
 ENV_ID = "remoteenv/CartPole-v0"
 EXAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "examples", "real_time_twin.py")
@@ -114,3 +114,44 @@ def test_the_example_runs_and_writes_its_comparison(tmp_path):
             assert result["traces"]["values"] == sum(result["real_time"]["ticks"])
         for e in range(2):
             assert Trace(str(tmp_path / "traces" / policy / f"episode-{e}.trace.txt")).values
+
+
+def test_each_world_of_a_real_time_vector_env_is_recorded_and_its_twin_starts_where_it_did():
+    envs = LatencyRecorderVector(
+        gym.make_vec(
+            ENV_ID,
+            num_envs=2,
+            vectorization_mode="vector_entry_point",
+            continuous=True,
+            real_time=True,
+            max_episode_steps=4,
+        )
+    )
+    starts: list[list[np.ndarray]] = [[], []]
+    try:
+        obs, _ = envs.reset(seed=5)
+        for w in range(2):
+            starts[w].append(obs[w])
+        restarting = np.zeros(2, dtype=bool)
+        for _ in range(10):  # 4 steps, an autoreset step, 4 steps, an autoreset step
+            obs, _, terminated, truncated, _ = envs.step(np.stack([cartpole_continuous(o) for o in obs]))
+            for w in np.flatnonzero(restarting):
+                starts[w].append(obs[w])
+            restarting = np.logical_or(terminated, truncated)
+    finally:
+        envs.close()
+    for w, episodes in enumerate(envs.episodes):
+        assert [(e.seed, e.resets_after_seed, e.steps, e.truncated) for e in episodes] == [
+            (5 + w, 0, 4, True),
+            (5 + w, 1, 4, True),
+        ]
+        assert all(sum(e.ticks_elapsed) == len(e.values()) >= 4 for e in episodes)
+    # The second episode of world 1 began after an unseeded reset: its twin gets there the same way.
+    twin = make_twin(ENV_ID, envs.episodes[1][1].trace(), continuous=True)
+    try:
+        first, _ = twin.reset(seed=6)
+        second, _ = twin.reset()
+    finally:
+        twin.close()
+    np.testing.assert_array_equal(first, starts[1][0])
+    np.testing.assert_array_equal(second, starts[1][1])
