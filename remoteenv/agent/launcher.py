@@ -6,7 +6,7 @@ an ipc socket in a private temp dir, or tcp on 127.0.0.1 with a port the OS
 assigns. The launcher waits until each sim reports its bound endpoint (never a
 fixed sleep), and stops them on :meth:`close`, on interpreter exit or when it
 is garbage collected: SIGTERM to the process group, then SIGKILL, then the
-private dir (socket files, logs) is removed. Each sim also watches its parent
+private dir (socket files, logs, delay files) is removed. Each sim also watches its parent
 and exits if the agent dies.
 """
 
