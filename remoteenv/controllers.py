@@ -1,9 +1,16 @@
 """Hand-written controllers for the shipped scenes (agent side).
 
 Used by the demo, the tests and the examples as fixed, known-good policies.
+:class:`CartpolePredictor` is the delay-aware one: it knows the actions
+still in flight and what they will do.
 """
 
 from __future__ import annotations
+
+import importlib
+import importlib.resources
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -18,6 +25,104 @@ def cartpole_continuous(obs: np.ndarray) -> np.ndarray:
     """Balance the pole and centre the cart: ``Box(-1, 1, (1,))`` action."""
     u = float(np.dot(CARTPOLE_GAINS, np.asarray(obs, dtype=np.float64)))
     return np.array([np.clip(u, -1.0, 1.0)], dtype=np.float32)
+
+
+#: Control tick of the CartPole scene (s): ``frame_skip`` substeps of its model's timestep.
+CARTPOLE_DT = 0.02
+#: Entries of a CartPole observation (and of its state): ``[x, x_dot, theta, theta_dot]``.
+CARTPOLE_OBS = 4
+
+
+class CartpolePredictor:
+    """LQR for continuous CartPole that looks through the actions in flight.
+
+    Under an action delay of ``k`` ticks the action chosen now acts on the
+    state ``k`` ticks from now, after the ``k`` actions already sent have
+    taken effect. This controller puts the (delayed) observation into a
+    MuJoCo copy of the scene's own model (``cartpole.xml`` of the installed
+    ``remoteenv.scenes.cartpole``), rolls it forward one control tick per
+    action in flight (each held for :data:`CARTPOLE_DT` s, as the sim holds
+    it), and applies :func:`cartpole_continuous`'s gains to the predicted
+    state. With no action in flight it is :func:`cartpole_continuous`.
+
+    Called on an observation of :class:`remoteenv.wrappers.ActionHistory`
+    (``[x, x_dot, theta, theta_dot, a_{t-k+1}, ..., a_t]``, oldest first; the
+    zeros after a reset are the default action, zero force), it takes the
+    ``k`` actions from there: in lock-step with ``action_delay=k`` and
+    ``ActionHistory(env, k)`` those are exactly the actions in force during
+    the next ``k`` ticks, so the prediction is exact up to the observation's
+    float32 rounding.
+
+    Args:
+        gains: state-feedback gains on ``[x, x_dot, theta, theta_dot]``.
+    """
+
+    def __init__(self, gains: np.ndarray = CARTPOLE_GAINS) -> None:
+        import mujoco
+
+        self._mujoco = mujoco
+        self.gains = np.asarray(gains, dtype=np.float64)
+        self.model = mujoco.MjModel.from_xml_path(cartpole_model_path())
+        self.data = mujoco.MjData(self.model)
+        #: Physics substeps per control tick.
+        self.frame_skip = round(CARTPOLE_DT / float(self.model.opt.timestep))
+
+    def predict(self, obs: np.ndarray, in_flight: Sequence[Any] | np.ndarray = ()) -> np.ndarray:
+        """The state ``[x, x_dot, theta, theta_dot]`` once the actions ``in_flight``
+        (oldest first, each a ``Box(-1, 1, (1,))`` action) have been in force
+        for one control tick each, starting from ``obs``."""
+        mujoco, data = self._mujoco, self.data
+        state = np.asarray(obs, dtype=np.float64).reshape(-1)[:CARTPOLE_OBS]
+        mujoco.mj_resetData(self.model, data)
+        data.qpos[:] = state[[0, 2]]
+        data.qvel[:] = state[[1, 3]]
+        for action in in_flight:
+            data.ctrl[0] = float(np.clip(np.asarray(action, dtype=np.float64).reshape(-1)[0], -1.0, 1.0))
+            mujoco.mj_step(self.model, data, nstep=self.frame_skip)
+        return np.array([data.qpos[0], data.qvel[0], data.qpos[1], data.qvel[1]])
+
+    def act(self, obs: np.ndarray, in_flight: Sequence[Any] | np.ndarray = ()) -> np.ndarray:
+        """The action for the state :meth:`predict` returns (a ``Box(-1, 1, (1,))`` action)."""
+        return cartpole_continuous(self.predict(obs, in_flight))
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        """The action for an :class:`~remoteenv.wrappers.ActionHistory` observation (any ``k``)."""
+        flat = np.asarray(obs).reshape(-1)
+        return self.act(flat[:CARTPOLE_OBS], flat[CARTPOLE_OBS:].reshape(-1, 1))
+
+
+class CartpoleHoldPredictor:
+    """:class:`CartpolePredictor` for an agent that acts once per elastic step
+    (real time, or its lock-step twin: :mod:`remoteenv.latency_twin`).
+
+    While such an agent thinks, its previous action stays in force; the new
+    one takes effect some latency later. This policy remembers the action it
+    returned last and predicts ``horizon_ticks`` control ticks of it before
+    applying the gains: set the horizon to the latency you expect (in whole
+    ticks). Called on the plain observation; :meth:`reset` at each episode
+    start (the previous action is then the default one, zero force).
+    """
+
+    def __init__(self, horizon_ticks: int, predictor: CartpolePredictor | None = None) -> None:
+        if isinstance(horizon_ticks, bool) or not isinstance(horizon_ticks, int) or horizon_ticks < 0:
+            raise ValueError(f"horizon_ticks must be a whole number of ticks >= 0, got {horizon_ticks!r}")
+        self.predictor = predictor or CartpolePredictor()
+        self.horizon_ticks = horizon_ticks
+        self._last = np.zeros(1, dtype=np.float32)
+
+    def reset(self) -> None:
+        """Forget the previous action (a new episode starts with zero force)."""
+        self._last = np.zeros(1, dtype=np.float32)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        self._last = self.predictor.act(obs, [self._last] * self.horizon_ticks)
+        return self._last
+
+
+def cartpole_model_path() -> str:
+    """Path of the CartPole scene's MJCF model in the installed ``remoteenv.scenes.cartpole``."""
+    importlib.import_module("remoteenv")  # makes remoteenv.scenes importable from a source checkout too
+    return str(importlib.resources.files("remoteenv.scenes.cartpole").joinpath("cartpole.xml"))
 
 
 def cartpole_discrete(obs: np.ndarray) -> int:

@@ -6,7 +6,7 @@ an ipc socket in a private temp dir, or tcp on 127.0.0.1 with a port the OS
 assigns. The launcher waits until each sim reports its bound endpoint (never a
 fixed sleep), and stops them on :meth:`close`, on interpreter exit or when it
 is garbage collected: SIGTERM to the process group, then SIGKILL, then the
-private dir (socket files, logs) is removed. Each sim also watches its parent
+private dir (socket files, logs, delay files) is removed. Each sim also watches its parent
 and exits if the agent dies.
 """
 
@@ -24,7 +24,7 @@ from typing import Any
 
 from remoteenv.agent.connection import SimConnection, connect_sim
 from remoteenv.agent.processes import pid_alive
-from remoteenv.agent.sim_command import scene_command, wait_ready
+from remoteenv.agent.sim_command import scene_command, wait_ready, write_sim_delay_file
 from remoteenv.agent.sim_group import LaunchSpec, SimLayout
 from remoteenv.agent.sim_process import LaunchState, SimProcess, stop_all
 from remoteenv.wire.addresses import ipc_address, ipc_path, is_loopback, tcp_loopback_address, zmq_transport
@@ -306,9 +306,7 @@ class Launcher:
             render_mode=spec.render_mode,
             real_time=spec.real_time,
             real_time_factor=spec.real_time_factor,
-            action_delay=spec.action_delay,
-            obs_delay=spec.obs_delay,
-            link_delay=spec.link_delay,
+            delay_file=write_sim_delay_file(workdir, instance, spec.delay_file_text()),
             curve_files=curve_files,
             allow_remote=self.remote,
             extra_args=self.extra_args,

@@ -5,18 +5,21 @@ Runs wherever sims are started for an agent: in the agent process (the local
 (:mod:`remoteenv.ray`). Both build the same command line here, so a sim
 started either way gets the same arguments (see
 :func:`remoteenv.sim.scene_main.scene_argument_parser` for their meaning).
+Delay specs are not arguments: the launcher writes them to a delay file in
+its private dir (:mod:`remoteenv.wire.delay_file`) and passes its path.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 from collections.abc import Sequence
 from typing import Any, Protocol
 
 from remoteenv.agent.errors import RemoteEnvError, SceneArgumentError
-from remoteenv.wire.delays import DelaySpec
+from remoteenv.wire.delay_file import write_delay_file
 from remoteenv.wire.errors import SCENE_ARGS_MARKER
 
 
@@ -34,9 +37,7 @@ def scene_command(
     render_mode: str | None = None,
     real_time: bool = False,
     real_time_factor: float = 1.0,
-    action_delay: int | DelaySpec = 0,
-    obs_delay: int | DelaySpec = 0,
-    link_delay: float | DelaySpec | None = None,
+    delay_file: str | None = None,
     curve_files: tuple[str, str] | None = None,
     allow_remote: bool = False,
     extra_args: Sequence[str] = (),
@@ -46,7 +47,9 @@ def scene_command(
 
     ``curve_files`` is ``(server secret key file, allowed client keys file)``
     to turn CURVE on; ``allow_remote`` permits an address beyond loopback
-    (which needs CURVE). ``python`` is the interpreter that runs the scene."""
+    (which needs CURVE). ``delay_file`` is the path of the sim's delay file
+    (see :func:`write_sim_delay_file`), None without delays. ``python`` is the
+    interpreter that runs the scene."""
     cmd = [
         python,
         scene,
@@ -75,24 +78,23 @@ def scene_command(
         cmd += ["--render-mode", render_mode]
     if real_time:
         cmd += ["--real-time", "--real-time-factor", repr(float(real_time_factor))]
-    cmd += delay_arguments(action_delay, obs_delay, link_delay)
+    if delay_file is not None:
+        cmd += ["--delay-file", delay_file]
     return cmd + list(extra_args)
 
 
-def delay_arguments(
-    action_delay: int | DelaySpec = 0, obs_delay: int | DelaySpec = 0, link_delay: float | DelaySpec | None = None
-) -> list[str]:
-    """The scene arguments of the delays: ``--action-delay``/``--obs-delay`` (ticks)
-    and ``--link-delay`` (seconds), a number as is and a spec as its wire form in
-    JSON (see :mod:`remoteenv.sim.scene_main`); none for a delay that is always 0."""
-    args: list[str] = []
-    for flag, value in (("--action-delay", action_delay), ("--obs-delay", obs_delay), ("--link-delay", link_delay)):
-        if isinstance(value, DelaySpec):
-            if not value.is_zero:
-                args += [flag, json.dumps(value.to_wire())]
-        elif value:
-            args += [flag, json.dumps(float(value) if flag == "--link-delay" else int(value))]
-    return args
+def write_sim_delay_file(private_dir: str, instance: int, text: str | None) -> str | None:
+    """Write sim ``instance``'s delay file (``text`` from
+    :func:`remoteenv.wire.delay_file.delay_file_text`) into ``private_dir`` as
+    ``sim-<instance>.delays.json``, mode 0600, replacing one a previous launch
+    of the instance left; return its path (None, and no file, when ``text`` is None)."""
+    if text is None:
+        return None
+    path = os.path.join(private_dir, f"sim-{instance}.delays.json")
+    if os.path.lexists(path):
+        os.unlink(path)
+    write_delay_file(path, text)
+    return path
 
 
 class StartingSim(Protocol):

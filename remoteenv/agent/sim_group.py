@@ -32,8 +32,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
-from remoteenv.agent.sim_command import delay_arguments
 from remoteenv.agent.sim_connection import SimConnection
+from remoteenv.wire.delay_file import delay_file_text
 from remoteenv.wire.delays import SECONDS, TICKS, DelaySpec, as_delay
 from remoteenv.wire.keys import KeyPair
 
@@ -97,10 +97,10 @@ class LaunchSpec:
         except TypeError as exc:
             raise TypeError(f"env kwargs must be JSON-serializable to reach the scene: {exc}") from None
 
-    def delay_arguments(self) -> list[str]:
-        """The scene command-line arguments of the delays (ints as ints, specs as
-        their wire form in JSON); empty without delays."""
-        return delay_arguments(self.action_delay, self.obs_delay, self.link_delay)
+    def delay_file_text(self) -> str | None:
+        """The text of each sim's delay file (see :mod:`remoteenv.wire.delay_file`):
+        every delay's wire form in JSON; None without delays."""
+        return delay_file_text(self.action_delay, self.obs_delay, self.link_delay)
 
     def layout(self, source: str) -> SimLayout:
         """The layout of the sims this spec starts; ``source`` names who started them, for messages."""

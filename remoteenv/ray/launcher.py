@@ -292,8 +292,10 @@ class RayLauncher:
             render_mode=spec.render_mode,
             real_time=spec.real_time,
             real_time_factor=spec.real_time_factor,
-            # Every delay (an int or a spec: action, observation, link) as scene arguments.
-            extra_args=(*spec.delay_arguments(), *self.extra_args),
+            # Every delay (action, observation, link) travels in the actor's
+            # construction and reaches the sim as a file on its node.
+            delays=spec.delay_file_text(),
+            extra_args=self.extra_args,
             startup_timeout=spec.startup_timeout,
         )
         bundle = self.placement.bundle()

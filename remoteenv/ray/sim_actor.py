@@ -4,7 +4,9 @@ Runs in a Ray worker process on whichever node the placement group put it.
 The actor starts the scene script as its child, bound to TCP on the node's
 address with an OS-chosen port and CURVE on, waits for the child's ready
 file, and reports where it listens. It keeps the child's stderr in a private
-dir on the node for error messages. The child watches the actor as its
+dir on the node for error messages, and writes its delay specs there (they
+arrive as an argument of this actor's construction, so they reach the node
+through Ray; see :mod:`remoteenv.wire.delay_file`). The child watches the actor as its
 parent (``--parent-pid``): if the actor dies, however it dies, the child
 exits within about a second (see :mod:`remoteenv.sim.orphan`).
 
@@ -30,7 +32,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any
 
-from remoteenv.agent.sim_command import scene_command, wait_ready
+from remoteenv.agent.sim_command import scene_command, wait_ready, write_sim_delay_file
 from remoteenv.agent.sim_process import SimProcess
 from remoteenv.wire.addresses import is_loopback
 from remoteenv.wire.keys import check_key, write_public_keys, write_secret_key
@@ -52,8 +54,10 @@ class SimSpec:
         worlds: MuJoCo worlds the sim hosts.
         seed: seed of the sim's first world (world w gets seed + w), or None.
         env_kwargs: JSON-able keyword arguments of the scene's env class.
-        render_mode, real_time, real_time_factor, action_delay: as for
-            :class:`remoteenv.Launcher`.
+        render_mode, real_time, real_time_factor: as for :class:`remoteenv.Launcher`.
+        delays: the text of the sim's delay file (every delay spec's wire form,
+            :meth:`remoteenv.agent.sim_group.LaunchSpec.delay_file_text`), None
+            without delays; the actor writes it next to its sim.
         extra_args: more command-line arguments for the scene script.
         startup_timeout: seconds to wait for the child's ready file.
     """
@@ -66,7 +70,7 @@ class SimSpec:
     render_mode: str | None = None
     real_time: bool = False
     real_time_factor: float = 1.0
-    action_delay: int = 0
+    delays: str | None = None
     extra_args: tuple[str, ...] = ()
     startup_timeout: float = 60.0
 
@@ -222,7 +226,7 @@ class SimActor:
             render_mode=spec.render_mode,
             real_time=spec.real_time,
             real_time_factor=spec.real_time_factor,
-            action_delay=spec.action_delay,
+            delay_file=write_sim_delay_file(self.workdir, instance, spec.delays),
             curve_files=(names["curve_secret"], names["curve_clients"]),
             allow_remote=not is_loopback(address),
             extra_args=spec.extra_args,

@@ -195,8 +195,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--items", type=int, default=None, help="frames to publish (default: endless)")
     parser.add_argument("--episode-steps", type=int, default=100, help="control ticks per episode")
     args = parser.parse_args(argv)
-    if args.real_time or args.action_delay or args.worlds != 1:
-        parser.error("a publisher drives one world lock-step: --real-time, --action-delay, --worlds do not apply")
+    if args.real_time or args.action_delay or args.delay_file or args.worlds != 1:
+        parser.error(
+            "a publisher drives one world lock-step: --real-time, --action-delay, --delay-file, --worlds do not apply"
+        )
     env_kwargs: dict[str, Any] = json.loads(args.env_kwargs)
     env_kwargs["render_mode"] = "rgb_array"
     env = load_env_class(args.scene, args.env_class)(**env_kwargs)

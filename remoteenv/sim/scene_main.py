@@ -11,6 +11,7 @@ from typing import Any
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.pacing_levers import GC_MODES, apply_levers
 from remoteenv.sim.server import RemoteControlledAgent
+from remoteenv.wire.delay_file import read_delay_file
 from remoteenv.wire.delays import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
 from remoteenv.wire.errors import EXIT_SCENE_ARGS, SCENE_ARGS_MARKER, ProtocolError, short_repr
 from remoteenv.wire.keys import read_key, read_keys
@@ -40,6 +41,20 @@ def tick_delay_argument(text: str) -> DelaySpec:
 def seconds_delay_argument(text: str) -> DelaySpec:
     """``--link-delay``: seconds, a number or a JSON spec."""
     return _delay_argument(text, SECONDS)
+
+
+def apply_delay_file(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Set ``args.action_delay``/``obs_delay``/``link_delay`` from ``--delay-file``;
+    exits through ``parser.error`` if the file is bad or repeats a delay flag."""
+    try:
+        specs = read_delay_file(args.delay_file)
+    except ProtocolError as exc:
+        parser.error(str(exc))
+    defaults = {"action_delay": 0, "obs_delay": 0, "link_delay": None}
+    for key, spec in specs.items():
+        if getattr(args, key) != defaults[key]:
+            parser.error(f"--{key.replace('_', '-')} is given twice: as a flag and in --delay-file")
+        setattr(args, key, spec)
 
 
 def scene_argument_parser(description: str | None = None) -> argparse.ArgumentParser:
@@ -79,6 +94,13 @@ def scene_argument_parser(description: str | None = None) -> argparse.ArgumentPa
         type=seconds_delay_argument,
         default=None,
         help="real time: emulated extra link delay per action, wall seconds (a number or a JSON spec with unit s)",
+    )
+    p.add_argument(
+        "--delay-file",
+        default=None,
+        help="a JSON file of delay specs (keys action_delay, obs_delay, link_delay; see "
+        "remoteenv.wire.delay_file): how launchers pass them, since a recorded trace is too long for "
+        "a command line. A delay given here and as its own flag is refused",
     )
     levers = p.add_argument_group("real-time pacing levers (see remoteenv.sim.pacing_levers)")
     levers.add_argument("--rt-priority", type=int, default=0, help="run under SCHED_FIFO at this priority (1..99)")
@@ -121,7 +143,10 @@ def run_scene(
 ) -> None:
     """Parse the scene command line, build the worlds with ``env_factory(render_mode=..., **env_kwargs)``
     and serve them until told to stop. A scene script's ``main`` is one call of this."""
-    args = scene_argument_parser(description).parse_args(argv)
+    parser = scene_argument_parser(description)
+    args = parser.parse_args(argv)
+    if args.delay_file is not None:
+        apply_delay_file(parser, args)
     env_kwargs: dict[str, Any] = json.loads(args.env_kwargs)
     if not isinstance(env_kwargs, dict):
         sys.exit(f"--env-kwargs must be a JSON map, got {args.env_kwargs!r}")

@@ -261,7 +261,8 @@ class Trace(DelaySpec):
     one-dimensional numeric array, loaded without pickle), ``.json`` (a list
     of numbers), otherwise text with numbers separated by whitespace or
     commas, ``#`` starting a comment. The file is read here, in the process
-    that builds the spec; its values travel on the wire.
+    that builds the spec; its values reach the sim in the launch's delay file
+    (:mod:`remoteenv.wire.delay_file`).
     """
 
     kind = "trace"

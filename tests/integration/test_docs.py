@@ -29,6 +29,7 @@ DOCUMENTS = [
     "docs/failures-and-security.md",
     "docs/protocol.md",
     "docs/troubleshooting.md",
+    "docs/latency-twin.md",
 ]
 SKIP = "<!-- skip-test -->"
 _BLOCK = re.compile(r"^(?P<indent>[ \t]*)```python[ \t]*\n(?P<code>.*?)^(?P=indent)```[ \t]*$", re.M | re.S)

@@ -167,3 +167,25 @@ def test_the_worked_example_of_the_docs():
     assert rows == [(1, 1, 2), (2, 1, 3), (2, 1, 3), (2, 1, 3)]
     assert [i["obs_sim_time"] for *_, i in remote] == pytest.approx([0.0, DT, 2 * DT, 3 * DT])
     assert remote[0][4]["applied_action"] is None and remote[1][4]["applied_action"] is None
+
+
+def test_a_trace_of_the_documented_maximum_launches_and_is_replayed():
+    """100,000 delays of up to 10,000 ticks: far too long for a command line
+    (the spec reaches the sim in its delay file)."""
+    values = np.random.default_rng(1).integers(0, 10_000, size=100_000, endpoint=True)
+    values[0] = 10_000
+    trace = Trace(values)
+    env = gym.make("remoteenv/CartPole-v0", continuous=True, action_delay=trace, max_episode_steps=None)
+    try:
+        env.reset(seed=0)
+        hs = env.unwrapped.handshake
+        sent = []
+        for _ in range(20):  # the pole stands that long without a push
+            _, _, terminated, _, info = env.step(np.zeros(1, dtype=np.float32))
+            sent.append(info["latency_ticks"])  # no observation delay: the delay drawn for this step's action
+            assert not terminated
+    finally:
+        env.close()
+    assert hs["stepping"]["action_delay_spec"] == trace.to_wire()  # every value arrived
+    assert hs.action_delay == 10_000
+    assert sent == values[:20].tolist()

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import glob
+import os
+import tempfile
 import time
 
 import gymnasium as gym
@@ -11,6 +14,7 @@ import pytest
 import remoteenv
 from remoteenv import OpenAIRemoteEnv, RemoteVectorEnv, SimDiedError
 from remoteenv.agent.errors import LaunchError
+from remoteenv.delays import Trace
 from remoteenv.ray import RayLauncher
 
 REACHER = "remoteenv/Reacher-v0"
@@ -95,6 +99,26 @@ def test_a_single_env_on_the_cluster_matches_a_local_one(cluster) -> None:
             env.close()
         runs.append(np.array(trace))
     np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_a_trace_of_the_documented_maximum_reaches_a_sim_on_a_worker_node(cluster, assert_nothing_left) -> None:
+    """100,000 delays of up to 10,000 ticks travel to the node with the actor
+    and reach the sim in a file there, removed when the sim stops."""
+    values = np.random.default_rng(2).integers(0, 10_000, size=100_000, endpoint=True)
+    trace = Trace(values)
+    before = set(glob.glob(os.path.join(tempfile.gettempdir(), "remoteenv-ray-*")))
+    launcher = RayLauncher(num_cpus_per_process=0.5, label_selector={"pool": "a"})
+    env = OpenAIRemoteEnv(remoteenv.scene_path("cartpole"), action_delay=trace, launcher=launcher)
+    try:
+        assert launcher.node_ids[0] != cluster.head_node_id
+        env.reset(seed=0)
+        sent = [env.step(0)[4]["latency_ticks"] for _ in range(8)]
+        spec = env.handshake["stepping"]["action_delay_spec"]
+    finally:
+        env.close()
+    assert spec == trace.to_wire() and sent == values[:8].tolist()
+    assert_nothing_left(launcher)
+    assert set(glob.glob(os.path.join(tempfile.gettempdir(), "remoteenv-ray-*"))) <= before
 
 
 def test_real_time_runs_on_the_cluster(cluster) -> None:

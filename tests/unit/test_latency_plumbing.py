@@ -9,26 +9,39 @@ import json
 import pytest
 from gymnasium import spaces
 
+from remoteenv.agent.sim_command import write_sim_delay_file
 from remoteenv.agent.sim_group import LaunchSpec
-from remoteenv.delays import Categorical, Constant, Uniform
+from remoteenv.delays import Categorical, Constant, Trace, Uniform
 from remoteenv.sim.lock_step import LockStepper
 from remoteenv.sim.scene_main import seconds_delay_argument, tick_delay_argument
+from remoteenv.wire.delay_file import delays_from_map, read_delay_file
 from remoteenv.wire.handshake import parse_handshake
 from remoteenv.wire.spaces import space_to_wire
 from tests.unit.test_sim_lock_step import DT, RecordingWorld
 
 
-def test_delay_arguments_round_trip_through_the_scene_command_line():
+def test_delay_specs_round_trip_through_the_delay_file(tmp_path):
     spec = LaunchSpec("x.py", action_delay=Uniform(0, 3), obs_delay=2)
-    args = spec.delay_arguments()
-    assert args[0] == "--action-delay" and args[2:] == ["--obs-delay", "2"]
-    assert tick_delay_argument(args[1]) == Uniform(0, 3)
-    assert tick_delay_argument(args[3]) == Constant(2)
+    text = spec.delay_file_text()
+    assert text is not None
+    path = write_sim_delay_file(str(tmp_path), 4, text)
+    assert path == str(tmp_path / "sim-4.delays.json")
+    assert read_delay_file(path) == {"action_delay": Uniform(0, 3), "obs_delay": Constant(2)}
     rt = LaunchSpec("x.py", real_time=True, link_delay=Uniform(0.0, 0.01, unit="s"))
-    (flag, text) = rt.delay_arguments()
-    assert flag == "--link-delay" and seconds_delay_argument(text) == Uniform(0.0, 0.01, unit="s")
+    assert delays_from_map(json.loads(rt.delay_file_text() or "")) == {"link_delay": Uniform(0.0, 0.01, unit="s")}
+    assert json.loads(LaunchSpec("x.py", real_time=True, link_delay=0.02).delay_file_text() or "") == {
+        "link_delay": Constant(0.02, unit="s").to_wire()
+    }
+    assert LaunchSpec("x.py").delay_file_text() is None
+    assert LaunchSpec("x.py", action_delay=Constant(0), obs_delay=Trace([0, 0])).delay_file_text() is None
+    assert write_sim_delay_file(str(tmp_path), 5, None) is None and not (tmp_path / "sim-5.delays.json").exists()
+
+
+def test_a_sim_started_by_hand_still_takes_delays_as_flags():
+    assert tick_delay_argument(json.dumps(Uniform(0, 3).to_wire())) == Uniform(0, 3)
+    assert tick_delay_argument("2") == Constant(2)
+    assert seconds_delay_argument(json.dumps(Uniform(0.0, 0.01, unit="s").to_wire())) == Uniform(0.0, 0.01, unit="s")
     assert seconds_delay_argument("0.02") == Constant(0.02, unit="s")
-    assert LaunchSpec("x.py").delay_arguments() == []
 
 
 @pytest.mark.parametrize(

@@ -81,7 +81,7 @@ def test_the_scene_command_line_carries_every_launch_option() -> None:
         render_mode="rgb_array",
         real_time=True,
         real_time_factor=2.0,
-        action_delay=1,
+        delay_file="/d/sim-3.delays.json",
         curve_files=("/d/s", "/d/c"),
         allow_remote=True,
         extra_args=["--x"],
@@ -93,7 +93,7 @@ def test_the_scene_command_line_carries_every_launch_option() -> None:
     assert json.loads(opts["--env-kwargs"]) == {"a": 1} and opts["--parent-pid"] == "42"
     assert opts["--seed"] == "24" and opts["--render-mode"] == "rgb_array" and opts["--real-time-factor"] == "2.0"
     assert opts["--curve-secret-key-file"] == "/d/s" and opts["--curve-client-keys-file"] == "/d/c"
-    assert opts["--action-delay"] == "1"
+    assert opts["--delay-file"] == "/d/sim-3.delays.json" and "--action-delay" not in cmd
     assert "--allow-remote" in cmd and "--real-time" in cmd and cmd[-1] == "--x"
 
 
