@@ -132,7 +132,9 @@ int, "actions": [dtype, shape], "obs": [dtype, shape]}}`` (optional; a
 lock-step sim whose worlds step together and whose spaces fit offers it, to
 the agent that launched it, over the local pipe only; anyone else gets a
 ``state`` error): the sim's shared-memory region for batched steps, an
-anonymous file the agent maps as ``/proc/<pid>/fd/<fd>``, laid out as
+anonymous file the agent maps as ``/proc/<pid>/fd/<fd>``, sealed against
+shrinking and growing (``F_SEAL_SHRINK | F_SEAL_GROW | F_SEAL_SEAL``) before
+it is offered, laid out as
 :mod:`remoteenv.wire.shared_batch` says. Afterwards a ``step_batch`` on the
 pipe may carry ``"shared": true`` and no ``actions`` (nor ``worlds``): the
 actions of positions ``0 .. n-1`` are rows ``0 .. n-1`` of the region's
