@@ -141,9 +141,13 @@ class RemoteControlledAgent:
         self._handlers: dict[str, Handler] = common.handlers()
         self._handlers.update(AttributeCommands(envs, instance).handlers())
         self._handlers.update(mode_commands)
+        drivers = common.drivers
         for name in ("pause", "resume"):  # they stop or start every world's clock
             if name in self._handlers:
-                self._handlers[name] = common.driven_only(name, self._handlers[name])
+                self._handlers[name] = drivers.guard_every(name, self._handlers[name])
+        if "reset_batch" in self._handlers:
+            self._handlers["reset_batch"] = drivers.guard_reset_batch(self._handlers["reset_batch"])
+            self._handlers["step_batch"] = drivers.guard_step_batch(self._handlers["step_batch"])
         common.advertised = sorted(self._handlers)
         self._authenticator: Any = None
         raise_fd_limit()

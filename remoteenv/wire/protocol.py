@@ -88,7 +88,8 @@ Values).
 
 ``render`` ``{"world": int}`` -> ``{"frame": uint8 array H x W x 3 | nil}``.
 
-``close`` ``{}`` -> ``{}``; the server then exits.
+``close`` ``{}`` -> ``{}``; the server then exits. Only a connection that
+drives the worlds may close a sim (see Drivers).
 
 ``timing`` ``{"clear": bool}`` -> ``{"worlds": [map, ...]}`` (real-time sims
 only): per world, ``pacing_error_s`` and ``apply_delay_s`` summaries
@@ -172,6 +173,24 @@ its handshake's ``commands``.
 
 ``world`` defaults to 0 and addresses one of the ``num_worlds`` MuJoCo worlds
 a sim process hosts.
+
+Drivers
+-------
+One connection drives each world (a connection is the local pipe, or one
+ZeroMQ peer, known by its routing id: a client keeps its routing id when it
+reconnects). A sim with a local pipe is driven by the pipe, every world and
+for good. Otherwise nobody drives a world until a connection resets it
+(``reset``, ``reset_batch``), and the connection that reset a world last
+drives it. A ``state`` error answers ``step`` or ``step_batch`` on a world
+another connection drives; ``reset`` or ``reset_batch`` from anything but
+the pipe of a sim that has one; and ``close``, ``pause`` or ``resume`` from
+a connection that does not drive every world somebody drives (the sim's
+owner: its pipe, else the connection driving its worlds). Every other
+command is open to every connection. A client that wants to drive a world
+resets it first. This keeps a second client from displacing a driver's
+steps or stopping its sim; it does not tell users apart (without a pipe a
+reset takes a world over): who may connect at all is up to the transport
+(an ipc socket in a private dir, CURVE keys).
 
 Values
 ------
