@@ -32,6 +32,12 @@ oversize with an error reply instead. A receiver drops an oversize frame
 (ZeroMQ does so itself through ``ZMQ_MAXMSGSIZE``, which closes that peer's
 connection). In a request, no msgpack array or map holds more than
 :data:`MAX_REQUEST_ITEMS` entries (lists of numbers travel as arrays).
+A server bounds what it holds for its peers in total: it may refuse a
+connection's handshake when it serves enough connections already (the
+reference sims admit 8 at once), and it may drop a request unread when too
+many requests from connections that drive no world (see Drivers) are
+waiting, answering it with a ``state`` error whose ``seq`` is read from the
+frame's first bytes (-1 if it is not there: :func:`peek_seq`).
 Integers are within msgpack's range ``[-2**63, 2**64)``. Error messages echo
 at most a bounded repr of the request's content
 (:data:`remoteenv.wire.errors.MAX_ECHO_CHARS` characters per value) and are
@@ -274,6 +280,22 @@ def unpack(frame: bytes, max_items: int | None = None) -> Any:
         raise ProtocolError(f"undecodable frame ({type(exc).__name__}: {short_repr(str(exc))})") from None
 
 
+def peek_seq(frame: Any, prefix: int = 64) -> int:
+    """The ``seq`` of a request frame read from its first ``prefix`` bytes only,
+    or -1 when it is not among them (a receiver that drops a frame unread
+    answers it with this ``seq``). Never raises."""
+    unpacker = msgpack.Unpacker(raw=False, strict_map_key=True, max_buffer_size=prefix)
+    try:
+        unpacker.feed(bytes(memoryview(frame)[:prefix]))
+        for _ in range(min(unpacker.read_map_header(), 4)):
+            key, value = unpacker.unpack(), unpacker.unpack()
+            if key == "seq":
+                return value if type(value) is int and -1 <= value < 2**64 else -1
+    except Exception:
+        pass
+    return -1
+
+
 def decode_request(frame: bytes) -> dict[str, Any]:
     """Decode and shape-check a request frame (arrays and maps of at most
     :data:`MAX_REQUEST_ITEMS` entries; an int ``seq``, a str ``cmd``)."""
@@ -411,6 +433,7 @@ __all__ = [
     "decode_request",
     "error_reply",
     "pack",
+    "peek_seq",
     "stream_frame",
     "unpack",
     "wire_dtype",
