@@ -224,3 +224,37 @@ def test_the_gate_admits_at_most_max_peers_and_admits_again_when_one_leaves(serv
         for sock in socks:
             sock.close(linger=0)
         ctx.term()
+
+
+def test_the_peer_count_follows_the_monitor_events_libzmq_sends():
+    from remoteenv.sim.peer_gate import PeerCount
+
+    E = zmq
+    count = PeerCount(handshake_s=2.0)
+    # An idle or garbage connection: accepted, handshake failed, disconnected.
+    for failed in (E.EVENT_HANDSHAKE_FAILED_NO_DETAIL, E.EVENT_HANDSHAKE_FAILED_PROTOCOL):
+        count.event(E.EVENT_ACCEPTED, 15)
+        count.event(failed, 0)
+        count.event(E.EVENT_DISCONNECTED, 15)
+        assert count.admitted(0.0) == 0
+    # Two admitted, one still in its handshake (not counted: an idle storm must not lock clients out).
+    count.event(E.EVENT_ACCEPTED, 16)
+    count.admit(0.0)
+    assert count.admitted(0.0) == 1  # admitted by the gate, handshake not done yet
+    count.event(E.EVENT_HANDSHAKE_SUCCEEDED, 0)
+    count.event(E.EVENT_ACCEPTED, 17)
+    count.admit(0.1)
+    count.event(E.EVENT_HANDSHAKE_SUCCEEDED, 0)
+    count.event(E.EVENT_ACCEPTED, 18)
+    assert count.admitted(0.2) == 2
+    count.event(E.EVENT_DISCONNECTED, 16)
+    assert count.admitted(0.3) == 1
+    # An admission whose handshake never completes stops counting after the handshake interval.
+    count.event(E.EVENT_ACCEPTED, 19)
+    count.admit(1.0)
+    assert count.admitted(1.5) == 2 and count.admitted(3.5) == 1
+    # Whatever went astray, no connection left means nobody admitted.
+    count.event(E.EVENT_HANDSHAKE_SUCCEEDED, 0)  # e.g. one whose disconnect came first
+    for fd in (17, 18, 19):
+        count.event(E.EVENT_DISCONNECTED, fd)
+    assert count.admitted(4.0) == 0
