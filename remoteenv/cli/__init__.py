@@ -8,6 +8,8 @@ import importlib
 import sys
 from collections.abc import Sequence
 
+from remoteenv.cli.optional import is_optional, missing_message
+
 #: Command name -> module in remoteenv.cli, in the order ``--help`` lists them.
 COMMANDS = {
     "demo": "demo",
@@ -31,7 +33,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         module = importlib.import_module(f"remoteenv.cli.{module_name}")
         module.add_parser(sub)
     args = parser.parse_args(argv)
-    return int(args.run(args) or 0)
+    try:
+        return int(args.run(args) or 0)
+    except ModuleNotFoundError as exc:
+        if not is_optional(exc):
+            raise
+        print(missing_message(exc.name or "", f"python -m remoteenv {args.command}"), file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

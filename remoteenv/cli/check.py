@@ -12,6 +12,8 @@ import argparse
 import sys
 from typing import Any
 
+from remoteenv.cli.arguments import non_negative_int, positive_seconds
+
 
 def add_parser(sub: Any) -> None:
     p = sub.add_parser(
@@ -23,12 +25,15 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("launch_info", metavar="LAUNCH_INFO_FILE", help="the launch-info file")
     p.add_argument(
-        "--instance", type=int, default=None, help="check only this instance of the file (default: every one)"
+        "--instance",
+        type=non_negative_int,
+        default=None,
+        help="check only this instance of the file (default: every one)",
     )
     p.add_argument(
         "--allow-close", action="store_true", help="also check 'close', which stops the server (default: skipped)"
     )
-    p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for each reply (default 10)")
+    p.add_argument("--timeout", type=positive_seconds, default=10.0, help="seconds to wait for each reply (default 10)")
     p.set_defaults(run=run)
 
 
@@ -36,9 +41,6 @@ def run(args: argparse.Namespace) -> int:
     from remoteenv.agent.errors import RemoteEnvError
     from remoteenv.compliance import compliant, format_report, run_suite, targets_from_launch_info
 
-    if not args.timeout > 0:
-        print(f"--timeout must be a number of seconds > 0, got {args.timeout}", file=sys.stderr)
-        return 2
     try:
         targets = targets_from_launch_info(
             args.launch_info, args.instance, timeout=args.timeout, allow_close=args.allow_close

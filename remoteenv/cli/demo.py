@@ -22,6 +22,8 @@ from typing import Any
 import gymnasium as gym
 
 from remoteenv import SHIPPED_SCENES as SCENES
+from remoteenv.cli.arguments import non_negative_int, non_negative_number, positive_factor, positive_int
+from remoteenv.cli.optional import require
 from remoteenv.remote_env import OpenAIRemoteEnv
 
 #: Steps per episode for a scene script run without a registered time limit.
@@ -46,7 +48,7 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument(
         "--max-steps",
-        type=int,
+        type=positive_int,
         default=None,
         help=f"truncate episodes after this many steps (default: the id's limit; {DEFAULT_MAX_STEPS} for a script)",
     )
@@ -55,8 +57,8 @@ def add_parser(sub: Any) -> None:
         action="store_true",
         help="show the sim in MuJoCo's viewer window (render_mode='human'; needs a display)",
     )
-    p.add_argument("--episodes", type=int, default=3, help="episodes to run (default 3)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the first reset (default 0)")
+    p.add_argument("--episodes", type=positive_int, default=3, help="episodes to run (default 3)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the first reset (default 0)")
     p.add_argument("--continuous", action="store_true", help="cartpole: Box(-1, 1) action instead of Discrete(2)")
     p.add_argument("--random", action="store_true", help="random actions instead of the controller")
     p.add_argument(
@@ -79,16 +81,19 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument(
         "--real-time-factor",
-        type=float,
+        type=positive_factor,
         default=1.0,
         help="with --real-time: simulated seconds per wall-clock second (default 1.0)",
     )
     p.add_argument(
-        "--think-ms", type=float, default=0.0, help="the agent sleeps this many ms before each action (default 0)"
+        "--think-ms",
+        type=non_negative_number,
+        default=0.0,
+        help="the agent sleeps this many ms before each action (default 0)",
     )
     p.add_argument(
         "--action-delay",
-        type=int,
+        type=non_negative_int,
         default=0,
         help="lock-step: each action takes effect this many ticks later (default 0)",
     )
@@ -194,6 +199,8 @@ def run(args: argparse.Namespace) -> int:
     if args.viewer and not has_display():
         print("demo: --viewer needs a display (DISPLAY or WAYLAND_DISPLAY); use --record DIR instead", file=sys.stderr)
         return 2
+    if args.record:
+        require("moviepy", "demo --record")
     t0 = time.perf_counter()
     env = make_env(args)
     try:

@@ -33,6 +33,9 @@ from typing import Any
 
 import numpy as np
 
+from remoteenv.cli.arguments import json_map, non_negative_int, positive_int
+from remoteenv.cli.optional import require
+
 #: Builtin controllers (functions of remoteenv.controllers) and the scene each suits.
 BUILTIN_POLICIES = {
     "cartpole_continuous": "CartPole with continuous=True",
@@ -61,10 +64,12 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--delays", default="0,1,2,3,4", help="comma-separated delays in control ticks (default 0..4)")
     p.add_argument("--mode", choices=MODES, default="action_delay", help="what a delay means (default action_delay)")
     p.add_argument("--random", action="store_true", help="lock-step: draw each delay from Uniform(0, d) instead")
-    p.add_argument("--episodes", type=int, default=5, help="episodes per delay and seed (default 5)")
+    p.add_argument("--episodes", type=positive_int, default=5, help="episodes per delay and seed (default 5)")
     p.add_argument("--seeds", default="0,1,2", help="comma-separated seeds (default 0,1,2)")
-    p.add_argument("--max-steps", type=int, default=None, help="cut episodes at this many steps")
-    p.add_argument("--action-history", type=int, default=0, help="wrap in ActionHistory(env, k) (the policy's input)")
+    p.add_argument("--max-steps", type=positive_int, default=None, help="cut episodes at this many steps")
+    p.add_argument(
+        "--action-history", type=non_negative_int, default=0, help="wrap in ActionHistory(env, k) (the policy's input)"
+    )
     p.add_argument("--env-kwargs", default="{}", help="JSON map for the env, e.g. '{\"continuous\": true}'")
     p.add_argument("--out", default="latency-sweep", help="directory for sweep.csv, sweep.json, sweep.png")
     p.add_argument("--no-plot", action="store_true", help="skip the plot (no matplotlib needed)")
@@ -90,7 +95,7 @@ def load_policy(name: str) -> Policy:
         return fn
     if not os.path.isfile(name):
         raise SystemExit(f"--policy {name[:200]!r} is neither a builtin ({', '.join(BUILTIN_POLICIES)}) nor a file")
-    import torch
+    torch = require("torch", "a TorchScript --policy")
 
     module = torch.jit.load(name, map_location="cpu")
     module.eval()
@@ -111,9 +116,7 @@ def make_env(args: argparse.Namespace, delay: int) -> Any:
     from remoteenv.delays import Uniform
     from remoteenv.wrappers import ActionHistory
 
-    kwargs: dict[str, Any] = json.loads(args.env_kwargs)
-    if not isinstance(kwargs, dict):
-        raise SystemExit("--env-kwargs must be a JSON map")
+    kwargs = json_map(args.env_kwargs, "--env-kwargs")
     spec: Any = Uniform(0, delay) if args.random else delay
     if args.mode == "action_delay":
         kwargs["action_delay"] = spec
@@ -210,40 +213,78 @@ def plot(summary: list[dict[str, Any]], path: str, title: str, xlabel: str) -> N
     plt.close(fig)
 
 
-def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
+class SweepFiles:
+    """The sweep's result files in ``out``: ``sweep.csv`` is created (and its
+    header written) before the sweep starts, so an unwritable ``out`` fails at
+    once, and takes each episode's row as soon as it ends; ``sweep.json`` is
+    rewritten after every delay point. A sweep cut short keeps what it ran."""
 
+    def __init__(self, out: str) -> None:
+        self.out = out
+        self.csv_path = os.path.join(out, "sweep.csv")
+        self.json_path = os.path.join(out, "sweep.json")
+        try:
+            os.makedirs(out, exist_ok=True)
+            fd = os.open(self.csv_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NOFOLLOW", 0), 0o644)
+        except OSError as exc:
+            raise SystemExit(f"cannot write the results into --out {out!r}: {exc.strerror or exc}") from None
+        self._csv = os.fdopen(fd, "w", newline="")
+        self._writer = csv.DictWriter(self._csv, fieldnames=CSV_FIELDS)
+        self._writer.writeheader()
+        self._csv.flush()
+
+    def add(self, row: dict[str, Any]) -> None:
+        """Append one episode's row to ``sweep.csv`` (flushed at once)."""
+        self._writer.writerow(row)
+        self._csv.flush()
+
+    def write_json(self, doc: dict[str, Any]) -> None:
+        """Replace ``sweep.json`` with ``doc`` (atomically)."""
+        from remoteenv.wire.files import write_atomic
+
+        write_atomic(self.json_path, json.dumps(doc, indent=1))
+
+    def close(self) -> None:
+        self._csv.close()
+
+
+def run(args: argparse.Namespace) -> int:
     delays = int_list(args.delays, "--delays")
     seeds = int_list(args.seeds, "--seeds")
     if args.episodes < 1:
         raise SystemExit("--episodes must be >= 1")
+    if args.max_steps is not None and args.max_steps < 1:
+        raise SystemExit("--max-steps must be a positive integer")
     if args.random and args.mode == "real_time":
         raise SystemExit("--random applies to the lock-step modes; real_time's think time is fixed per point")
+    json_map(args.env_kwargs, "--env-kwargs")
+    if not args.no_plot:
+        require("matplotlib", "latency-sweep's plot (or pass --no-plot)")
     policy = load_policy(args.policy)
-    os.makedirs(args.out, exist_ok=True)
+    files = SweepFiles(args.out)  # before the first sim starts
+    config = {k: v for k, v in vars(args).items() if k != "run"}
     rows: list[dict[str, Any]] = []
     started = time.perf_counter()
-    with tqdm(total=len(delays) * len(seeds) * args.episodes, unit="episode", desc="latency sweep") as bar:
-        for d in delays:
-            env = make_env(args, d)
-            try:
-                think = d * float(env.unwrapped.dt) if args.mode == "real_time" else 0.0
-                for s in seeds:
-                    for row in run_point(env, policy, s, args.episodes, think):
-                        rows.append({"delay": d, **row})
-                        bar.update(1)
-            finally:
-                env.close()
+    try:
+        with progress(len(delays) * len(seeds) * args.episodes) as bar:
+            for i, d in enumerate(delays):
+                env = make_env(args, d)
+                try:
+                    think = d * float(env.unwrapped.dt) if args.mode == "real_time" else 0.0
+                    for s in seeds:
+                        for row in run_point(env, policy, s, args.episodes, think):
+                            rows.append({"delay": d, **row})
+                            files.add(rows[-1])
+                            bar.update(1)
+                finally:
+                    env.close()
+                done = delays[: i + 1]
+                doc = {"config": config, "wall_s": time.perf_counter() - started, "complete": done == delays}
+                files.write_json({**doc, "summary": summarize(rows, done, seeds), "rows": rows})
+    finally:
+        files.close()
     wall = time.perf_counter() - started
     summary = summarize(rows, delays, seeds)
-    csv_path = os.path.join(args.out, "sweep.csv")
-    with open(csv_path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=CSV_FIELDS)
-        writer.writeheader()
-        writer.writerows(rows)
-    config = {k: v for k, v in vars(args).items() if k != "run"}
-    with open(os.path.join(args.out, "sweep.json"), "w") as f:
-        json.dump({"config": config, "wall_s": wall, "summary": summary, "rows": rows}, f, indent=1)
     kind = f"Uniform(0, d) {args.mode}" if args.random else args.mode
     xlabel = "think time d (ticks)" if args.mode == "real_time" else f"{kind} d (ticks)"
     if not args.no_plot:
@@ -254,5 +295,33 @@ def run(args: argparse.Namespace) -> int:
             f"{point['delay']:5d}  {point['mean_return']:11.2f}  {point['std_over_seeds']:11.2f}  "
             f"{point['mean_latency_ticks']:13.2f}"
         )
-    print(f"wrote {csv_path}, sweep.json{'' if args.no_plot else ', sweep.png'} in {wall:.1f} s")
+    print(f"wrote {files.csv_path}, sweep.json{'' if args.no_plot else ', sweep.png'} in {wall:.1f} s")
     return 0
+
+
+class _Lines:
+    """A stand-in for tqdm's bar when tqdm is not installed: one line per tenth."""
+
+    def __init__(self, total: int) -> None:
+        self.total, self.done = total, 0
+
+    def __enter__(self) -> _Lines:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        pass
+
+    def update(self, n: int) -> None:
+        step = max(1, self.total // 10)
+        before, self.done = self.done, self.done + n
+        if before // step != self.done // step or self.done == self.total:
+            print(f"latency sweep: {self.done}/{self.total} episodes", flush=True)
+
+
+def progress(total: int) -> Any:
+    """A progress bar over ``total`` episodes: tqdm's if installed (it is optional), else plain lines."""
+    try:
+        from tqdm import tqdm
+    except ModuleNotFoundError:
+        return _Lines(total)
+    return tqdm(total=total, unit="episode", desc="latency sweep")

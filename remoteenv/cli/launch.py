@@ -11,13 +11,20 @@ the command stops the others and exits with status 1.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import signal
 import socket
 import sys
 import time
 from typing import Any
+
+from remoteenv.cli.arguments import (
+    check_can_write,
+    json_map,
+    non_negative_int,
+    positive_factor,
+    positive_int,
+)
 
 _WATCH_S = 0.2
 
@@ -31,10 +38,10 @@ def add_parser(sub: Any) -> None:
         "attach=FILE)), and keep them running until Ctrl-C / SIGTERM.",
     )
     p.add_argument("scene", help="shipped scene name (cartpole, reacher) or path of a scene script")
-    p.add_argument("--instances", type=int, default=1, help="sim processes to start (default 1)")
-    p.add_argument("--worlds", type=int, default=1, help="MuJoCo worlds per sim process (default 1)")
+    p.add_argument("--instances", type=positive_int, default=1, help="sim processes to start (default 1)")
+    p.add_argument("--worlds", type=positive_int, default=1, help="MuJoCo worlds per sim process (default 1)")
     p.add_argument("--out", default="launch.json", help="launch-info file to write (default launch.json)")
-    p.add_argument("--seed", type=int, default=None, help="RNG seed; instance i uses seed + i * worlds")
+    p.add_argument("--seed", type=non_negative_int, default=None, help="RNG seed; instance i uses seed + i * worlds")
     p.add_argument("--env-kwargs", default="{}", help="JSON map of keyword arguments for the scene's env")
     p.add_argument("--render-mode", default=None, choices=["rgb_array", "human"], help="render mode of the sims")
     p.add_argument(
@@ -53,10 +60,16 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--curve", action="store_true", help="encrypt with ZMQ CURVE even on loopback")
     p.add_argument("--real-time", action="store_true", help="run the sims on a paced wall clock")
     p.add_argument(
-        "--real-time-factor", type=float, default=1.0, help="simulated seconds per wall-clock second in real-time mode"
+        "--real-time-factor",
+        type=positive_factor,
+        default=1.0,
+        help="simulated seconds per wall-clock second in real-time mode",
     )
     p.add_argument(
-        "--action-delay", type=int, default=0, help="lock-step: an action takes effect this many ticks later"
+        "--action-delay",
+        type=non_negative_int,
+        default=0,
+        help="lock-step: an action takes effect this many ticks later",
     )
     p.set_defaults(run=run)
 
@@ -85,10 +98,9 @@ def run(args: argparse.Namespace) -> int:
     from remoteenv.wire.handshake import handshake_request, parse_handshake
     from remoteenv.wire.keys import write_secret_key
 
-    env_kwargs = json.loads(args.env_kwargs)
-    if not isinstance(env_kwargs, dict):
-        raise SystemExit(f"--env-kwargs must be a JSON map, got {args.env_kwargs!r}")
+    env_kwargs = json_map(args.env_kwargs, "--env-kwargs")
     out = os.path.abspath(args.out)
+    check_can_write(out, "--out")  # before any sim starts
 
     def _stop(signum: int, _frame: Any) -> None:
         raise SystemExit(128 + signum)
@@ -146,7 +158,11 @@ def run(args: argparse.Namespace) -> int:
                 for s in launcher.sims
             ],
         )
-        write_launch_info(out, info)
+        try:
+            write_launch_info(out, info)
+        except OSError as exc:
+            print(f"launch failed: cannot write {out!r}: {exc}; stopping the sims", file=sys.stderr)
+            return 1
         written.append(out)
         for s in info.instances:
             print(f"instance {s.instance}: pid {s.pid} at {s.endpoint}")

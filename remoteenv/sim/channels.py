@@ -8,14 +8,16 @@ arrived, each with whom to answer) and ``send``.
 
 from __future__ import annotations
 
+import collections
 import socket
+from collections.abc import Callable, Collection
 from typing import Any, Protocol
 
 import zmq
 
-from remoteenv.sim.limits import FRAMES_PER_DRAIN
+from remoteenv.sim.limits import BACKLOG_BYTES, FRAMES_PER_DRAIN, OTHERS_BYTES_PER_PASS
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import PROTOCOL
+from remoteenv.wire.errors import PROTOCOL, STATE
 from remoteenv.wire.hot_wait import HotWait
 
 
@@ -31,8 +33,9 @@ class Channel(Protocol):
     #: True when the last :meth:`receive_nowait` left requests waiting (it takes a bounded number).
     more: bool
 
-    def receive_nowait(self) -> list[tuple[Any, bytes]]:
-        """The request frames that have arrived, each with whom to answer (never blocks)."""
+    def receive_nowait(self) -> list[tuple[Any, Any]]:
+        """The request frames that have arrived (``bytes`` or another buffer), each
+        with whom to answer (never blocks)."""
         ...
 
     def send(self, reply_to: Any, payload: bytes) -> None:
@@ -50,11 +53,21 @@ class ZmqChannel:
     """The bound ROUTER socket; ``reply_to`` is the peer's routing id.
 
     :meth:`receive_nowait` takes at most :data:`~remoteenv.sim.limits.FRAMES_PER_DRAIN`
-    frames per call, so a flood cannot keep the loop from its other channels;
+    frames out of libzmq per call (zero-copy: a frame is a ``zmq.Frame``, read
+    through the buffer protocol). Frames of the connections that drive a world
+    (``owners()``, their routing ids) are served at once; other frames wait
+    in a backlog of at most :data:`~remoteenv.sim.limits.BACKLOG_BYTES`, from
+    which each call serves :data:`~remoteenv.sim.limits.OTHERS_BYTES_PER_PASS`
+    (at least one frame), oldest first. A frame that finds the backlog full is
+    dropped unread and answered with a ``state`` error (see :meth:`drop`).
     :attr:`more` says whether frames were left waiting.
+
+    Args:
+        sock: the bound ROUTER.
+        owners: the routing ids whose frames go first (read on every call).
     """
 
-    def __init__(self, sock: zmq.Socket) -> None:
+    def __init__(self, sock: zmq.Socket, owners: Callable[[], Collection[bytes]] = frozenset) -> None:
         self.socket = sock
         self.closed = False
         #: What to register in a ``zmq.Poller``.
@@ -64,21 +77,67 @@ class ZmqChannel:
         self.fd: int = int(sock.getsockopt(zmq.FD))
         #: True when the last :meth:`receive_nowait` left frames waiting.
         self.more = False
+        #: Frames dropped unread because the backlog was full.
+        self.dropped = 0
+        self._owners = owners
+        self._backlog: collections.deque[tuple[bytes, Any]] = collections.deque()
+        self._backlog_bytes = 0
 
-    def receive_nowait(self) -> list[tuple[Any, bytes]]:
-        out: list[tuple[Any, bytes]] = []
+    def receive_nowait(self) -> list[tuple[Any, Any]]:
         sock = self.socket
-        handled = 0
-        while sock.getsockopt(zmq.EVENTS) & zmq.POLLIN:  # type: ignore[arg-type,operator]
-            if handled == FRAMES_PER_DRAIN:
-                self.more = True
-                return out
-            handled += 1
-            frames = sock.recv_multipart(zmq.NOBLOCK)
-            if len(frames) == 2:  # anything else is not a DEALER-framed request: drop
-                out.append((frames[0], frames[1]))
-        self.more = False
+        owners = self._owners()
+        backlog = self._backlog
+        out: list[tuple[Any, Any]] = []
+        taken = 0
+        while taken < FRAMES_PER_DRAIN and sock.getsockopt(zmq.EVENTS) & zmq.POLLIN:  # type: ignore[arg-type,operator]
+            taken += 1
+            routing_id = sock.recv(zmq.NOBLOCK)
+            frame = sock.recv(zmq.NOBLOCK, copy=False)
+            if frame.more:  # not a DEALER-framed request: drop all of it
+                while sock.getsockopt(zmq.RCVMORE):
+                    sock.recv(zmq.NOBLOCK, copy=False)
+                continue
+            if routing_id in owners:
+                out.append((routing_id, frame))
+                continue
+            size = len(frame)
+            if backlog and self._backlog_bytes + size > BACKLOG_BYTES:
+                self.drop(routing_id, frame)
+                continue
+            backlog.append((routing_id, frame))
+            self._backlog_bytes += size
+        budget, first = OTHERS_BYTES_PER_PASS, True
+        while backlog and (first or len(backlog[0][1]) <= budget):
+            routing_id, frame = backlog.popleft()
+            size = len(frame)
+            self._backlog_bytes -= size
+            budget -= size
+            first = False
+            out.append((routing_id, frame))
+        self.more = bool(backlog) or (taken == FRAMES_PER_DRAIN and bool(sock.getsockopt(zmq.EVENTS) & zmq.POLLIN))  # type: ignore[arg-type,operator]
         return out
+
+    def budgeted(self, reply_to: Any) -> bool:
+        """Whether requests from ``reply_to`` share the per-pass budgets (it drives no world)."""
+        return reply_to not in self._owners()
+
+    def defer(self, frames: list[tuple[Any, Any]]) -> None:
+        """Put ``frames`` (from :meth:`receive_nowait`, in order) back at the front of the backlog."""
+        for routing_id, frame in reversed(frames):
+            self._backlog.appendleft((routing_id, frame))
+            self._backlog_bytes += len(frame)
+        self.more = bool(self._backlog)
+
+    def drop(self, routing_id: bytes, frame: Any) -> None:
+        """Drop ``frame`` unread and tell its sender (``seq`` read from its first bytes, else -1)."""
+        self.dropped += 1
+        reply = protocol.error_reply(
+            protocol.peek_seq(frame),
+            STATE,
+            f"request dropped unread: this sim is busy ({BACKLOG_BYTES >> 20} MiB of requests from "
+            "connections that drive no world are waiting); retry later",
+        )
+        self.socket.send_multipart([routing_id, protocol.pack(reply)])
 
     def send(self, reply_to: Any, payload: bytes) -> None:
         self.socket.send_multipart([reply_to, payload])

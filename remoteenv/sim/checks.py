@@ -90,9 +90,10 @@ def require_driver(owner: Any, sender: Any, world: int, instance: int, cmd: str)
     if owner is not None and owner != sender:
         raise RequestError(
             STATE,
-            f"'{cmd}' refused: world {world} of real-time sim instance {instance} is driven by another "
+            f"'{cmd}' refused: world {world} of sim instance {instance} is driven by another "
             "connection (the launching agent, or the one that reset it last); only that one may step, "
-            "reset, pause or resume it. Read-only commands (handshake, render, timing) are open to all.",
+            "pause, resume or close it (and, with a launching agent, reset it). Other commands "
+            "(handshake, render, timing, attributes) are open to all.",
         )
 
 

@@ -21,11 +21,11 @@ from remoteenv.sim.channels import Channel
 from remoteenv.sim.checks import (
     options_value,
     protocol_version,
-    require_driver,
     require_reset,
     seed_value,
     world_index,
 )
+from remoteenv.sim.drivers import Drivers
 from remoteenv.sim.stepping import Stepping
 from remoteenv.wire import protocol
 from remoteenv.wire import spaces as spaces_codec
@@ -47,11 +47,12 @@ class Commands:
         stop: called by ``close`` to end serving once the reply is sent.
         launcher_channel: the launching agent's local pipe, if any.
 
-    In real time one connection drives each world (a second client's step
-    would displace the driver's pending one): the launching agent's pipe if
-    there is one, else the connection that reset the world last. ``step``
-    and ``reset`` from any other connection are refused with a ``state``
-    error; the other commands are open to every connection.
+    One connection drives each world, in both modes (:mod:`remoteenv.sim.drivers`):
+    the launching agent's pipe if there is one, else the connection that
+    reset the world last. ``step`` (and, while the pipe drives, ``reset``)
+    from any other connection is refused with a ``state`` error, and so is
+    ``close`` from a connection that does not drive every driven world; the
+    other commands here are open to every connection.
     """
 
     def __init__(
@@ -69,11 +70,8 @@ class Commands:
         self._worlds = stepping.worlds
         self.instance = instance
         self._stop = stop
-        self._exclusive = self._worlds[0].describe().get("mode") == "real_time"
-        launcher = None if launcher_channel is None else (launcher_channel, None)
-        self._launcher = launcher
-        #: Per world, the ``(channel, routing id)`` that drives it in real time (None: nobody yet).
-        self._drivers: list[Any] = [launcher] * len(envs)
+        #: Who drives each world (and so may step it, and close the sim).
+        self.drivers = Drivers(len(envs), instance, launcher_channel)
 
     def handlers(self) -> dict[str, Handler]:
         return {
@@ -106,27 +104,11 @@ class Commands:
             "commands": list(self.advertised),
         }
 
-    def driven_only(self, cmd: str, handler: Handler) -> Handler:
-        """``handler`` for a command that acts on every world (``pause``, ``resume``): in
-        real time it is refused to a connection other than the one driving them."""
-
-        def guarded(msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
-            if self._exclusive:
-                for world, owner in enumerate(self._drivers):
-                    require_driver(owner, (channel, reply_to), world, self.instance, cmd)
-            return handler(msg, channel, reply_to)
-
-        return guarded
-
     def reset(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
         world = world_index(msg, len(self.envs))
         seed = seed_value(msg.get("seed"))
         options = options_value(msg.get("options"))
-        if self._exclusive:
-            sender = (channel, reply_to)
-            if self._launcher is not None:
-                require_driver(self._launcher, sender, world, self.instance, "reset")
-            self._drivers[world] = sender
+        self.drivers.take((world,), (channel, reply_to), "reset")
         obs, info = self._worlds[world].reset(seed=seed, options=options)
         return describe_scalars({"obs": obs, "info": info})
 
@@ -134,9 +116,8 @@ class Commands:
         world = world_index(msg, len(self.envs))
         stepper = self._worlds[world]
         require_reset(stepper.has_reset, world, self.instance)
-        if self._exclusive:
-            require_driver(self._drivers[world], (channel, reply_to), world, self.instance, "step")
-        action = check_action(self.envs[world].action_space, msg.get("action"))
+        action = check_action(self.envs[world].action_space, msg.get("action"))  # the same answer for anyone
+        self.drivers.require((world,), (channel, reply_to), "step")
         reply = stepper.submit(msg["seq"], action, channel, reply_to)
         return None if reply is None else describe_scalars(reply)
 
@@ -145,6 +126,7 @@ class Commands:
         return {"frame": self.envs[world].render()}
 
     def close(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        self.drivers.require_every((channel, reply_to), "close")
         self._stop()
         return {}
 

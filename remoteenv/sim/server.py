@@ -27,10 +27,9 @@ from remoteenv.sim.attributes import AttributeCommands
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.channels import Channel, Outgoing, PipeChannel, ZmqChannel
 from remoteenv.sim.checks import RequestError
-from remoteenv.sim.client_keys import start_client_key_check
 from remoteenv.sim.commands import Commands, Handler
 from remoteenv.sim.lifecycle import exit_on_sigterm, remove_ipc_file, write_ready_file
-from remoteenv.sim.limits import configure_router, raise_fd_limit
+from remoteenv.sim.limits import EXPENSIVE_COMMANDS, EXPENSIVE_PER_PASS, raise_fd_limit, return_large_frees
 from remoteenv.sim.orphan import (
     CHECK_INTERVAL_S,
     ParentWatch,
@@ -40,6 +39,7 @@ from remoteenv.sim.orphan import (
     start_guard,
 )
 from remoteenv.sim.real_time import Clock
+from remoteenv.sim.router import open_router
 from remoteenv.sim.stepping_modes import stepping_and_commands
 from remoteenv.wire import protocol
 from remoteenv.wire.addresses import is_loopback
@@ -141,27 +141,31 @@ class RemoteControlledAgent:
         self._handlers: dict[str, Handler] = common.handlers()
         self._handlers.update(AttributeCommands(envs, instance).handlers())
         self._handlers.update(mode_commands)
+        #: Who drives each world (:mod:`remoteenv.sim.drivers`).
+        self.drivers = drivers = common.drivers
         for name in ("pause", "resume"):  # they stop or start every world's clock
             if name in self._handlers:
-                self._handlers[name] = common.driven_only(name, self._handlers[name])
+                self._handlers[name] = drivers.guard_every(name, self._handlers[name])
+        if "reset_batch" in self._handlers:
+            self._handlers["reset_batch"] = drivers.guard_reset_batch(self._handlers["reset_batch"])
+            self._handlers["step_batch"] = drivers.guard_step_batch(self._handlers["step_batch"])
         common.advertised = sorted(self._handlers)
-        self._authenticator: Any = None
         raise_fd_limit()
-        self._ctx: zmq.Context[Any] = zmq.Context.instance()
-        self.socket = self._ctx.socket(zmq.ROUTER)
-        configure_router(self.socket)
-        if curve_secret_key is not None:
-            if curve_client_keys is not None:
-                self._authenticator = start_client_key_check(self._ctx, curve_client_keys)
-            self.socket.curve_server = True
-            self.socket.curve_secretkey = curve_secret_key
-        elif not is_loopback(address):
-            raise ValueError(f"binding {address!r} beyond loopback requires CURVE keys")
-        self.socket.bind(address)
+        return_large_frees()
+        # A context of its own: its ZAP handler is this server's gate.
+        self._ctx: zmq.Context[Any] = zmq.Context()
+        try:
+            self.socket, self._gate = open_router(self._ctx, address, curve_secret_key, curve_client_keys)
+        except BaseException:
+            self._ctx.term()
+            raise
         self.endpoint: str = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
-        self.channels: list[Channel] = [ZmqChannel(self.socket)]
+        #: The ROUTER's channel: the drivers' frames first, the others' within budgets.
+        self.router = ZmqChannel(self.socket, owners=lambda: drivers.routing_ids)
+        self.channels: list[Channel] = [self.router]
         if self._pipe is not None:
             self.channels.append(self._pipe)
+        self._expensive_left = EXPENSIVE_PER_PASS
         self._running = True
         #: Wall seconds before a deadline at which waiting turns from sleeping to spinning.
         self.deadline_spin_s = DEADLINE_SPIN_S
@@ -208,19 +212,19 @@ class RemoteControlledAgent:
                 guard.release()
 
     def _serve_until_stopped(self) -> None:
-        stepping, clock, pipe = self.stepping, self.clock, self._pipe
+        stepping, clock, pipe, router = self.stepping, self.clock, self._pipe, self.router
         # Busy-waiting for the agent's next request pays in lock-step; in real
         # time the loop's own waits are paced by the deadlines instead.
         hot = HotWait(SIM_SPIN_S if pipe is not None and not self.real_time else 0.0)
+        served: list[Channel] = [router] if pipe is None else [pipe, router]  # the launching agent first
         poller = zmq.Poller()
-        by_pollable: dict[Any, Channel] = {}
-        for channel in self.channels:
+        for channel in served:
             poller.register(channel.pollable, zmq.POLLIN)
-            by_pollable[channel.pollable] = channel
-        fds = [channel.fd for channel in self.channels]
+        fds = [channel.fd for channel in served]
         spin_s = self.deadline_spin_s
         last_check = clock()
         while self._running:
+            self._expensive_left = EXPENSIVE_PER_PASS
             deadline = stepping.next_deadline()
             if deadline is None:
                 if pipe is not None and hot.worth_it():
@@ -234,9 +238,11 @@ class RemoteControlledAgent:
                     if pipe.closed:
                         self.pipe_closed()
                         continue
-                events = poller.poll(_CHECK_INTERVAL_MS)
-                for pollable, _ in events:
-                    channel = by_pollable[pollable]
+                # Frames left waiting in the router's backlog: look, do not wait.
+                events = dict(poller.poll(0 if router.more else _CHECK_INTERVAL_MS))
+                for channel in served:
+                    if channel.pollable not in events and not channel.more:
+                        continue
                     frames = channel.receive_nowait()
                     if channel is pipe and frames:
                         hot.waited(time.perf_counter() - hot.since)
@@ -258,7 +264,7 @@ class RemoteControlledAgent:
                         # absorbed by spinning (looping) instead of making us late.
                         select.select(fds, [], [], timeout - spin_s)
                 # The ZeroMQ descriptor is edge-triggered: read every channel.
-                for channel in self.channels:
+                for channel in served:
                     self._answer(channel, channel.receive_nowait())
                     if channel.closed:
                         self.pipe_closed()
@@ -268,10 +274,21 @@ class RemoteControlledAgent:
                 self.check_parent()
                 last_check = now
 
-    def _answer(self, channel: Channel, frames: list[tuple[Any, bytes]]) -> None:
-        stepping = self.stepping
-        for reply_to, frame in frames:
-            reply = self.handle_frame(frame, channel, reply_to)
+    def _answer(self, channel: Channel, frames: list[tuple[Any, Any]]) -> None:
+        stepping, router = self.stepping, self.router
+        for i, (reply_to, frame) in enumerate(frames):
+            reply: dict[str, Any] | None
+            try:
+                msg = protocol.decode_request(frame)
+            except protocol.ProtocolError as exc:
+                reply = protocol.error_reply(-1, PROTOCOL, str(exc))
+            else:
+                if msg["cmd"] in EXPENSIVE_COMMANDS and channel is router and router.budgeted(reply_to):
+                    if self._expensive_left <= 0:  # this pass's share is spent: the rest waits
+                        router.defer(frames[i:])
+                        return
+                    self._expensive_left -= 1
+                reply = self.handle(msg, channel, reply_to)
             if reply is not None:
                 channel.send(reply_to, self.pack_reply(reply))
                 if stepping.clock_waiting:  # a reset was answered: its world's clock starts now
@@ -370,11 +387,11 @@ class RemoteControlledAgent:
                 env.close()
             except Exception:
                 traceback.print_exc()
+        self._gate.stop()
         self.socket.close(linger=0)
+        self._ctx.term()
         if self._pipe is not None:
             self._pipe.close()
-        if self._authenticator is not None:
-            self._authenticator.stop()
         remove_ipc_file(self.endpoint)
 
 

@@ -32,6 +32,12 @@ oversize with an error reply instead. A receiver drops an oversize frame
 (ZeroMQ does so itself through ``ZMQ_MAXMSGSIZE``, which closes that peer's
 connection). In a request, no msgpack array or map holds more than
 :data:`MAX_REQUEST_ITEMS` entries (lists of numbers travel as arrays).
+A server bounds what it holds for its peers in total: it may refuse a
+connection's handshake when it serves enough connections already (the
+reference sims admit 8 at once), and it may drop a request unread when too
+many requests from connections that drive no world (see Drivers) are
+waiting, answering it with a ``state`` error whose ``seq`` is read from the
+frame's first bytes (-1 if it is not there: :func:`peek_seq`).
 Integers are within msgpack's range ``[-2**63, 2**64)``. Error messages echo
 at most a bounded repr of the request's content
 (:data:`remoteenv.wire.errors.MAX_ECHO_CHARS` characters per value) and are
@@ -88,7 +94,8 @@ Values).
 
 ``render`` ``{"world": int}`` -> ``{"frame": uint8 array H x W x 3 | nil}``.
 
-``close`` ``{}`` -> ``{}``; the server then exits.
+``close`` ``{}`` -> ``{}``; the server then exits. Only a connection that
+drives the worlds may close a sim (see Drivers).
 
 ``timing`` ``{"clear": bool}`` -> ``{"worlds": [map, ...]}`` (real-time sims
 only): per world, ``pacing_error_s`` and ``apply_delay_s`` summaries
@@ -132,7 +139,9 @@ int, "actions": [dtype, shape], "obs": [dtype, shape]}}`` (optional; a
 lock-step sim whose worlds step together and whose spaces fit offers it, to
 the agent that launched it, over the local pipe only; anyone else gets a
 ``state`` error): the sim's shared-memory region for batched steps, an
-anonymous file the agent maps as ``/proc/<pid>/fd/<fd>``, laid out as
+anonymous file the agent maps as ``/proc/<pid>/fd/<fd>``, sealed against
+shrinking and growing (``F_SEAL_SHRINK | F_SEAL_GROW | F_SEAL_SEAL``) before
+it is offered, laid out as
 :mod:`remoteenv.wire.shared_batch` says. Afterwards a ``step_batch`` on the
 pipe may carry ``"shared": true`` and no ``actions`` (nor ``worlds``): the
 actions of positions ``0 .. n-1`` are rows ``0 .. n-1`` of the region's
@@ -170,6 +179,24 @@ its handshake's ``commands``.
 
 ``world`` defaults to 0 and addresses one of the ``num_worlds`` MuJoCo worlds
 a sim process hosts.
+
+Drivers
+-------
+One connection drives each world (a connection is the local pipe, or one
+ZeroMQ peer, known by its routing id: a client keeps its routing id when it
+reconnects). A sim with a local pipe is driven by the pipe, every world and
+for good. Otherwise nobody drives a world until a connection resets it
+(``reset``, ``reset_batch``), and the connection that reset a world last
+drives it. A ``state`` error answers ``step`` or ``step_batch`` on a world
+another connection drives; ``reset`` or ``reset_batch`` from anything but
+the pipe of a sim that has one; and ``close``, ``pause`` or ``resume`` from
+a connection that does not drive every world somebody drives (the sim's
+owner: its pipe, else the connection driving its worlds). Every other
+command is open to every connection. A client that wants to drive a world
+resets it first. This keeps a second client from displacing a driver's
+steps or stopping its sim; it does not tell users apart (without a pipe a
+reset takes a world over): who may connect at all is up to the transport
+(an ipc socket in a private dir, CURVE keys).
 
 Values
 ------
@@ -251,6 +278,22 @@ def unpack(frame: bytes, max_items: int | None = None) -> Any:
         raise
     except Exception as exc:  # msgpack raises several types for bad input
         raise ProtocolError(f"undecodable frame ({type(exc).__name__}: {short_repr(str(exc))})") from None
+
+
+def peek_seq(frame: Any, prefix: int = 64) -> int:
+    """The ``seq`` of a request frame read from its first ``prefix`` bytes only,
+    or -1 when it is not among them (a receiver that drops a frame unread
+    answers it with this ``seq``). Never raises."""
+    unpacker = msgpack.Unpacker(raw=False, strict_map_key=True, max_buffer_size=prefix)
+    try:
+        unpacker.feed(bytes(memoryview(frame)[:prefix]))
+        for _ in range(min(unpacker.read_map_header(), 4)):
+            key, value = unpacker.unpack(), unpacker.unpack()
+            if key == "seq":
+                return value if type(value) is int and -1 <= value < 2**64 else -1
+    except Exception:
+        pass
+    return -1
 
 
 def decode_request(frame: bytes) -> dict[str, Any]:
@@ -390,6 +433,7 @@ __all__ = [
     "decode_request",
     "error_reply",
     "pack",
+    "peek_seq",
     "stream_frame",
     "unpack",
     "wire_dtype",

@@ -5,8 +5,10 @@ A sim process serving its launching agent over the local pipe can put the
 arrays of a plain ``step_batch`` (every world stepped, none reset) in memory
 both processes map, so the pipe carries only the small rest of the request
 and reply (ops, infos). The sim creates the region (an anonymous
-``memfd``: nothing on disk, gone when both ends close it); the agent maps the
-same file through ``/proc/<sim pid>/fd/<fd>``. Layout, for ``K`` worlds, each
+``memfd``: nothing on disk, gone when both ends close it) and, before it
+offers it, seals its size (:data:`REGION_SEALS`: ``F_SEAL_SHRINK``,
+``F_SEAL_GROW``, ``F_SEAL_SEAL``) so no process can truncate it under a
+mapping; the agent maps the same file through ``/proc/<sim pid>/fd/<fd>``. Layout, for ``K`` worlds, each
 block starting on a 64-byte boundary in this order:
 
 - ``actions``: ``K`` rows of the action (Box: its dtype and shape; Discrete:
@@ -23,6 +25,7 @@ numbers of a fixed dtype and shape, nothing it would interpret further.
 
 from __future__ import annotations
 
+import fcntl
 import math
 import mmap
 import os
@@ -136,11 +139,26 @@ class SharedArrays:
             pass
 
 
+#: The seals :func:`create_region` sets on the region's ``memfd`` once it has its
+#: size, before the region is offered: its size is fixed for good (a shrunk
+#: file would kill a process that maps it with SIGBUS), and no seal may be
+#: added or removed afterwards. Writes stay allowed: both sides write it.
+REGION_SEALS = fcntl.F_SEAL_SHRINK | fcntl.F_SEAL_GROW | fcntl.F_SEAL_SEAL if hasattr(fcntl, "F_SEAL_SHRINK") else 0
+
+
 def create_region(layout: SharedLayout) -> tuple[int, SharedArrays]:
-    """A new anonymous region for ``layout``: its file descriptor and views (sim side)."""
-    fd = os.memfd_create("remoteenv-shared-batch", getattr(os, "MFD_CLOEXEC", 0))
+    """A new anonymous region for ``layout``: its file descriptor and views (sim side).
+
+    The ``memfd`` is created with ``MFD_ALLOW_SEALING`` and, once sized, sealed
+    with :data:`REGION_SEALS` (``F_SEAL_SHRINK | F_SEAL_GROW | F_SEAL_SEAL``),
+    so neither this process nor any other can change its size afterwards.
+    """
+    flags = getattr(os, "MFD_CLOEXEC", 0) | getattr(os, "MFD_ALLOW_SEALING", 0)
+    fd = os.memfd_create("remoteenv-shared-batch", flags)
     try:
         os.ftruncate(fd, layout.size)
+        if REGION_SEALS:
+            fcntl.fcntl(fd, fcntl.F_ADD_SEALS, REGION_SEALS)
         region = mmap.mmap(fd, layout.size)
     except BaseException:
         os.close(fd)
@@ -161,4 +179,4 @@ def map_region(path: str, layout: SharedLayout) -> SharedArrays:
     return SharedArrays(layout, region)
 
 
-__all__ = ["MAX_SHARED_BYTES", "SharedArrays", "SharedLayout", "create_region", "map_region"]
+__all__ = ["MAX_SHARED_BYTES", "REGION_SEALS", "SharedArrays", "SharedLayout", "create_region", "map_region"]

@@ -75,6 +75,33 @@ def test_both_ends_see_one_region():
 
 
 @linux_only
+def test_the_region_is_sealed_against_resizing_before_it_is_offered():
+    import fcntl
+
+    layout = SharedLayout(4, "<f4", (2,), "<f8", (10,))
+    fd, sim_end = create_region(layout)
+    try:
+        seals = fcntl.fcntl(fd, fcntl.F_GET_SEALS)
+        wanted = fcntl.F_SEAL_SHRINK | fcntl.F_SEAL_GROW | fcntl.F_SEAL_SEAL
+        assert seals & wanted == wanted and not seals & fcntl.F_SEAL_WRITE
+        # Another process (here: this one through /proc, as the agent opens it) cannot resize it.
+        other = os.open(f"/proc/{os.getpid()}/fd/{fd}", os.O_RDWR)
+        try:
+            for size in (64, layout.size * 2):
+                with pytest.raises(PermissionError):
+                    os.ftruncate(other, size)
+            with pytest.raises(PermissionError):
+                fcntl.fcntl(other, fcntl.F_ADD_SEALS, fcntl.F_SEAL_WRITE)  # the seals are sealed too
+        finally:
+            os.close(other)
+        assert os.fstat(fd).st_size == layout.size
+        sim_end.obs[3] = 1.0  # writes stay allowed
+    finally:
+        sim_end.close()
+        os.close(fd)
+
+
+@linux_only
 def test_a_file_smaller_than_its_layout_is_not_mapped(tmp_path):
     small = tmp_path / "small"
     small.write_bytes(b"\0" * 64)

@@ -1,0 +1,76 @@
+"""Only the sim's owner, the connection that drives its worlds, may stop it,
+in lock-step and in real time; nobody else may step a world someone drives.
+
+A second client reaches the sim's ZeroMQ endpoint (ipc, same uid; or tcp on
+loopback, where any local user could) while the owner drives it, over the
+launching pipe or, without one, over ZeroMQ itself.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from remoteenv import OpenAIRemoteEnv, RemoteVectorEnv, StateError, scene_path
+from remoteenv.agent.launcher import pid_alive
+from remoteenv.agent.zmq_connection import ZmqConnection
+
+
+def _gone(pid: int, within_s: float = 30.0) -> bool:
+    deadline = time.monotonic() + within_s  # generous: a loaded 2-core machine
+    while pid_alive(pid):
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
+@pytest.mark.parametrize("real_time", [False, True], ids=["lock_step", "real_time"])
+@pytest.mark.parametrize("transport", ["pipe", "tcp"])
+def test_a_second_client_can_neither_close_nor_step_the_owners_sim(transport, real_time):
+    env = OpenAIRemoteEnv(
+        scene_path("cartpole"), transport=transport, real_time=real_time, timeout=20.0, startup_timeout=120.0
+    )
+    try:
+        pid = env.pid
+        env.reset(seed=0)
+        other = ZmqConnection(env.launcher.sims[0].endpoint, timeout=20.0)
+        try:
+            for cmd, args in (("close", {}), ("step", {"action": 0}), ("pause", {})):
+                if cmd == "pause" and not real_time:
+                    continue
+                with pytest.raises(StateError, match="driven by another connection"):
+                    other.request(cmd, **args)
+            assert other.request("render")["ok"]  # read-only commands stay open
+        finally:
+            other.close()
+        assert pid_alive(pid)
+        for _ in range(3):
+            obs, *_ = env.step(env.action_space.sample())  # the owner's sim serves on
+        assert obs.shape == (4,)
+    finally:
+        env.close()
+    assert _gone(pid)
+
+
+def test_a_second_client_cannot_step_a_lock_step_vector_sim_over_zeromq():
+    env = RemoteVectorEnv(scene_path("cartpole"), 2, envs_per_process=2, startup_timeout=120.0, timeout=20.0)
+    try:
+        env.reset(seed=0)
+        other = ZmqConnection(env.launcher.sims[0].endpoint, timeout=20.0)
+        try:
+            for cmd, args in (
+                ("step_batch", {"ops": [0, 0], "actions": np.zeros(2, np.int64)}),
+                ("reset_batch", {"worlds": [0, 1], "seeds": None}),
+                ("close", {}),
+            ):
+                with pytest.raises(StateError, match="driven by another connection"):
+                    other.request(cmd, **args)
+        finally:
+            other.close()
+        obs, *_ = env.step(np.array([0, 1]))
+        assert obs.shape == (2, 4)
+    finally:
+        env.close()
