@@ -22,12 +22,13 @@ table) and ``rt_replay.json``. The defaults are the study of docs/latency.md::
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import tempfile
 from typing import Any
 
+from remoteenv.cli.arguments import json_map, positive_int
 from remoteenv.cli.latency_sweep import int_list
+from remoteenv.cli.optional import require
 
 DEFAULT_ENV = "remoteenv/CartPole-v0"
 
@@ -49,18 +50,28 @@ def add_parser(sub: Any) -> None:
         "--random-delays", default="4,8,12", help="k of the Uniform(0, k) delays in ticks; '' for none (default 4,8,12)"
     )
     p.add_argument("--seeds", default="0,1,2", help="training seeds (default 0,1,2)")
-    p.add_argument("--steps", type=int, default=300_000, help="environment steps per training run (default 300000)")
-    p.add_argument("--eval-episodes", type=int, default=10, help="evaluation episodes per policy (default 10)")
+    p.add_argument(
+        "--steps", type=positive_int, default=300_000, help="environment steps per training run (default 300000)"
+    )
+    p.add_argument("--eval-episodes", type=positive_int, default=10, help="evaluation episodes per policy (default 10)")
     p.add_argument(
         "--workers",
-        type=int,
+        type=positive_int,
         default=min(2, os.cpu_count() or 1),
         help="training runs in parallel, one per core (default min(2, CPUs))",
     )
     p.add_argument("--out", default="latency-study", help="output directory (default ./latency-study)")
     p.add_argument("--resume", action="store_true", help="keep the finished runs of an interrupted study in --out")
+    p.add_argument(
+        "--policies", default=None, help="keep the trained policies in this directory (default: a temporary one)"
+    )
     p.add_argument("--no-plot", action="store_true", help="skip the figure (no matplotlib needed)")
-    p.add_argument("--rt-episodes", type=int, default=20, help="real-time episodes per policy for the twin check")
+    p.add_argument(
+        "--rt-episodes",
+        type=positive_int,
+        default=10,
+        help="real-time episodes per policy in the twin check (default 10)",
+    )
     p.add_argument("--no-rt-replay", action="store_true", help="skip the real-time / lock-step replay comparison")
     p.set_defaults(run=run)
 
@@ -69,46 +80,49 @@ def _config(args: argparse.Namespace) -> Any:
     from remoteenv.latency_study.design import StudyConfig
 
     if args.env_kwargs is None:
-        kwargs: Any = {"continuous": True} if args.env == DEFAULT_ENV else {}
+        kwargs: dict[str, Any] = {"continuous": True} if args.env == DEFAULT_ENV else {}
     else:
-        try:
-            kwargs = json.loads(args.env_kwargs)
-        except json.JSONDecodeError as exc:
-            raise SystemExit(f"--env-kwargs is not JSON: {exc}") from None
-        if not isinstance(kwargs, dict):
-            raise SystemExit("--env-kwargs must be a JSON map")
-    if args.steps < 1 or args.eval_episodes < 1 or args.workers < 1 or args.rt_episodes < 1:
-        raise SystemExit("--steps, --eval-episodes, --workers and --rt-episodes must be >= 1")
+        kwargs = json_map(args.env_kwargs, "--env-kwargs")
     random_delays = int_list(args.random_delays, "--random-delays") if args.random_delays.strip() else []
-    return StudyConfig(
-        env_id=args.env,
-        env_kwargs=kwargs,
-        delays=tuple(int_list(args.delays, "--delays")),
-        random_delays=tuple(random_delays),
-        seeds=tuple(int_list(args.seeds, "--seeds")),
-        steps=args.steps,
-        eval_episodes=args.eval_episodes,
-    )
+    try:
+        return StudyConfig(
+            env_id=args.env,
+            env_kwargs=kwargs,
+            delays=tuple(int_list(args.delays, "--delays")),
+            random_delays=tuple(random_delays),
+            seeds=tuple(int_list(args.seeds, "--seeds")),
+            steps=args.steps,
+            eval_episodes=args.eval_episodes,
+        )
+    except ValueError as exc:
+        raise SystemExit(str(exc)) from None
 
 
 def _check_writable(folder: str) -> None:
     """Fail now, not after an hour of training, if ``folder`` cannot take the outputs."""
-    os.makedirs(folder, exist_ok=True)
     try:
+        os.makedirs(folder, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=folder, prefix=".write-check-"):
             pass
     except OSError as exc:
-        raise SystemExit(f"--out {folder!r} is not writable: {exc.strerror}") from None
+        raise SystemExit(f"--out {folder!r} is not writable: {exc.strerror or exc}") from None
 
 
 def run(args: argparse.Namespace) -> int:
-    from remoteenv.latency_study.results import markdown_table, plot
+    purpose = "python -m remoteenv latency-study"
+    for module in ("torch", "stable_baselines3", "tqdm") + (() if args.no_plot else ("matplotlib",)):
+        require(module, purpose)
+    from remoteenv.latency_study.results import markdown_table, plot, write_json
     from remoteenv.latency_study.runner import run_study
+    from remoteenv.latency_study.twin_check import run_twin_check
 
     config = _config(args)
     _check_writable(args.out)
+    if args.policies is not None:
+        _check_writable(args.policies)
     json_path = os.path.join(args.out, "delay_effect.json")
-    with tempfile.TemporaryDirectory(prefix="remoteenv-study-policies-") as policy_dir:
+    with tempfile.TemporaryDirectory(prefix="remoteenv-study-policies-") as scratch:
+        policy_dir = args.policies or scratch
         data = run_study(config, json_path, workers=args.workers, resume=args.resume, policy_dir=policy_dir)
         table = markdown_table(data["records"])
         with open(os.path.join(args.out, "delay_effect.md"), "w") as f:
@@ -119,4 +133,10 @@ def run(args: argparse.Namespace) -> int:
             plot(data["records"], os.path.join(args.out, "delay_effect.png"), title)
         print(table)
         print(f"wrote {json_path} (training wall time {data['wall_s']:.0f} s on {data['host']['cpus']} CPUs)")
+        if not args.no_rt_replay:
+            check = run_twin_check(config, policy_dir, args.rt_episodes, progress=print)
+            write_json(os.path.join(args.out, "rt_replay.json"), check)
+            pooled = check["pooled"]
+            verdict = pooled["verdict"] if pooled else "too few episodes"
+            print(f"wrote {os.path.join(args.out, 'rt_replay.json')}: real time vs lock-step replay, pooled: {verdict}")
     return 0
