@@ -106,6 +106,14 @@ class BaseEnv:
             self._np_random, self._np_random_seed = seeding.np_random()
         return self._np_random
 
+    @property
+    def np_random_seed(self) -> int:
+        """The seed of :attr:`np_random`, as Gymnasium's ``Env.np_random_seed``: the
+        last seed a reset or the launch gave, a random one drawn now if never seeded."""
+        if self._np_random is None:
+            self._np_random, self._np_random_seed = seeding.np_random()
+        return int(self._np_random_seed if self._np_random_seed is not None else -1)
+
     def seed_rng(self, seed: int | None) -> None:
         """Reseed the RNG (as ``reset(seed=...)`` does) without resetting the world."""
         self._np_random, self._np_random_seed = seeding.np_random(seed)
