@@ -57,6 +57,7 @@ import zmq
 
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.lifecycle import exit_on_sigterm, remove_ipc_file, write_ready_file
+from remoteenv.sim.log import log_to_stderr
 from remoteenv.sim.orphan import CHECK_INTERVAL_S, parent_alive
 from remoteenv.sim.scene_main import scene_argument_parser
 from remoteenv.wire import protocol
@@ -234,6 +235,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--env-class", default=None, help="env class in the scene script (if it has several)")
     parser.add_argument("--episode-steps", type=int, default=100, help="control ticks per episode")
     args = parser.parse_args(argv)
+    log_to_stderr(args.instance)
     if args.real_time or args.action_delay or args.worlds != 1:
         parser.error("a publisher drives one world lock-step: --real-time, --action-delay, --worlds do not apply")
     env_kwargs: dict[str, Any] = json.loads(args.env_kwargs)
