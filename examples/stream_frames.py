@@ -1,7 +1,7 @@
 """Stream rendered CartPole frames from sim processes into a torch DataLoader.
 
 Two publisher sim processes each render their own world offscreen (random
-actions, MUJOCO_GL=egl) and push frames with labels; a DataLoader with two
+actions, MUJOCO_GL=egl) and send frames with labels; a DataLoader with two
 workers reads them, one publisher per worker, and this script saves a grid of
 the frames with each frame's pole angle (a label) as its title.
 
@@ -33,7 +33,7 @@ def main() -> None:
     parser.add_argument("--out", default="frames.png", help="PNG file to write")
     parser.add_argument("--instances", type=int, default=2, help="publisher sim processes")
     parser.add_argument("--workers", type=int, default=2, help="DataLoader worker processes")
-    parser.add_argument("--items", type=int, default=16, help="frames per publisher")
+    parser.add_argument("--items", type=int, default=16, help="frames per publisher (one pass)")
     parser.add_argument("--width", type=int, default=240)
     parser.add_argument("--height", type=int, default=160)
     args = parser.parse_args()

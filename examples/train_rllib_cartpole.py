@@ -1,11 +1,13 @@
-"""Train RLlib PPO (new API stack) on remoteenv/CartPole-v0.
+"""Train RLlib PPO (new API stack) on remoteenv/CartPole-v0, or any registered remote env id.
 
 RLlib's env runners are separate processes that never import remoteenv, so
-a plain id (``"remoteenv/CartPole-v0"``) fails there with
-``NamespaceNotFound``. Give RLlib the module-prefixed id instead: Gymnasium
-imports the module named before the colon, which registers the id::
+a plain id (``"remoteenv/CartPole-v0"``) is unknown there. One call in the
+driver registers every remote env id with Ray Tune's env registry, which
+RLlib's runners read::
 
-    config.environment("remoteenv:remoteenv/CartPole-v0")
+    import remoteenv.rllib
+    remoteenv.rllib.register_envs()
+    config.environment("remoteenv/CartPole-v0")
 
 Each env runner builds its envs with ``gym.make_vec``; with
 ``gym_env_vectorize_mode="vector_entry_point"`` that is one
@@ -13,10 +15,12 @@ Each env runner builds its envs with ``gym.make_vec``; with
 from one request. Keyword arguments of the env go in ``env_config``.
 
     python examples/train_rllib_cartpole.py                  # until mean return >= 450
+    python examples/train_rllib_cartpole.py --env my_arm:my_arm/MyArm-v0 --target=-inf --iterations 5
 
 Needs ``pip install torch==2.13.0 "ray[rllib]==2.60.0"`` (torch first). Exits
 1 if the return is not reached within ``--iterations``. Measured on the
-2-core reference machine: see docs/cluster.md, "RLlib".
+2-core reference machine: see docs/cluster.md, "RLlib". The RLlib settings
+are RLlib's for CartPole; another env may want others.
 """
 
 from __future__ import annotations
@@ -26,18 +30,18 @@ import sys
 import time
 from typing import Any
 
-ENV_ID = "remoteenv:remoteenv/CartPole-v0"
+ENV_ID = "remoteenv/CartPole-v0"
 TARGET_RETURN = 450.0
 
 
-def make_config(env_runners: int, envs_per_runner: int, seed: int) -> Any:
-    """PPO on remoteenv's CartPole, with RLlib's settings for CartPole."""
+def make_config(env_runners: int, envs_per_runner: int, seed: int, env_id: str = ENV_ID) -> Any:
+    """PPO on ``env_id`` (a plain id: see :func:`register`), with RLlib's settings for CartPole."""
     from ray.rllib.algorithms.ppo import PPOConfig
     from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
 
     return (
         PPOConfig()
-        .environment(ENV_ID, env_config={"seed": seed})
+        .environment(env_id, env_config={"seed": seed})
         .env_runners(
             num_env_runners=env_runners,
             num_envs_per_env_runner=envs_per_runner,
@@ -49,6 +53,14 @@ def make_config(env_runners: int, envs_per_runner: int, seed: int) -> Any:
     )
 
 
+def register(env_id: str = ENV_ID) -> str:
+    """Make ``env_id`` known to RLlib's env runners; returns the plain id to configure.
+    ``"module:id"`` imports ``module`` first (an env package of your own)."""
+    import remoteenv.rllib
+
+    return remoteenv.rllib.register_envs(env_id)[0]
+
+
 def train(
     iterations: int,
     target: float = TARGET_RETURN,
@@ -56,13 +68,14 @@ def train(
     envs_per_runner: int = 4,
     seed: int = 0,
     log: Any = print,
+    env_id: str = ENV_ID,
 ) -> list[dict[str, float]]:
     """Train until the mean episode return reaches ``target`` or ``iterations`` are done.
 
     Connects to the Ray cluster this process is attached to (``ray.init``
     first), else starts a local one. Returns one row per iteration:
     ``{"iteration", "return_mean", "env_steps", "seconds"}``."""
-    algo = make_config(env_runners, envs_per_runner, seed).build_algo()
+    algo = make_config(env_runners, envs_per_runner, seed, register(env_id)).build_algo()
     rows: list[dict[str, float]] = []
     start = time.perf_counter()
     try:
@@ -94,7 +107,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--iterations", type=int, default=60, help="at most this many training iterations")
     p.add_argument("--target", type=float, default=TARGET_RETURN, help="stop at this mean episode return")
     p.add_argument("--env-runners", type=int, default=1, help="RLlib env runner processes")
-    p.add_argument("--envs-per-runner", type=int, default=4, help="remote CartPole worlds per env runner")
+    p.add_argument("--envs-per-runner", type=int, default=4, help="remote worlds per env runner")
+    p.add_argument("--env", default=ENV_ID, help="a registered remote env id (module:id imports the module)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--address", default=None, help="Ray cluster to join (default: start a local one)")
     args = p.parse_args(argv)
@@ -102,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     import ray
 
     ray.init(address=args.address)
-    rows = train(args.iterations, args.target, args.env_runners, args.envs_per_runner, args.seed)
+    rows = train(args.iterations, args.target, args.env_runners, args.envs_per_runner, args.seed, env_id=args.env)
     last = rows[-1]
     reached = last["return_mean"] >= args.target
     print(

@@ -32,16 +32,15 @@ the finished envs at once with ``reset(options={"reset_mask": dones})``.
 
 from __future__ import annotations
 
-import importlib
-import inspect
 from collections.abc import Iterable, Sequence
 from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
-from gymnasium.envs.registration import load_env_creator
 from gymnasium.vector import AutoresetMode, VectorEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
+
+from remoteenv.registration import make_vector_env
 
 
 def split_infos(infos: dict[str, Any], num_envs: int) -> list[dict[str, Any]]:
@@ -227,25 +226,6 @@ class SB3VecEnv(VecEnv):
         return out
 
 
-def _takes_autoreset_mode(env_id: str) -> bool:
-    """Whether ``env_id``'s registered vector entry point has an ``autoreset_mode``
-    parameter (``"module:id"`` imports the module first, as ``gym.make_vec`` does)."""
-    module, _, name = env_id.rpartition(":")
-    try:
-        if module:
-            importlib.import_module(module)
-        entry = gym.spec(name).vector_entry_point
-    except (ImportError, gym.error.Error):  # gym.make_vec will say what is wrong with the id
-        return False
-    if entry is None:
-        return False
-    creator = load_env_creator(entry) if isinstance(entry, str) else entry
-    try:
-        return "autoreset_mode" in inspect.signature(creator).parameters
-    except (TypeError, ValueError):  # no signature to read
-        return False
-
-
 def make_sb3_vec_env(env_id: str, num_envs: int, **kwargs: Any) -> SB3VecEnv:
     """An SB3 ``VecEnv`` of ``num_envs`` remote envs of ``env_id``, via the id's
     registered vector entry point (:class:`remoteenv.vector_env.RemoteVectorEnv`).
@@ -255,10 +235,7 @@ def make_sb3_vec_env(env_id: str, num_envs: int, **kwargs: Any) -> SB3VecEnv:
     ``SAME_STEP`` when its entry point takes that parameter: an episode's end
     and the next episode's reset then cost one round trip, not two. SB3 sees
     the same obs, rewards, dones and infos in either mode."""
-    if "autoreset_mode" not in kwargs and _takes_autoreset_mode(env_id):
-        kwargs["autoreset_mode"] = AutoresetMode.SAME_STEP
-    venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
-    return SB3VecEnv(venv)
+    return SB3VecEnv(make_vector_env(env_id, num_envs, AutoresetMode.SAME_STEP, **kwargs))
 
 
 __all__ = ["SB3VecEnv", "make_sb3_vec_env", "split_infos"]

@@ -385,15 +385,23 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         out_obs = ObsBatch(self.single_observation_space, self.batch_size).for_gym(obs)
         return out_obs, rewards, terminated, truncated, infos
 
+    @property
+    def np_random_seed(self) -> tuple[int, ...]:  # type: ignore[override]
+        """Each world's RNG seed, as ``SyncVectorEnv`` gives its envs' (``get_attr("np_random_seed")``)."""
+        return self.get_attr("np_random_seed")
+
     def render(self) -> tuple[Any, ...] | None:
         """With ``render_mode="rgb_array"``: one uint8 H x W x 3 frame per world."""
         if self.render_mode != "rgb_array":
             return None
-        frames = []
-        for p, (lo, hi) in enumerate(self.slices):
-            for w in range(hi - lo):
-                frames.append(self._session.request(p, "render", world=w)["frame"])
-        return tuple(frames)
+        return tuple(self.render_world(i) for i in range(self.num_envs))
+
+    def render_world(self, i: int) -> Any:
+        """World ``i``'s frame (None unless ``render_mode="rgb_array"``); ``call("render")`` gives every world's."""
+        if self.render_mode != "rgb_array":
+            return None
+        p, w = self._locate(i)
+        return self._session.request(p, "render", world=w)["frame"]
 
     def close_extras(self, **kwargs: Any) -> None:
         """Ask every sim to exit, then make sure they have (no process or socket

@@ -115,15 +115,21 @@ class VectorAttributes:
     each world's sim. ``call`` calls a method (or returns a plain attribute's
     value), ``get_attr`` is ``call`` without arguments, and ``set_attr`` takes
     one value for all worlds or a list/tuple with one per world.
-    :meth:`call_at` and :meth:`set_attr_at` address some worlds only.
+    ``call("render")`` returns each world's frame, as ``SyncVectorEnv``'s
+    calls each env's ``render()``. :meth:`call_at` and :meth:`set_attr_at`
+    address some worlds only.
 
     Needs ``num_envs``, ``slices`` (``(first, end)`` world indices of each
-    sim) and ``_reach`` (a :class:`SceneReach` over the env's session).
+    sim), ``_reach`` (a :class:`SceneReach` over the env's session) and
+    ``render_world(i)`` (world ``i``'s frame, or None).
     """
 
     num_envs: int
     slices: list[tuple[int, int]]
     _reach: SceneReach
+
+    def render_world(self, i: int) -> Any:
+        raise NotImplementedError
 
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         """``name`` called (or read) on every world; one result per world."""
@@ -147,6 +153,8 @@ class VectorAttributes:
 
     def call_at(self, indices: Sequence[int], name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         """Like :meth:`call`, on the worlds ``indices`` only, in that order."""
+        if name == "render" and not args and not kwargs:
+            return tuple(self.render_world(i) for i in indices)
         local = self._local_value(name)
         if local is not _MISSING:
             value = local(*args, **kwargs) if callable(local) else local

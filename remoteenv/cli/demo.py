@@ -171,12 +171,23 @@ def make_env(args: argparse.Namespace) -> gym.Env:
         kwargs["render_mode"] = "human"
     record = getattr(args, "record", None)
     if record:
+        require_moviepy()
         kwargs["render_mode"] = "rgb_array"
     env = _make(args.scene, getattr(args, "max_steps", None), kwargs)
     if record:
         prefix = os.path.splitext(os.path.basename(args.scene))[0].replace("/", "-")
         return gym.wrappers.RecordVideo(env, record, episode_trigger=lambda episode: True, name_prefix=prefix)
     return env
+
+
+def require_moviepy() -> None:
+    """Exit with the install hint unless moviepy (``--record``'s video writer) imports."""
+    try:
+        import moviepy  # noqa: F401
+    except ImportError:
+        raise SystemExit(
+            "demo: --record writes videos with moviepy, which is not installed: pip install 'remoteenv[video]'"
+        ) from None
 
 
 def _make(target: str, max_steps: int | None, kwargs: dict[str, Any]) -> gym.Env:
@@ -191,8 +202,29 @@ def _make(target: str, max_steps: int | None, kwargs: dict[str, Any]) -> gym.Env
     except gym.error.Error as exc:
         raise SystemExit(
             f"demo: {target!r} is neither a shipped scene ({', '.join(sorted(SCENES))}), a scene "
-            f"script nor a registered id ({exc}); for a package's id use 'package:namespace/Name-v0'"
+            f"script nor a registered id ({exc}); {id_hint(target)}"
         ) from None
+
+
+def id_hint(target: str) -> str:
+    """What to do about an id ``gym.make`` did not find (``module:`` prefix or not)."""
+    if ":" not in target:
+        return "for a package's id use 'package:namespace/Name-v0' (the package is imported first)"
+    module = target.split(":", 1)[0]
+    try:
+        spec = importlib.util.find_spec(module)
+    except (ImportError, ValueError):
+        spec = None
+    if spec is None:
+        return f"{module!r} is not importable here: install it (pip install -e DIR) or run from where it is"
+    if spec.origin in (None, "namespace"):
+        where = ", ".join(spec.submodule_search_locations or [])
+        return (
+            f"{module!r} imports as an empty namespace package from {where}: a folder of that name "
+            "(e.g. the package's project folder) hides the installed package; run from another "
+            "directory, or give the package a src layout (as new-scene writes it)"
+        )
+    return f"importing {module!r} ({spec.origin}) did not register that id; check the id in its gymnasium.register"
 
 
 def run(args: argparse.Namespace) -> int:

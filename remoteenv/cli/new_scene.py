@@ -1,18 +1,28 @@
 """``python -m remoteenv new-scene NAME --dir D``: write a standalone env package.
 
 The package is what the env-package guide (``docs/env-package.md``) describes,
-ready to install and test: ``D/pyproject.toml`` (the MJCF model as package
-data), ``D/NAME/NAME.xml``, ``D/NAME/NAME_scene.py`` (the sim side: a
-:class:`~remoteenv.sim.BaseEnv` subclass, ``run_scene`` and a
-``demo_policy``), ``D/NAME/__init__.py`` (the agent side: registers
-``NAME/Camel-v0`` on import), ``D/tests/test_NAME.py`` and a README. It
-passes Gymnasium's env checker as generated; the templates are in
+ready to install and test, in a src layout: ``D/pyproject.toml`` (the MJCF
+model as package data), ``D/src/NAME/NAME.xml``, ``D/src/NAME/NAME_scene.py``
+(the sim side: a BaseEnv subclass, ``run_scene`` and a ``demo_policy``),
+``D/src/NAME/__init__.py`` (the agent side: registers ``NAME/<Name>-v0`` on
+import, ``<Name>`` being NAME in CamelCase, e.g. ``ball_plate/BallPlate-v0``),
+``D/tests/test_NAME.py`` and a README. It passes Gymnasium's env checker as
+generated. NAME must not be the name of an importable module (``numpy``,
+``os``, ``remoteenv``, ...), which the package would hide.
+
+Why a src layout: with the package directly in ``D`` (``D/NAME/``), running
+Python in the folder above ``D`` (where ``new-scene`` was run, when ``D`` is
+``./NAME``) imports the project folder ``./NAME`` as an empty namespace
+package, which hides the installed one. Under ``src/`` no folder on the
+import path is named like the package. The templates are in
 ``remoteenv/cli/scene_template/``.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.machinery
+import importlib.metadata
 import keyword
 import os
 import re
@@ -25,9 +35,9 @@ from typing import Any
 FILES = {
     "pyproject.toml.tmpl": "pyproject.toml",
     "README.md.tmpl": "README.md",
-    "init.py.tmpl": "$name/__init__.py",
-    "scene.py.tmpl": "$name/${name}_scene.py",
-    "model.xml.tmpl": "$name/$name.xml",
+    "init.py.tmpl": "src/$name/__init__.py",
+    "scene.py.tmpl": "src/$name/${name}_scene.py",
+    "model.xml.tmpl": "src/$name/$name.xml",
     "test.py.tmpl": "tests/test_$name.py",
 }
 
@@ -36,7 +46,7 @@ def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "new-scene",
         help="write a standalone, installable env package for a new scene",
-        description=__doc__.split("\n\n")[1] if __doc__ else None,
+        description=__doc__.split("\n\n")[1].replace("``", "") if __doc__ else None,
     )
     p.add_argument("name", help="package name: lower case letters, digits and _ (e.g. pointmass)")
     p.add_argument(
@@ -50,10 +60,45 @@ def camel(name: str) -> str:
     return "".join(part[:1].upper() + part[1:] for part in name.split("_") if part)
 
 
+def existing_module(name: str) -> str | None:
+    """Where an importable top-level module ``name`` comes from (the standard
+    library, a file or a folder), or None if there is none. The working
+    directory is left out: a folder there is what ``--dir`` may create."""
+    if name in sys.builtin_module_names or name in getattr(sys, "stdlib_module_names", ()):
+        return "the standard library"
+    loaded = getattr(sys.modules.get(name), "__file__", None)
+    if loaded:
+        return str(loaded)
+    cwd = os.getcwd()
+    path = [p for p in sys.path if p and os.path.abspath(p) != cwd]
+    for finder in sys.meta_path:
+        try:
+            if finder is importlib.machinery.PathFinder:
+                spec = importlib.machinery.PathFinder.find_spec(name, path)
+            else:
+                find_spec = getattr(finder, "find_spec", None)
+                spec = find_spec(name, None) if find_spec is not None else None
+        except (ImportError, ValueError):
+            continue
+        if spec is not None:
+            if spec.origin not in (None, "namespace"):
+                return str(spec.origin)
+            locations = list(spec.submodule_search_locations or [])
+            return f"a namespace package at {', '.join(locations) or 'an unknown place'}"
+    return None
+
+
 def check_name(name: str) -> str:
+    """``name`` if it can be the new package's name; else ValueError saying why."""
     if not re.fullmatch(r"[a-z][a-z0-9_]*", name) or keyword.iskeyword(name) or len(name) > 64:
         raise ValueError(
             f"package name {name[:80]!r} is not usable: use lower case letters, digits and _ , starting with a letter"
+        )
+    where = existing_module(name)
+    if where is not None:
+        raise ValueError(
+            f"package name {name!r} is taken: an importable module {name!r} exists ({where}), and a "
+            f"package of that name would hide it or be hidden by it; pick another name, e.g. {name}_scene"
         )
     return name
 
@@ -85,13 +130,28 @@ def run(args: argparse.Namespace) -> int:
         print(f"new-scene: {exc}", file=sys.stderr)
         return 2
     root = os.path.dirname(written[0])
-    print(f"wrote the env package {args.name} ({camel(args.name)}-v0) to {root}:")
+    env_id = f"{args.name}/{camel(args.name)}-v0"
+    print(f"wrote the env package {args.name} ({env_id}) to {root}:")
     for path in written:
         print(f"  {os.path.relpath(path, root)}")
-    print(
-        "next:\n"
-        f"  pip install -e {root}\n"
-        f"  pytest {os.path.join(root, 'tests')}\n"
-        f"  python -m remoteenv demo {args.name}:{args.name}/{camel(args.name)}-v0"
-    )
+    print("next:")
+    clone = remoteenv_source_tree()
+    if clone is not None:
+        print(f"  pip install {clone}    # remoteenv itself: it is not installed here, only imported from there")
+    print(f"  pip install -e {root}\n  cd {root} && pytest\n  python -m remoteenv demo {args.name}:{env_id}")
     return 0
+
+
+def remoteenv_source_tree() -> str | None:
+    """The root of the remoteenv clone this process imports remoteenv from, when
+    remoteenv is not installed as a distribution (e.g. run through PYTHONPATH);
+    None when it is installed (the new package's requirement is then met)."""
+    try:
+        importlib.metadata.distribution("remoteenv")
+        return None
+    except importlib.metadata.PackageNotFoundError:
+        pass
+    import remoteenv
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(remoteenv.__file__)))
+    return root if os.path.isfile(os.path.join(root, "pyproject.toml")) else None

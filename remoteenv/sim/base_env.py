@@ -13,6 +13,8 @@ from gymnasium.utils import seeding
 
 from remoteenv.sim.batch_result import BatchResult
 from remoteenv.sim.obs_check import check_observation
+from remoteenv.sim.step_check import StepResultError, check_finite_obs, unpack_step
+from remoteenv.wire.errors import short_repr
 
 
 class BaseEnv:
@@ -43,12 +45,16 @@ class BaseEnv:
         check_obs_bounds: also check that observations lie inside the
             observation space's bounds (dtype and shape are always checked,
             see :mod:`remoteenv.sim.obs_check`).
+        check_finite: also check that observations and rewards hold no NaN
+            or infinity (the kind and count of what the hooks return are
+            always checked, see :mod:`remoteenv.sim.step_check`).
     """
 
     env_id: ClassVar[str] = "scene"
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"]}
     default_camera: ClassVar[str | None] = None
     check_obs_bounds: ClassVar[bool] = False
+    check_finite: ClassVar[bool] = False
 
     observation_space: spaces.Space
     action_space: spaces.Space
@@ -70,7 +76,7 @@ class BaseEnv:
                 f"{type(self).__name__} does not support render_mode={render_mode!r}; "
                 f"supported: {self.metadata['render_modes']}"
             )
-        self.model = mujoco.MjModel.from_xml_path(os.fspath(model_path))
+        self.model = mujoco.MjModel.from_xml_path(self._model_file(os.fspath(model_path)))
         self.data = mujoco.MjData(self.model)
         self.frame_skip = int(frame_skip)
         self.observation_space = observation_space
@@ -99,6 +105,14 @@ class BaseEnv:
         if self._np_random is None:
             self._np_random, self._np_random_seed = seeding.np_random()
         return self._np_random
+
+    @property
+    def np_random_seed(self) -> int:
+        """The seed of :attr:`np_random`, as Gymnasium's ``Env.np_random_seed``: the
+        last seed a reset or the launch gave, a random one drawn now if never seeded."""
+        if self._np_random is None:
+            self._np_random, self._np_random_seed = seeding.np_random()
+        return int(self._np_random_seed if self._np_random_seed is not None else -1)
 
     def seed_rng(self, seed: int | None) -> None:
         """Reseed the RNG (as ``reset(seed=...)`` does) without resetting the world."""
@@ -154,7 +168,9 @@ class BaseEnv:
         (see :meth:`prepare_steps`). The default calls :meth:`post_step` per world."""
         obs, rewards, terminated, infos = [], [], [], []
         for env, action in zip(envs, _per_world(actions)):
-            o, r, t, info = env.post_step(action)
+            o, r, t, info = unpack_step(
+                env.post_step(action), scene=cls.__name__, hook="post_step", finite=env.check_finite
+            )
             obs.append(o)
             rewards.append(float(r))
             terminated.append(bool(t))
@@ -168,20 +184,44 @@ class BaseEnv:
         if seed is not None:
             self.seed_rng(seed)
         mujoco.mj_resetData(self.model, self.data)
-        obs, info = self.reset_model(options)
+        result = self.reset_model(options)
+        if not isinstance(result, tuple) or len(result) != 2 or not isinstance(result[1], dict):
+            raise StepResultError(
+                f"{type(self).__name__}.reset_model returned {short_repr(result, 80)} "
+                f"({type(result).__name__}); it returns the tuple (obs, info), info a dict"
+            )
+        obs, info = result
         self._check_obs(obs, "reset_model")
         return obs, info
 
     def finish_tick(self, action: Any) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
-        """:meth:`post_step` with its observation checked against ``observation_space``."""
-        result = self.post_step(action)
+        """:meth:`post_step`, its result checked: four values, a scalar reward,
+        a bool ``terminated``, a dict info (:mod:`remoteenv.sim.step_check`)
+        and the observation against ``observation_space``."""
+        result = unpack_step(
+            self.post_step(action), scene=type(self).__name__, hook="post_step", finite=self.check_finite
+        )
         self._check_obs(result[0], "post_step")
         return result
 
     def _check_obs(self, obs: Any, hook: str) -> None:
-        check_observation(
-            self.observation_space, obs, scene=type(self).__name__, hook=hook, bounds=self.check_obs_bounds
-        )
+        scene = type(self).__name__
+        check_observation(self.observation_space, obs, scene=scene, hook=hook, bounds=self.check_obs_bounds)
+        if self.check_finite:
+            check_finite_obs(obs, scene=scene, hook=hook)
+
+    def _model_file(self, path: str) -> str:
+        """``path`` if it names a file; else FileNotFoundError naming the scene, with the fix."""
+        if os.path.isfile(path):
+            return path
+        hint = ""
+        if not os.path.isabs(path):
+            hint = (
+                f"; a relative path is looked up from the sim process's working directory ({os.getcwd()}), "
+                "which is the agent's, not the scene script's folder: build it from the script's folder, "
+                'os.path.join(os.path.dirname(os.path.abspath(__file__)), "model.xml")'
+            )
+        raise FileNotFoundError(f"{type(self).__name__}: MJCF model file {path!r} not found{hint}")
 
     def substep(self) -> None:
         """Advance the physics by one ``model.opt.timestep``."""

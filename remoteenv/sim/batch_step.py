@@ -20,6 +20,7 @@ import numpy as np
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.batch_physics import PhysicsThreads, default_threads
 from remoteenv.sim.batch_result import BatchResult
+from remoteenv.sim.step_check import check_batch
 
 
 def steps_together(envs: Sequence[Any]) -> bool:
@@ -52,6 +53,9 @@ class WorldsStepper:
         self._models = [env.model for env in self.envs]
         self._datas = [env.data for env in self.envs]
         self._frame_skip = self.envs[0].frame_skip
+        own = getattr(self._cls.post_steps, "__func__", None) is not getattr(BaseEnv.post_steps, "__func__", None)
+        #: The hook that produced a batch's results, as its errors name it.
+        self._hook = "post_steps" if own else "post_step"
         self._all = list(range(len(self.envs)))
         self.physics = PhysicsThreads(threads if threads is not None else default_threads(len(self.envs)))
 
@@ -66,7 +70,14 @@ class WorldsStepper:
             datas = [self._datas[w] for w in worlds]
         self._cls.prepare_steps(envs, actions)
         self.physics.step(models, datas, self._frame_skip)
-        result = self._cls.post_steps(envs, actions)
+        env = self.envs[0]
+        result = check_batch(
+            self._cls.post_steps(envs, actions),
+            len(envs),
+            scene=self._cls.__name__,
+            hook=self._hook,
+            finite=env.check_finite,
+        )
         self._check_obs(result.obs)
         return result
 
@@ -80,7 +91,7 @@ class WorldsStepper:
         else:
             rows = obs
         for row in rows:
-            env._check_obs(row, "post_steps")
+            env._check_obs(row, self._hook)
 
     def close(self) -> None:
         self.physics.close()

@@ -7,7 +7,8 @@ Runs in the sim process (``python <scene script> --rt-priority ...``, see
 - real-time scheduling (``SCHED_FIFO`` at a priority, Linux): the paced
   process preempts ordinary ones, so a CPU hog beside it cannot delay its
   wake-ups. Needs root or ``CAP_SYS_NICE`` (or an ``RLIMIT_RTPRIO``); when
-  refused the process says so on stderr and runs on with normal priority.
+  refused the process logs a warning (``remoteenv.sim`` logger, see
+  :mod:`remoteenv.sim.log`) and runs on with normal priority.
   A FIFO process that never sleeps would starve its CPU: the server loop
   sleeps between deadlines, and spins only within the spin window.
 - CPU affinity: pin the process to given CPUs (e.g. away from the agent's).
@@ -23,9 +24,11 @@ Runs in the sim process (``python <scene script> --rt-priority ...``, see
 from __future__ import annotations
 
 import gc
+import logging
 import os
-import sys
 from collections.abc import Sequence
+
+log = logging.getLogger(__name__)
 
 GC_MODES = ("auto", "freeze", "off")
 #: Generation-0 threshold with ``gc="freeze"`` (CPython's default is 2000 since 3.13, 700 before).
@@ -34,17 +37,17 @@ FROZEN_GC_THRESHOLD = 50_000
 
 def set_realtime_priority(priority: int) -> bool:
     """Run this process under ``SCHED_FIFO`` at ``priority`` (1..99); False, with
-    a note on stderr, where the OS refuses or lacks it."""
+    a logged warning, where the OS refuses or lacks it."""
     if not hasattr(os, "sched_setscheduler"):
-        print("remoteenv sim: real-time scheduling is not available on this OS; normal priority", file=sys.stderr)
+        log.warning("real-time scheduling is not available on this OS; normal priority")
         return False
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except PermissionError:
-        print(
-            f"remoteenv sim: SCHED_FIFO priority {priority} refused (needs root, CAP_SYS_NICE or an "
-            "RLIMIT_RTPRIO of at least that); running with normal priority",
-            file=sys.stderr,
+        log.warning(
+            "SCHED_FIFO priority %d refused (needs root, CAP_SYS_NICE or an RLIMIT_RTPRIO of at least "
+            "that); running with normal priority",
+            priority,
         )
         return False
     return True

@@ -3,7 +3,7 @@
 Runs in the sim process; the agent-side reader is
 :class:`remoteenv.torch.RemoteIterableDataset`. This is blendtorch's other
 half: instead of answering step requests, the sim drives its own world with
-random actions and pushes what it renders.
+random actions and sends what it renders, as its reader asks for it.
 
 Started as ``python publisher.py --scene <scene script> --address ...``: the
 scene command line of :mod:`remoteenv.sim.scene_main` plus the flags below,
@@ -12,9 +12,12 @@ so :class:`remoteenv.Launcher` starts publishers exactly like sims
 
 Wire
 ----
-The publisher binds one ZeroMQ PUSH socket (loopback or ipc only) and sends
-one msgpack map per frame, encoded with :mod:`remoteenv.protocol` (numpy
-arrays as extension type 1; never pickle)::
+The publisher binds one ZeroMQ ROUTER socket (loopback or ipc only); its
+reader connects a DEALER. Frames are rendered on demand: the reader grants
+*credit* with ``{"credit": n}`` (:mod:`remoteenv.wire.stream`: msgpack,
+``1 <= n <= WINDOW``), and the publisher renders and sends one item per
+credit, never more than ``WINDOW`` ahead. Each item is one msgpack map, encoded with
+:mod:`remoteenv.protocol` (numpy arrays as extension type 1; never pickle)::
 
     {"instance": int, "index": int, "episode": int, "step": int,
      "frame": uint8 array H x W x 3, "labels": map}
@@ -25,12 +28,16 @@ the state right after reset). ``labels`` come from the scene: if its env class
 defines ``stream_labels(self, obs, info) -> dict``, that; otherwise
 ``{"obs", "qpos", "qvel", "sim_time"}``.
 
-Exactly one reader should connect to each publisher (a PUSH socket deals its
-items round-robin among connected readers). The publisher blocks while no
-reader is connected or the reader's queue is full, so nothing is dropped.
-After ``--items`` frames (or never, without the flag) it stops producing but
-keeps its socket open until SIGTERM/SIGINT or the launching process exits, so
-frames still queued reach the reader.
+The stream is endless and goes on across readers: a reader that connects
+later (the next pass over a dataset) gets the next item, so a reader that
+asks for exactly what it reads leaves nothing behind and the next one starts
+at the following index. The newest reader to grant credit is the one served
+(the credit of an earlier one is void, and it is told so with
+``{"superseded": true}``), so exactly one reader should read a publisher at
+a time. Credit messages that are not a map with one int
+``credit`` in range are dropped. An item the publisher could not deliver
+(its reader disconnected) goes to the next reader. The publisher runs until
+SIGTERM/SIGINT or the launching process exits.
 """
 
 from __future__ import annotations
@@ -39,8 +46,7 @@ import importlib.util
 import json
 import os
 import sys
-import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 if __name__ == "__main__" and sys.path and os.path.abspath(sys.path[0]) == os.path.dirname(os.path.abspath(__file__)):
@@ -51,13 +57,13 @@ import zmq
 
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.lifecycle import exit_on_sigterm, remove_ipc_file, write_ready_file
+from remoteenv.sim.log import log_to_stderr
 from remoteenv.sim.orphan import CHECK_INTERVAL_S, parent_alive
 from remoteenv.sim.scene_main import scene_argument_parser
 from remoteenv.wire import protocol
 from remoteenv.wire.addresses import is_loopback
+from remoteenv.wire.stream import MAX_CREDIT_BYTES, WINDOW, parse_credit, superseded_message
 
-#: Frames a PUSH socket queues before the publisher waits for its reader.
-SEND_HWM = 8
 _POLL_MS = round(CHECK_INTERVAL_S * 1000)
 
 
@@ -101,14 +107,14 @@ def default_labels(env: BaseEnv, obs: Any, info: dict[str, Any]) -> dict[str, An
 
 
 class FramePublisher:
-    """Drives one world with random actions and pushes a frame per control tick.
+    """Drives one world with random actions and sends a frame per control tick,
+    one per credit its reader grants (see the module docstring).
 
     Args:
         env: the world; must support ``render_mode="rgb_array"``.
         address: ZeroMQ endpoint to bind (ipc or loopback tcp; ``:*`` port allowed).
         instance: this publisher's index, sent with every item.
         seed: seeds the world's resets and the random actions.
-        items: frames to produce, or None for an endless stream.
         episode_steps: control ticks per episode before a reset (episodes also
             end when the scene terminates them).
         parent_pid: stop when this process is no longer our parent.
@@ -121,7 +127,6 @@ class FramePublisher:
         *,
         instance: int = 0,
         seed: int | None = None,
-        items: int | None = None,
         episode_steps: int = 100,
         parent_pid: int | None = None,
     ) -> None:
@@ -134,54 +139,90 @@ class FramePublisher:
         self.env = env
         self.instance = instance
         self.seed = seed
-        self.items = items
         self.episode_steps = episode_steps
         self.parent_pid = parent_pid
         self._ctx: zmq.Context[Any] = zmq.Context.instance()
-        self.socket = self._ctx.socket(zmq.PUSH)
-        self.socket.setsockopt(zmq.SNDHWM, SEND_HWM)
+        self.socket = self._ctx.socket(zmq.ROUTER)
+        self.socket.setsockopt(zmq.ROUTER_MANDATORY, 1)  # an undeliverable item raises, and is kept
+        self.socket.setsockopt(zmq.SNDHWM, WINDOW)
+        self.socket.setsockopt(zmq.RCVHWM, 4 * WINDOW)
+        self.socket.setsockopt(zmq.MAXMSGSIZE, MAX_CREDIT_BYTES)
         self.socket.setsockopt(zmq.LINGER, 0)
         self.socket.bind(address)
         self.endpoint: str = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
         self._labels = getattr(env, "stream_labels", None)
+        #: Items sent so far (the next item's ``index``).
+        self.sent = 0
+        self._reader: bytes | None = None
+        self._credit = 0
 
     def _parent_gone(self) -> bool:
         return self.parent_pid is not None and not parent_alive(self.parent_pid)
 
-    def _send(self, frame: bytes) -> bool:
-        """Send one item, waiting for room; False if the parent died meanwhile."""
-        while not self.socket.poll(_POLL_MS, zmq.POLLOUT):
-            if self._parent_gone():
-                return False
-        self.socket.send(frame, copy=False)
-        return True
+    def _take_credit(self, wait_ms: int) -> None:
+        """Read the credit messages that arrived (waiting up to ``wait_ms`` for the first)."""
+        while self.socket.poll(wait_ms, zmq.POLLIN):
+            wait_ms = 0
+            frames = self.socket.recv_multipart(zmq.NOBLOCK)
+            credit = parse_credit(frames[1]) if len(frames) == 2 else None
+            if credit is None:
+                continue
+            if frames[0] != self._reader:  # a new reader takes over; the old one's credit is void
+                if self._reader is not None:
+                    try:
+                        self.socket.send_multipart([self._reader, superseded_message()], zmq.NOBLOCK)
+                    except zmq.ZMQError:
+                        pass  # it is gone (or its queue is full: it will time out instead)
+                self._reader, self._credit = frames[0], 0
+            self._credit = min(self._credit + credit, WINDOW)
 
-    def run(self) -> None:
-        """Produce ``items`` frames, then idle until stopped (see module docstring)."""
+    def _items(self) -> Iterator[bytes]:
+        """The endless stream of encoded items, rendered as they are asked for."""
         env = self.env
         env.action_space.seed(self.seed)
         obs, info = env.reset(seed=self.seed)
-        episode, step, index = 0, 0, 0
-        while self.items is None or index < self.items:
+        episode, step = 0, 0
+        while True:
             labels = self._labels(obs, info) if self._labels else default_labels(env, obs, info)
-            item = {
-                "instance": self.instance,
-                "index": index,
-                "episode": episode,
-                "step": step,
-                "frame": env.render(),
-                "labels": labels,
-            }
-            if not self._send(protocol.pack(item)):
-                return
-            index += 1
+            yield protocol.pack(
+                {
+                    "instance": self.instance,
+                    "index": self.sent,
+                    "episode": episode,
+                    "step": step,
+                    "frame": env.render(),
+                    "labels": labels,
+                }
+            )
             obs, _, terminated, info = env.step(env.action_space.sample())
             step += 1
             if terminated or step >= self.episode_steps:
                 obs, info = env.reset()
                 episode, step = episode + 1, 0
+
+    def run(self) -> None:
+        """Serve items against credit until the parent process is gone."""
+        items = self._items()
+        pending: bytes | None = None
         while not self._parent_gone():
-            time.sleep(CHECK_INTERVAL_S)
+            self._take_credit(0 if self._credit else _POLL_MS)
+            if not self._credit or self._reader is None:
+                continue
+            if pending is None:
+                pending = next(items)
+            try:
+                self.socket.send_multipart([self._reader, pending], zmq.NOBLOCK, copy=False)
+            except zmq.ZMQError as exc:
+                if exc.errno == zmq.EHOSTUNREACH:  # the reader left: keep the item for the next one
+                    self._reader, self._credit = None, 0
+                    continue
+                if exc.errno == zmq.EAGAIN:  # its queue is full (more credit than room): wait for room
+                    self._take_credit(_POLL_MS // 10)
+                    continue
+                raise
+            pending = None
+            self.sent += 1
+            self._credit -= 1
 
     def close(self) -> None:
         self.socket.close(linger=0)
@@ -192,9 +233,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser = scene_argument_parser(__doc__.splitlines()[0])
     parser.add_argument("--scene", required=True, help="path of the scene script whose world to publish")
     parser.add_argument("--env-class", default=None, help="env class in the scene script (if it has several)")
-    parser.add_argument("--items", type=int, default=None, help="frames to publish (default: endless)")
     parser.add_argument("--episode-steps", type=int, default=100, help="control ticks per episode")
     args = parser.parse_args(argv)
+    log_to_stderr(args.instance)
     if args.real_time or args.action_delay or args.delay_file or args.worlds != 1:
         parser.error(
             "a publisher drives one world lock-step: --real-time, --action-delay, --delay-file, --worlds do not apply"
@@ -208,7 +249,6 @@ def main(argv: Sequence[str] | None = None) -> None:
         args.address,
         instance=args.instance,
         seed=args.seed,
-        items=args.items,
         episode_steps=args.episode_steps,
         parent_pid=args.parent_pid,
     )

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
 from remoteenv.sim.base_env import BaseEnv
+from remoteenv.sim.log import log_to_stderr
 from remoteenv.sim.pacing_levers import GC_MODES, apply_levers
 from remoteenv.sim.server import RemoteControlledAgent
 from remoteenv.wire.delay_file import read_delay_file
@@ -145,6 +147,7 @@ def run_scene(
     and serve them until told to stop. A scene script's ``main`` is one call of this."""
     parser = scene_argument_parser(description)
     args = parser.parse_args(argv)
+    log_to_stderr(args.instance)
     if args.delay_file is not None:
         apply_delay_file(parser, args)
     env_kwargs: dict[str, Any] = json.loads(args.env_kwargs)
@@ -191,5 +194,5 @@ def run_scene(
     cpus = [int(c) for c in args.rt_cpus.split(",")] if args.rt_cpus else None
     on = apply_levers(priority=args.rt_priority, cpus=cpus, gc_mode=args.rt_gc)
     if on:
-        print(f"remoteenv sim {args.instance}: pacing levers on: {', '.join(on)}", file=sys.stderr)
+        logging.getLogger(__name__).info("pacing levers on: %s", ", ".join(on))
     server.serve()

@@ -16,6 +16,7 @@ substeps.
 
 from __future__ import annotations
 
+import logging
 import select
 import time
 import traceback
@@ -46,6 +47,8 @@ from remoteenv.wire.addresses import is_loopback
 from remoteenv.wire.delays import DelaySpec
 from remoteenv.wire.errors import INVALID_ACTION, PROTOCOL, SCENE, InvalidAction, short_repr
 from remoteenv.wire.hot_wait import HotWait
+
+log = logging.getLogger(__name__)
 
 #: Longest busy-wait (seconds) for the agent's next request on the local pipe.
 SIM_SPIN_S = 1e-3
@@ -386,7 +389,7 @@ class RemoteControlledAgent:
             try:
                 env.close()
             except Exception:
-                traceback.print_exc()
+                log.exception("closing %s (a world of sim instance %d) raised", type(env).__name__, self.instance)
         self._gate.stop()
         self.socket.close(linger=0)
         self._ctx.term()

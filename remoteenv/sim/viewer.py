@@ -30,7 +30,10 @@ class HumanRenderUnavailable(RuntimeError):
 
 _ALTERNATIVE = (
     'Use render_mode="rgb_array" instead: it renders offscreen (MUJOCO_GL=egl) and '
-    "works without a display; gymnasium.wrappers.RecordVideo turns its frames into video."
+    "works without a display; gymnasium.wrappers.RecordVideo turns its frames into video. "
+    "Gymnasium's check_env builds an env for every declared render mode, human included: "
+    "without a display call check_env(env, skip_render_check=True), or run it under a "
+    "virtual display (xvfb-run)."
 )
 
 

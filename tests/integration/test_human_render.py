@@ -31,6 +31,21 @@ def test_headless_human_render_fails_naming_rgb_array(monkeypatch, env_id):
     assert 'render_mode="rgb_array"' in text
 
 
+def test_headless_check_env_with_the_render_check_says_what_to_do(monkeypatch):
+    from gymnasium.utils.env_checker import check_env
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    env = gym.make("remoteenv/CartPole-v0")
+    try:
+        with pytest.raises(RemoteEnvError) as err:
+            check_env(env.unwrapped)  # builds a "human" env: no display here
+    finally:
+        env.close()
+    assert "check_env(env, skip_render_check=True)" in str(err.value)
+    assert 'render_mode="rgb_array"' in str(err.value)
+
+
 def test_headless_gl_backend_is_reported(monkeypatch):
     monkeypatch.setenv("DISPLAY", ":99")
     monkeypatch.setenv("MUJOCO_GL", "egl")

@@ -36,6 +36,7 @@ def test_generated_package_installs_and_passes_check_env(tmp_path, capsys):
         timeout=300,
     )
     assert (target / "point_mass" / "point_mass.xml").is_file()  # the model ships as package data
+    assert (pkg / "src" / "point_mass" / "point_mass_scene.py").is_file()  # a src layout
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(target), ROOT]))
     where = subprocess.run(
         [sys.executable, "-c", "import point_mass; print(point_mass.__file__)"],
@@ -55,7 +56,100 @@ def test_generated_package_installs_and_passes_check_env(tmp_path, capsys):
         timeout=300,
     )
     assert tests.returncode == 0, tests.stdout + tests.stderr
-    assert "3 passed" in tests.stdout
+    assert "4 passed" in tests.stdout
+
+
+def _private_venv(where):
+    """A venv without pip that sees the test venv's packages and this checkout's
+    remoteenv (a .pth file each), so an editable install lands in it alone."""
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(where)], check=True, timeout=120)
+    python = where / "bin" / "python"
+    site = subprocess.run(
+        [str(python), "-c", "import site; print(site.getsitepackages()[0])"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
+    main_site = next(p for p in sys.path if p.endswith("site-packages") and os.path.isdir(p))
+    with open(os.path.join(site, "remoteenv_test.pth"), "w") as f:
+        f.write(f"{ROOT}\n{main_site}\n")
+    return python
+
+
+def test_editable_package_works_in_the_folder_it_was_made_in(tmp_path):
+    # As the scaffold's "next:" lines say: new-scene NAME, pip install -e NAME,
+    # then the demo of its id, run where new-scene was run. There a folder
+    # named like the package (the project folder) is on the import path; with
+    # the package directly in it, Python imported that folder as an empty
+    # namespace package and the id was not found.
+    python = _private_venv(tmp_path / "venv")
+    env = dict(os.environ, PYTHONPATH="", MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    made = subprocess.run(
+        [str(python), "-m", "remoteenv", "new-scene", "ball_plate"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert made.returncode == 0, made.stderr
+    assert f"pip install -e {tmp_path / 'ball_plate'}" in made.stdout
+    subprocess.run(
+        [sys.executable, "-m", "pip", "--python", str(python), "install", "--quiet", "--no-deps"]
+        + ["--no-build-isolation", "-e", str(tmp_path / "ball_plate")],
+        check=True,
+        timeout=300,
+    )
+    demo = subprocess.run(
+        [str(python), "-m", "remoteenv", "demo", "ball_plate:ball_plate/BallPlate-v0", "--episodes", "1"]
+        + ["--max-steps", "5"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert demo.returncode == 0, demo.stdout + demo.stderr
+    assert "steps    5" in demo.stdout
+
+
+def test_the_demo_names_a_folder_that_hides_a_package(tmp_path):
+    (tmp_path / "ghost_pkg").mkdir()  # a project folder without a src layout looks like this
+    out = subprocess.run(
+        [sys.executable, "-m", "remoteenv", "demo", "ghost_pkg:ghost_pkg/GhostPkg-v0"],
+        cwd=tmp_path,
+        env=dict(os.environ, PYTHONPATH=ROOT),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode != 0
+    assert "empty namespace package" in out.stderr and str(tmp_path / "ghost_pkg") in out.stderr
+    assert "use 'package:namespace/Name-v0'" not in out.stderr  # the form the user just used
+
+
+def test_the_readme_installs_remoteenv_first(tmp_path):
+    write_package("ball_plate", tmp_path / "p")
+    readme = (tmp_path / "p" / "README.md").read_text()
+    assert "installs the package (and remoteenv)" not in readme
+    assert readme.index("pip install /path/to/remoteenv") < readme.index("pip install -e .")
+
+
+@pytest.mark.parametrize("name", ["remoteenv", "numpy", "os", "json", "gymnasium"])
+def test_names_of_importable_modules_are_refused(tmp_path, name, capsys):
+    with pytest.raises(ValueError, match=f"importable module '{name}' exists"):
+        write_package(name, tmp_path / "x")
+    assert not (tmp_path / "x").exists()
+    assert cli_main(["new-scene", name, "--dir", str(tmp_path / "y")]) == 2
+    assert "pick another name" in capsys.readouterr().err
+
+
+def test_help_shows_how_the_id_is_formed(capsys):
+    with pytest.raises(SystemExit):
+        cli_main(["new-scene", "--help"])
+    text = capsys.readouterr().out
+    assert "Camel-v0" not in text
+    assert "ball_plate/BallPlate-v0" in text
 
 
 def test_names_and_directories_are_checked(tmp_path):

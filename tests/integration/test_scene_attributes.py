@@ -148,3 +148,33 @@ def test_an_env_built_around_an_object_says_to_pass_a_factory():
             pickle.dumps(env)
     finally:
         env.close()
+
+
+def test_seeds_and_frames_as_sync_vector_env_gives_them():
+    kwargs = {"render_mode": "rgb_array", "width": 40, "height": 30}
+    remote = gym.make_vec(ID, num_envs=3, vectorization_mode="vector_entry_point", envs_per_process=2, **kwargs)
+    sync = gym.make_vec(ID, num_envs=3, vectorization_mode="sync", **kwargs)
+    try:
+        for env in (remote, sync):
+            env.reset(seed=5)
+            assert env.np_random_seed == (5, 6, 7)
+            assert env.get_attr("np_random_seed") == (5, 6, 7)
+            env.reset()  # no seed: each world's RNG stream goes on
+            assert env.np_random_seed == (5, 6, 7)
+            env.reset(seed=[9, None, 1])
+            assert env.np_random_seed == (9, 6, 1)
+        remote_frames, sync_frames = remote.call("render"), sync.call("render")
+        assert len(remote_frames) == 3 and remote_frames[0].shape == (30, 40, 3)
+        for a, b in zip(remote_frames, sync_frames):
+            np.testing.assert_array_equal(a, b)  # same seeds, same states, same pictures
+        assert len(remote.call_at([2], "render")) == 1
+        np.testing.assert_array_equal(remote.render()[1], remote_frames[1])
+    finally:
+        remote.close()
+        sync.close()
+    unrendered = gym.make_vec(ID, num_envs=2, vectorization_mode="vector_entry_point")
+    try:
+        unrendered.reset(seed=0)
+        assert unrendered.call("render") == (None, None)  # as SyncVectorEnv without a render mode
+    finally:
+        unrendered.close()

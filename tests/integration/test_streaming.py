@@ -92,3 +92,49 @@ def test_in_process_vanished_publisher_raises_remote_env_error():
             for _ in range(1000):
                 next(it)
         assert err.value.kind == "died"
+
+
+def _indices(loader) -> dict[int, list[int]]:
+    """Each publisher's item indices, in the order one pass over ``loader`` yields them."""
+    out: dict[int, list[int]] = {}
+    for batch in loader:
+        for i, k in zip(batch["instance"].tolist(), batch["index"].tolist()):
+            out.setdefault(i, []).append(k)
+    return out
+
+
+@pytest.mark.parametrize("workers", [0, 2])
+def test_every_epoch_reads_the_next_items_of_each_publisher(workers):
+    items = 5
+    with launch_publishers("cartpole", num_instances=2, items_per_instance=items, seed=1, width=W, height=H) as pubs:
+        # timeout: a second pass that got nothing (the old behaviour) fails fast.
+        dataset = RemoteIterableDataset.from_publishers(pubs, timeout=10.0)
+        loader = DataLoader(dataset, batch_size=3, num_workers=workers)
+        for epoch in range(3):
+            seen = _indices(loader)
+            assert seen == {i: list(range(epoch * items, (epoch + 1) * items)) for i in range(2)}, epoch
+
+
+def test_a_pass_left_early_drops_at_most_the_window():
+    from remoteenv.wire.stream import WINDOW
+
+    with launch_publishers("cartpole", num_instances=1, seed=0, width=W, height=H) as pubs:
+        dataset = RemoteIterableDataset(pubs.endpoints, items_per_publisher=4, pids=pubs.pids, timeout=10.0)
+        for item in dataset:
+            if item["index"] == 1:
+                break  # two read, the rest of what was asked for is dropped
+        nxt = [item["index"] for item in dataset]
+        assert len(nxt) == 4 and nxt == list(range(nxt[0], nxt[0] + 4))
+        assert 2 <= nxt[0] <= 2 + WINDOW
+
+
+def test_two_readers_of_one_publisher_are_told_apart():
+    with launch_publishers("cartpole", num_instances=1, seed=0, width=W, height=H) as pubs:
+        first = iter(RemoteIterableDataset(pubs.endpoints, pids=pubs.pids, timeout=10.0))
+        second = iter(RemoteIterableDataset(pubs.endpoints, pids=pubs.pids, timeout=10.0))
+        with pytest.raises(RemoteEnvError, match="another reader is reading it too"):
+            for _ in range(100):
+                next(first)
+                next(second)
+        first.close()
+        second.close()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 
 import gymnasium as gym
 import numpy as np
@@ -64,3 +65,11 @@ def test_demo_record_writes_mp4(tmp_path, capsys):
     assert videos == ["reacher-episode-0.mp4"]
     assert _is_mp4(os.path.join(out, videos[0]))
     assert "episode 0" in capsys.readouterr().out
+
+
+def test_demo_record_without_moviepy_names_the_video_extra(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "moviepy", None)  # "import moviepy" now fails
+    with pytest.raises(SystemExit) as exit_:
+        cli_main(["demo", "cartpole", "--episodes", "1", "--record", str(tmp_path / "out")])
+    assert "pip install 'remoteenv[video]'" in str(exit_.value.code)
+    assert not (tmp_path / "out").exists()

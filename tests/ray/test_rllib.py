@@ -1,4 +1,5 @@
-"""RLlib PPO (new API stack) trains on a remoteenv id: two iterations of the example."""
+"""RLlib PPO (new API stack) trains on a plain remoteenv id: two iterations of the
+example, and one of each vectorize mode after remoteenv.rllib.register_envs()."""
 
 from __future__ import annotations
 
@@ -52,3 +53,28 @@ def test_ppo_trains_two_iterations_on_remote_cartpole(cluster) -> None:
     assert [r["iteration"] for r in rows] == [1, 2]
     assert all(r["return_mean"] > 0 for r in rows)
     assert rows[-1]["env_steps"] >= 2 * 4000
+
+
+@pytest.mark.parametrize("vectorize", ["vector_entry_point", "sync"])
+def test_the_plain_id_trains_after_one_call_in_the_driver(cluster, vectorize) -> None:
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+    import remoteenv.rllib
+
+    assert "remoteenv/CartPole-v0" in remoteenv.rllib.register_envs()
+    config = (
+        PPOConfig()
+        .environment("remoteenv/CartPole-v0", env_config={"seed": 0, "continuous": True})
+        .env_runners(num_env_runners=1, num_envs_per_env_runner=2, gym_env_vectorize_mode=vectorize)
+        .training(train_batch_size_per_learner=128, minibatch_size=64, num_epochs=1)
+    )
+    algo = config.build_algo()  # the runners build their envs here
+    try:
+        result = algo.train()  # tiny: that it samples and learns, not what it learns
+        assert result["env_runners"]["num_env_steps_sampled"] >= 128
+        built = algo.env_runner_group.foreach_env_runner(
+            lambda r: (type(r.env.unwrapped).__name__, r.num_envs), local_env_runner=False
+        )
+        assert built == [("RemoteVectorEnv" if vectorize == "vector_entry_point" else "SyncVectorEnv", 2)]
+    finally:
+        algo.stop()
