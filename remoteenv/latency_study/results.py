@@ -103,12 +103,12 @@ def markdown_table(records: Iterable[dict[str, Any]]) -> str:
     for (kind, delay), by_variant in rows.items():
         cells = [delay_label(kind, delay)]
         for variant in VARIANTS:
-            s = by_variant.get(variant)
-            if s is None:
+            group = by_variant.get(variant)
+            if group is None:
                 cells += ["–", "–"]
                 continue
-            cells.append(f"{s['mean']:.0f} ({s['min']:.0f}–{s['max']:.0f})")
-            cells.append(", ".join(f"{v:.0f}" for v in s["seed_means"]))
+            cells.append(f"{group['mean']:.0f} ({group['min']:.0f}–{group['max']:.0f})")
+            cells.append(", ".join(f"{v:.0f}" for v in group["seed_means"]))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

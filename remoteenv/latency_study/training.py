@@ -56,7 +56,7 @@ class TrainedPolicy:
     def save(self, path: str) -> None:
         self.model.save(path + ".zip")
         if self.obs_stats is not None:
-            np.savez(path + ".npz", **self.obs_stats)
+            np.savez(path + ".npz", **self.obs_stats)  # type: ignore[arg-type]
 
     @classmethod
     def load(cls, path: str) -> TrainedPolicy:
@@ -88,7 +88,7 @@ def make_train_env(config: StudyConfig, cell: Cell) -> Any:
     )
     if cell.uses_wrapper:
         venv = ActionHistoryVector(venv, cell.history_length, include_latency=cell.include_latency)
-    env = VecMonitor(SB3VecEnv(venv))
+    env: Any = VecMonitor(SB3VecEnv(venv))
     if config.ppo_settings["normalize_obs"]:
         env = VecNormalize(env, norm_obs=True, norm_reward=False)
     return env
@@ -140,7 +140,7 @@ def train(
     class Curve(BaseCallback):
         def _on_step(self) -> bool:
             if self.num_timesteps - (len(curve) * CURVE_EVERY) >= CURVE_EVERY:
-                returns = [float(e["r"]) for e in list(self.model.ep_info_buffer)[-CURVE_WINDOW:]]
+                returns = [float(e["r"]) for e in list(self.model.ep_info_buffer or ())[-CURVE_WINDOW:]]
                 curve.append([float(self.num_timesteps), float(np.mean(returns)) if returns else float("nan")])
                 if progress is not None:
                     progress(self.num_timesteps)
@@ -166,7 +166,7 @@ def train(
             verbose=0,
         )
         model.learn(config.steps, callback=Curve())
-        recent = [float(e["r"]) for e in list(model.ep_info_buffer)[-CURVE_WINDOW:]]
+        recent = [float(e["r"]) for e in list(model.ep_info_buffer or ())[-CURVE_WINDOW:]]
         stats = None
         if hasattr(env, "obs_rms"):
             rms = env.obs_rms
