@@ -1,0 +1,127 @@
+"""The delay-effect study command runs end to end on a tiny budget and writes
+well-formed outputs. The learning result itself is never asserted here (a
+few thousand steps learn nothing): docs/latency.md reports the full run."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+pytest.importorskip("matplotlib")
+
+
+def test_a_reduced_study_writes_every_record_the_table_the_figure_and_the_twin_check(tmp_path):
+    out = tmp_path / "study"
+    cmd = [
+        sys.executable,
+        "-m",
+        "remoteenv",
+        "latency-study",
+        "--delays",
+        "0,2",
+        "--random-delays",
+        "2",
+        "--seeds",
+        "0,1",
+        "--steps",
+        "512",
+        "--eval-episodes",
+        "2",
+        "--workers",
+        "2",
+        "--rt-episodes",
+        "2",
+        "--out",
+        str(out),
+    ]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    data = json.loads((out / "delay_effect.json").read_text())
+    records = data["records"]
+    keys = {(r["variant"], r["kind"], r["delay"], r["seed"]) for r in records}
+    expected = {
+        (v, kind, d, s)
+        for kind, delays in (("constant", (0, 2)), ("uniform", (2,)))
+        for d in delays
+        for v in ("plain", "history")
+        for s in (0, 1)
+    }
+    assert keys == expected and len(records) == len(expected)
+    for r in records:
+        assert r["variant"] in ("plain", "history")
+        assert len(r["returns"]) == 2 and math.isclose(r["mean_return"], float(np.mean(r["returns"])))
+        assert all(ret >= 1 for ret in r["returns"])  # CartPole pays +1 per step survived
+        assert r["history_length"] == (r["delay"] if r["variant"] == "history" else 0)
+        assert r["include_latency"] == (r["variant"] == "history" and r["kind"] == "uniform")
+        assert r["steps"] == 512 and r["train_s"] > 0
+    assert data["config"]["delays"] == [0, 2] and data["wall_s"] > 0 and data["host"]["cpus"] >= 1
+    table = (out / "delay_effect.md").read_text()
+    assert "| Uniform(0, 2) |" in table and "| 2 |" in table
+    assert (out / "delay_effect.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    twin = json.loads((out / "rt_replay.json").read_text())
+    assert [(p["variant"], p["trained_delay"]) for p in twin["policies"]] == [
+        ("plain", 0),
+        ("plain", 0),
+        ("history", 2),
+        ("history", 2),
+    ]
+    for p in twin["policies"]:
+        assert len(p["real_time"]["returns"]) == len(p["replay"]["returns"]) == 2
+        assert p["comparison"]["verdict"] in ("equivalent", "different", "inconclusive")
+    assert twin["pooled"]["episodes"] == 8
+
+
+def test_a_resumed_study_keeps_what_it_finished_and_refuses_another_configuration(tmp_path):
+    out = tmp_path / "study"
+    base = [sys.executable, "-m", "remoteenv", "latency-study", "--out", str(out), "--no-rt-replay", "--no-plot"]
+    base += ["--random-delays", "", "--seeds", "0", "--steps", "256", "--eval-episodes", "1", "--workers", "1"]
+    first = subprocess.run([*base, "--delays", "0"], capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr[-3000:]
+    before = json.loads((out / "delay_effect.json").read_text())["records"]
+    again = subprocess.run([*base, "--delays", "0", "--resume"], capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr[-3000:]
+    after = json.loads((out / "delay_effect.json").read_text())["records"]
+    assert after == before  # nothing left to train: the records are kept as they were
+    other = subprocess.run([*base, "--delays", "1", "--resume"], capture_output=True, text=True, timeout=300)
+    assert other.returncode != 0 and "another configuration" in other.stderr
+
+
+def test_an_unwritable_out_fails_before_any_training(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    done = subprocess.run(
+        [sys.executable, "-m", "remoteenv", "latency-study", "--out", str(blocker / "sub")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode != 0 and "not writable" in done.stderr
+    assert "delay study" not in done.stderr  # no progress bar: nothing started
+
+
+def test_the_trained_policy_normalises_observations_as_vec_normalize_did(tmp_path):
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from remoteenv.latency_study.training import TrainedPolicy
+
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make("Pendulum-v1")]), norm_reward=False)
+    venv.reset()
+    for _ in range(50):
+        venv.step(np.array([[0.5]]))
+    stats = {
+        "mean": venv.obs_rms.mean,
+        "var": venv.obs_rms.var,
+        "clip": np.array(venv.clip_obs),
+        "epsilon": np.array(venv.epsilon),
+    }
+    obs = np.array([0.3, -0.9, 7.5], dtype=np.float32)
+    policy = TrainedPolicy(model=None, obs_stats=stats)
+    np.testing.assert_allclose(policy.normalize(obs), venv.normalize_obs(obs), rtol=1e-6)
+    venv.close()
