@@ -203,7 +203,17 @@ import msgpack
 
 from remoteenv.wire.arrays import ARRAY_DTYPES, _default, _ext_hook, wire_dtype
 from remoteenv.wire.errors import ProtocolError, short_repr
-from remoteenv.wire.frame_limits import MAX_ERROR_CHARS, MAX_MESSAGE_BYTES, MAX_REQUEST_ITEMS, FrameTooLarge
+from remoteenv.wire.frame_limits import (
+    MAX_ERROR_CHARS,
+    MAX_MESSAGE_BYTES,
+    MAX_REPLY_VALUES,
+    MAX_REQUEST_ITEMS,
+    MAX_SPACE_DEPTH,
+    MAX_SPACE_NODES,
+    MAX_WORLDS,
+    FrameTooLarge,
+)
+from remoteenv.wire.value_count import values_within
 
 PROTOCOL_VERSION = 1
 
@@ -237,13 +247,16 @@ def pack(obj: Any) -> bytes:
     return frame
 
 
-def unpack(frame: bytes, max_items: int | None = None) -> Any:
+def unpack(frame: bytes, max_items: int | None = None, max_values: int | None = None) -> Any:
     """Decode one frame. Raises :class:`ProtocolError` for anything off-spec.
 
-    ``max_items`` caps the entries of every array and map (before any is built).
+    ``max_items`` caps the entries of every array and map, ``max_values`` the
+    values of the whole frame (both checked before any value is built).
     """
     if len(frame) > MAX_MESSAGE_BYTES:
         raise FrameTooLarge(len(frame))
+    if max_values is not None and not values_within(frame, max_values):
+        raise ProtocolError(f"a frame of {len(frame)} bytes holds more than {max_values} msgpack values")
     limits = {} if max_items is None else {"max_array_len": max_items, "max_map_len": max_items}
     try:
         return msgpack.unpackb(frame, raw=False, ext_hook=_ext_hook, strict_map_key=True, use_list=True, **limits)
@@ -377,7 +390,11 @@ __all__ = [
     "ARRAY_DTYPES",
     "MAX_ERROR_CHARS",
     "MAX_MESSAGE_BYTES",
+    "MAX_REPLY_VALUES",
     "MAX_REQUEST_ITEMS",
+    "MAX_SPACE_DEPTH",
+    "MAX_SPACE_NODES",
+    "MAX_WORLDS",
     "OPS",
     "OP_RESET",
     "OP_STEP",
