@@ -6,7 +6,8 @@ over their connections, so the processes compute in parallel. While replies
 have been quick it polls without sleeping first (adaptive, see
 :mod:`remoteenv.wire.hot_wait`); local pipes are read in turn instead, one
 blocking read per reply (fewer system calls); stale replies (to abandoned
-requests) are dropped as they come; a dead sim is reported within
+requests) are dropped as they come, a bounded number per connection and
+round, and the deadline is checked on every round whatever arrived; a dead sim is reported within
 :data:`~remoteenv.agent.sim_connection.LIVENESS_CHECK_S`; after the timeout
 the connections still pending are rebuilt and :class:`remoteenv.RemoteEnvTimeout`
 is raised.
@@ -95,8 +96,9 @@ class FanIn:
             if not events and not arrived:
                 for p in pending:
                     conns[p].check_alive(what)
-                if deadline is not None and time.monotonic() > deadline:
-                    self._time_out(conns, pending, what, timeout)
+            # Checked on every round, whatever arrived: stale frames never extend it.
+            if pending and deadline is not None and time.monotonic() > deadline:
+                self._time_out(conns, pending, what, timeout)
         hot.waited(time.perf_counter() - started)
 
     # ------------------------------------------------------------ internals
