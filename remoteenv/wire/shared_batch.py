@@ -5,8 +5,10 @@ A sim process serving its launching agent over the local pipe can put the
 arrays of a plain ``step_batch`` (every world stepped, none reset) in memory
 both processes map, so the pipe carries only the small rest of the request
 and reply (ops, infos). The sim creates the region (an anonymous
-``memfd``: nothing on disk, gone when both ends close it); the agent maps the
-same file through ``/proc/<sim pid>/fd/<fd>``. Layout, for ``K`` worlds, each
+``memfd``: nothing on disk, gone when both ends close it) and, before it
+offers it, seals its size (:data:`REGION_SEALS`: ``F_SEAL_SHRINK``,
+``F_SEAL_GROW``, ``F_SEAL_SEAL``) so no process can truncate it under a
+mapping; the agent maps the same file through ``/proc/<sim pid>/fd/<fd>``. Layout, for ``K`` worlds, each
 block starting on a 64-byte boundary in this order:
 
 - ``actions``: ``K`` rows of the action (Box: its dtype and shape; Discrete:
@@ -19,13 +21,19 @@ Row ``j`` belongs to request position ``j``. Each side writes its blocks only
 while the other waits for the message that follows, so the pipe orders every
 access. The sim checks the actions it reads like any others; the agent reads
 numbers of a fixed dtype and shape, nothing it would interpret further.
+
+The agent maps only a region sealed against shrinking (:func:`map_region`):
+truncating a mapped file would turn its next access into ``SIGBUS``, a
+signal that kills the process instead of an error it can handle.
 """
 
 from __future__ import annotations
 
+import fcntl
 import math
 import mmap
 import os
+import stat
 from dataclasses import dataclass
 from typing import Any
 
@@ -136,11 +144,26 @@ class SharedArrays:
             pass
 
 
+#: The seals :func:`create_region` sets on the region's ``memfd`` once it has its
+#: size, before the region is offered: its size is fixed for good (a shrunk
+#: file would kill a process that maps it with SIGBUS), and no seal may be
+#: added or removed afterwards. Writes stay allowed: both sides write it.
+REGION_SEALS = fcntl.F_SEAL_SHRINK | fcntl.F_SEAL_GROW | fcntl.F_SEAL_SEAL if hasattr(fcntl, "F_SEAL_SHRINK") else 0
+
+
 def create_region(layout: SharedLayout) -> tuple[int, SharedArrays]:
-    """A new anonymous region for ``layout``: its file descriptor and views (sim side)."""
-    fd = os.memfd_create("remoteenv-shared-batch", getattr(os, "MFD_CLOEXEC", 0))
+    """A new anonymous region for ``layout``: its file descriptor and views (sim side).
+
+    The ``memfd`` is created with ``MFD_ALLOW_SEALING`` and, once sized, sealed
+    with :data:`REGION_SEALS` (``F_SEAL_SHRINK | F_SEAL_GROW | F_SEAL_SEAL``),
+    so neither this process nor any other can change its size afterwards.
+    """
+    flags = getattr(os, "MFD_CLOEXEC", 0) | getattr(os, "MFD_ALLOW_SEALING", 0)
+    fd = os.memfd_create("remoteenv-shared-batch", flags)
     try:
         os.ftruncate(fd, layout.size)
+        if REGION_SEALS:
+            fcntl.fcntl(fd, fcntl.F_ADD_SEALS, REGION_SEALS)
         region = mmap.mmap(fd, layout.size)
     except BaseException:
         os.close(fd)
@@ -148,17 +171,41 @@ def create_region(layout: SharedLayout) -> tuple[int, SharedArrays]:
     return fd, SharedArrays(layout, region)
 
 
+class UnsealedRegion(OSError):
+    """The region's file is not sealed against shrinking: mapping it would let
+    its creator end the mapping process with ``SIGBUS`` by truncating it."""
+
+
 def map_region(path: str, layout: SharedLayout) -> SharedArrays:
-    """Map the region a peer created, opened by ``path`` (agent side). Raises
-    ``OSError`` if it cannot be opened or is smaller than ``layout`` needs."""
-    fd = os.open(path, os.O_RDWR | getattr(os, "O_CLOEXEC", 0))
+    """Map the region a peer created, opened by ``path`` (agent side).
+
+    Raises ``OSError`` if it cannot be opened, is not a regular file or is
+    smaller than ``layout`` needs, and :class:`UnsealedRegion` if it lacks the
+    ``F_SEAL_SHRINK`` seal (where the system has seals): a region that can
+    shrink under its mapping turns the next access into ``SIGBUS``, which
+    kills the process instead of raising."""
+    fd = os.open(path, os.O_RDWR | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     try:
-        if os.fstat(fd).st_size < layout.size:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise OSError(f"{path} is not a regular file")
+        if info.st_size < layout.size:
             raise OSError(f"{path} is smaller than the {layout.size} bytes its layout needs")
+        shrink_seal = getattr(fcntl, "F_SEAL_SHRINK", None)
+        if shrink_seal is not None and not fcntl.fcntl(fd, fcntl.F_GET_SEALS) & shrink_seal:
+            raise UnsealedRegion(f"{path} is not sealed against shrinking (F_SEAL_SHRINK)")
         region = mmap.mmap(fd, layout.size)
     finally:
         os.close(fd)
     return SharedArrays(layout, region)
 
 
-__all__ = ["MAX_SHARED_BYTES", "SharedArrays", "SharedLayout", "create_region", "map_region"]
+__all__ = [
+    "MAX_SHARED_BYTES",
+    "REGION_SEALS",
+    "SharedArrays",
+    "SharedLayout",
+    "UnsealedRegion",
+    "create_region",
+    "map_region",
+]
