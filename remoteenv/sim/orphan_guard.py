@@ -15,6 +15,12 @@ private dir, and the dir once no other sim's files are left. Being another
 process, it needs nothing from the sim's interpreter. Where pidfds do not
 exist it exits at once and the sim's own watch (:class:`ParentWatch`) is all
 there is.
+
+When the sim ends first (its launcher is stopping it, or it crashed) the
+guard stays until the agent dies or the launcher SIGKILLs it with the sim's
+process group after removing the dir (it ignores SIGTERM, which the launcher
+sends that group first): an agent killed while it closed its env (a pool
+terminating its worker) leaves no dir behind.
 """
 
 from __future__ import annotations
@@ -27,8 +33,6 @@ import sys
 
 #: Seconds the sim gets to shut down by itself after SIGTERM before SIGKILL.
 GRACE_S = 0.5
-#: Seconds to wait, once the sim is gone, for the agent's pidfd to tell whether it died too.
-_AGENT_SETTLE_S = 0.3
 
 
 def remove_instance_files(private_dir: str, instance: int) -> None:
@@ -53,10 +57,10 @@ def remove_instance_files(private_dir: str, instance: int) -> None:
         shutil.rmtree(private_dir, ignore_errors=True)
 
 
-def _readable(fd: int, timeout_s: float) -> bool:
+def _readable(fd: int, timeout_s: float | None) -> bool:
     poller = select.poll()
     poller.register(fd, select.POLLIN | select.POLLHUP)
-    return bool(poller.poll(timeout_s * 1000))
+    return bool(poller.poll(None if timeout_s is None else timeout_s * 1000))
 
 
 def guard(agent_pid: int, sim_pid: int, private_dir: str, instance: int, sim_gone_fd: int = 0) -> int:
@@ -80,9 +84,11 @@ def guard(agent_pid: int, sim_pid: int, private_dir: str, instance: int, sim_gon
         poller.register(sim_gone_fd, select.POLLIN | select.POLLHUP)
         poller.register(agent, select.POLLIN)
         fds = {fd for fd, _ in poller.poll()}
-        if agent not in fds:  # the sim ended first
-            if not _readable(agent, _AGENT_SETTLE_S):
-                return 0  # ... while its agent lives: the launcher tidies up
+        if agent not in fds:  # the sim ended first (e.g. its launcher is stopping it)...
+            # ... so wait for the launcher to finish: it removes the dir, then
+            # SIGKILLs this guard with the sim's process group. If the launcher
+            # dies before that (killed while it closed the env), tidy up for it.
+            _readable(agent, None)
             if private_dir:
                 remove_instance_files(private_dir, instance)
             return 0
@@ -113,6 +119,9 @@ def _sim_parent_is(sim_pid: int, agent_pid: int) -> bool:
 def main(argv: list[str]) -> int:
     agent_pid, sim_pid, private_dir, instance = int(argv[0]), int(argv[1]), argv[2], int(argv[3])
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C in a terminal is for the agent
+    # The launcher's SIGTERM to the sim's process group is for the sim: this
+    # guard lives until the launcher has removed the dir (then SIGKILL).
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     return guard(agent_pid, sim_pid, private_dir, instance)
 
 
