@@ -31,8 +31,10 @@ from remoteenv.wire.errors import short_repr
 
 #: Spaces whose values are numpy arrays of the space's dtype and shape.
 _ARRAY_SPACES = (spaces.Box, spaces.MultiDiscrete, spaces.MultiBinary)
-#: numpy kinds a number column may have (bool, signed, unsigned, float).
+#: numpy kinds a list of numbers may have (signed, unsigned, float).
 _NUMBER_KINDS = frozenset("iuf")
+#: What a list of bools may hold (0 and 1 hash and compare as False and True).
+_BOOL_VALUES = frozenset({False, True})
 
 
 def _describe(value: Any) -> str:
@@ -178,24 +180,20 @@ class ReplyChecks:
         if cmd != "step_batch":
             return reply
         if not shared:
-            reply["reward"] = self._column(conn, cmd, reply, "reward", n, _NUMBER_KINDS, "numbers")
-            reply["terminated"] = self._column(conn, cmd, reply, "terminated", n, frozenset("b"), "bools")
-            reply["truncated"] = self._column(conn, cmd, reply, "truncated", n, frozenset("b"), "bools")
+            reward = _as_array(reply.get("reward"))
+            if reward is None or reward.shape != (n,) or reward.dtype.kind not in _NUMBER_KINDS:
+                self._fail(conn, cmd, "reward", f"is {_describe(reply.get('reward'))}, not a list of {n} numbers")
+            reply["reward"] = reward
+            for flag in ("terminated", "truncated"):
+                flags = _bools(reply.get(flag), n)
+                if flags is None:
+                    self._fail(conn, cmd, flag, f"is {_describe(reply.get(flag))}, not a list of {n} bools")
+                reply[flag] = flags
         self._fail_on(conn, cmd, "final", self._finals_problem(reply.get("final"), n))
         types = reply.get("final_types")
         if types is not None and not isinstance(types, list):
             self._fail(conn, cmd, "final_types", f"is {_describe(types)}, not nil or a list")
         return reply
-
-    def _column(
-        self, conn: Any, cmd: str, reply: dict[str, Any], field: str, n: int, kinds: frozenset[str], what: str
-    ) -> np.ndarray:
-        """``reply[field]`` as an array of ``n`` values of a numpy kind in ``kinds``."""
-        value = reply.get(field)
-        arr = _as_array(value)
-        if arr is None or arr.shape != (n,) or arr.dtype.kind not in kinds:
-            self._fail(conn, cmd, field, f"is {_describe(value)}, not a list of {n} {what}")
-        return arr  # type: ignore[return-value]
 
     def _finals_problem(self, final: Any, n: int) -> str | None:
         if not isinstance(final, list) or len(final) > n:
@@ -245,6 +243,22 @@ def _as_array(value: Any) -> np.ndarray | None:
         return None
 
 
+def _bools(value: Any, n: int) -> np.ndarray | None:
+    """``value`` (a list of ``n`` bools, or a bool array of shape ``(n,)``) as a
+    fresh bool array; None for anything else. 0 and 1 count as the bools they
+    equal (they convert exactly); strings, None and other numbers do not."""
+    if type(value) is np.ndarray:
+        return value if value.dtype == np.bool_ and value.shape == (n,) else None
+    if not isinstance(value, list) or len(value) != n:
+        return None
+    try:
+        if not set(value) <= _BOOL_VALUES:  # a set of at most two: cheaper than numpy's type inference
+            return None
+    except TypeError:  # unhashable members (lists, maps)
+        return None
+    return np.fromiter(value, np.bool_, n)
+
+
 def _info_problem(info: Any) -> str | None:
     if type(info) is not dict:
         return f"is {_describe(info)}, not a map"
@@ -273,10 +287,10 @@ def _infos_problem(infos: Any, n: int) -> str | None:
     for key, column in columns.items():
         if type(key) is not str or not (isinstance(column, list) and len(column) == 2):
             return f"column {short_repr(key)} is {_describe(column)}, not [values, present]"
-        values, present = _as_array(column[0]), _as_array(column[1])
+        values, present = _as_array(column[0]), _bools(column[1], n)
         if values is None or values.shape != (n,) or values.dtype.kind not in "biuf":
             return f"column {key!r} values are {_describe(column[0])}, not {n} bools, ints or floats"
-        if present is None or present.shape != (n,) or present.dtype != np.bool_:
+        if present is None:
             return f"column {key!r} present is {_describe(column[1])}, not {n} bools"
         column[0], column[1] = values, present
     return None
