@@ -409,4 +409,6 @@ def test_check_reports_a_lying_server_as_not_compliant_within_bounds(tmp_path, l
     print(f"check against {lie}: exit {done.returncode} in {took:.1f} s, peak RSS {peak_kb >> 10} MiB; {summary}")
     assert done.returncode == 1 and "NOT COMPLIANT" in done.stdout, (done.stdout[-2000:], done.stderr[-2000:])
     assert "Traceback" not in done.stderr, done.stderr[-2000:]
+    # A check fails with a reason; "the check raised" means the checker itself broke (e.g. MemoryError).
+    assert "the check raised" not in done.stdout, done.stdout[-3000:]
     assert took < CHECK_S and 0 < peak_kb < CHECK_RSS_KB
