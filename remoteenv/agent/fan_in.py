@@ -150,14 +150,16 @@ class FanIn:
         self, conns: Sequence[SimConnection], pending: dict[int, int], what: str, timeout: float | None
     ) -> None:
         p = next(iter(pending))
+        why = conns[p].why_silent() or (
+            "the process is alive but stuck or overloaded. Raise the vector env's timeout= or check the scene code"
+        )
         for q in pending:
             conns[q].reconnect()
         self._poller = None
         raise RemoteEnvTimeout(
             f"sim instance {p} (and {len(pending) - 1} more) at {conns[p].endpoint} "
-            f"did not answer {what} within {timeout:g} s; the process is alive but "
-            "stuck or overloaded. Raise the vector env's timeout= or check the scene "
-            "code. The connections were rebuilt; the next call can go ahead.",
+            f"did not answer {what} within {timeout:g} s; {why}. "
+            "The connections were rebuilt; the next call can go ahead.",
             kind="timeout",
             instance=p,
         )

@@ -215,7 +215,7 @@ class SimConnection:
 
     def _time_out(self, what: str, timeout: float | None, stale: int) -> None:
         """Make the transport usable again and raise the timeout of a wait for ``what``."""
-        why = self._why_silent()
+        why = self.why_silent()
         self._after_timeout()
         if why is None and stale:
             why = (
@@ -231,9 +231,10 @@ class SimConnection:
             instance=self.instance,
         ) from None
 
-    def _why_silent(self) -> str | None:
+    def why_silent(self) -> str | None:
         """What the transport saw that explains a missing reply (e.g. a connection
-        dropped for an oversize frame), or None."""
+        dropped for an oversize frame) since it last looked, or None. Used in
+        timeout messages (a vector call asks the first connection still pending)."""
         return None
 
     def _decode(self, frame: bytes, what: str) -> dict[str, Any]:

@@ -142,10 +142,12 @@ class AsyncWorlds:
             # Checked on every round, whatever arrived: stale frames never extend it.
             if self._ready_count < count and deadline is not None and time.monotonic() > deadline:
                 p = waiting[0]
+                why = conns[p].why_silent() or (
+                    "the process is alive but stuck or overloaded. Raise the vector env's timeout= "
+                    "or check the scene code"
+                )
                 raise RemoteEnvTimeout(
-                    f"sim instance {p} at {conns[p].endpoint} did not answer 'step_batch' within "
-                    f"{timeout:g} s; the process is alive but stuck or overloaded. Raise the vector "
-                    "env's timeout= or check the scene code.",
+                    f"sim instance {p} at {conns[p].endpoint} did not answer 'step_batch' within {timeout:g} s; {why}.",
                     kind="timeout",
                     instance=p,
                 )

@@ -131,7 +131,7 @@ class ZmqConnection(SimConnection):
     def _after_timeout(self) -> None:
         self.reconnect()
 
-    def _why_silent(self) -> str | None:
+    def why_silent(self) -> str | None:
         """What the monitor saw since the last look: a failed handshake (CURVE
         keys?) or a dropped connection while the sim lives (e.g. its reply was
         above the frame limit: libzmq closes such a connection)."""

@@ -253,13 +253,20 @@ def test_a_trickle_of_wrong_seq_replies_cannot_extend_a_vector_envs_deadline(tmp
             venv.close()
 
 
-def test_an_oversize_reply_is_reported_as_such(tmp_path):
-    with hostile(tmp_path, "oversize") as path:
-        env = OpenAIRemoteEnv.attach(path, timeout=TRICKLE_TIMEOUT_S)
+@pytest.mark.parametrize("kind", ["single", "vector", "send-recv"])
+def test_an_oversize_reply_is_reported_as_such(tmp_path, kind):
+    with hostile(tmp_path, "oversize", worlds=1 if kind == "single" else 2) as path:
+        env: Any = (OpenAIRemoteEnv if kind == "single" else RemoteVectorEnv).attach(path, timeout=TRICKLE_TIMEOUT_S)
         try:
             env.reset(seed=0)
             with pytest.raises(RemoteEnvTimeout) as err:
-                env.step(0)
+                if kind == "single":
+                    env.step(0)
+                elif kind == "vector":
+                    env.step(np.zeros(2, dtype=np.int64))
+                else:
+                    env.send(np.zeros(2, dtype=np.int64))
+                    env.recv()
             assert "frame limit" in str(err.value) and "stuck or overloaded" not in str(err.value)
         finally:
             env.close()
