@@ -29,7 +29,7 @@ from typing import Any
 
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import short_repr
+from remoteenv.wire.errors import ERROR_KINDS, short_repr
 
 #: How often (seconds) a waiting call checks that the sim process still lives.
 LIVENESS_CHECK_S = 0.1
@@ -37,7 +37,7 @@ LIVENESS_CHECK_S = 0.1
 _MAX_UNANSWERED = 1024
 #: Most frames one :meth:`SimConnection.try_receive` reads before it returns.
 DRAIN_FRAMES = 64
-#: Longest error ``kind`` taken from a reply (characters); a longer one is reported as ``"remote"``.
+#: Longest error ``kind`` shown as received (characters).
 _MAX_KIND_CHARS = 64
 
 
@@ -265,12 +265,14 @@ class SimConnection:
                 kind="protocol",
                 instance=self.instance,
             )
-        kind = err.get("kind")
-        if not isinstance(kind, str) or len(kind) > _MAX_KIND_CHARS:
-            kind = "remote"
+        sent = err.get("kind")
+        # Only the spec's kinds pick an exception class: a server cannot pass
+        # its error off as the agent's own "died" or "timeout".
+        kind = sent if sent in ERROR_KINDS else "remote"
+        shown = sent if isinstance(sent, str) and len(sent) <= _MAX_KIND_CHARS else short_repr(sent, _MAX_KIND_CHARS)
         message = _capped_text(err.get("message"), "unknown error")
         raise RemoteEnvError(
-            f"sim instance {self.instance} failed {what} ({kind}): {message}",
+            f"sim instance {self.instance} failed {what} ({shown}): {message}",
             kind=kind,
             instance=self.instance,
             remote_traceback=_capped_text(err.get("traceback"), ""),

@@ -294,6 +294,14 @@ def test_a_huge_error_message_is_capped_where_it_is_received():
     assert len(str(err.value)) < 2 * protocol.MAX_ERROR_CHARS + 300 and err.value.kind == "remote"
 
 
+def test_a_server_cannot_pass_its_error_off_as_the_agents_own_kinds():
+    error = {"kind": "died", "message": "gone", "traceback": ""}
+    conn = Frames([protocol.pack({"seq": 1, "ok": False, "error": error})])
+    with pytest.raises(RemoteEnvError) as err:
+        conn.request("step")
+    assert type(err.value) is RemoteEnvError and err.value.kind == "remote" and "(died)" in str(err.value)
+
+
 def test_try_receive_reads_a_bounded_number_of_stale_frames_per_call():
     stale = [protocol.pack({"seq": 99, "ok": True})] * 500
     conn = Frames(stale)
