@@ -28,6 +28,14 @@ File format (JSON, ``"format": "remoteenv-launch/1"``)::
 
 Any server that speaks :mod:`remoteenv.protocol` can be named in such a file
 (``pid`` may be null); that is how an agent drives, say, a real robot bridge.
+
+The file is read as any file a user names (:mod:`remoteenv.wire.file_reads`:
+never blocking, a regular file of at most :data:`MAX_LAUNCH_INFO_BYTES`, JSON
+nested at most 32 deep), and its content is checked before anything is
+connected: at most :data:`MAX_INSTANCES` instances of at most
+:data:`~remoteenv.wire.frame_limits.MAX_WORLDS` worlds, ``tcp://`` or
+``ipc://`` endpoints, well-formed CURVE keys. Anything off is a
+:class:`~remoteenv.agent.errors.LaunchError` naming the file and the field.
 """
 
 from __future__ import annotations
@@ -44,10 +52,19 @@ from remoteenv.agent.processes import pid_alive
 from remoteenv.agent.sim_connection import SimConnection
 from remoteenv.agent.sim_group import LaunchSpec, SimLayout
 from remoteenv.agent.zmq_connection import ZmqConnection
+from remoteenv.wire.errors import short_repr
+from remoteenv.wire.file_reads import read_json
 from remoteenv.wire.files import write_atomic
-from remoteenv.wire.keys import KeyPair, load_keypair
+from remoteenv.wire.frame_limits import MAX_WORLDS
+from remoteenv.wire.keys import KeyPair, check_key, load_keypair
 
 FORMAT = "remoteenv-launch/1"
+#: Largest launch-info file read (bytes).
+MAX_LAUNCH_INFO_BYTES = 1 << 20
+#: Most sim instances one launch-info file may name.
+MAX_INSTANCES = 1024
+#: Longest endpoint taken from a launch-info file (characters).
+_MAX_ENDPOINT_CHARS = 1024
 
 
 @dataclass
@@ -138,10 +155,10 @@ class LaunchInfo:
             path = os.path.join(os.path.dirname(os.path.abspath(self.path)), os.path.basename(path))
         try:
             return load_keypair(path)
-        except OSError as exc:
+        except (OSError, ValueError) as exc:  # ValueError: not a regular file, too large, not a key
             raise RemoteEnvError(
                 f"launch-info file {self.path} needs the CURVE client secret key {path}, which cannot "
-                f"be read ({exc}); copy it (mode 0600) next to the launch-info file",
+                f"be read ({short_repr(str(exc), 300)}); copy it (mode 0600) next to the launch-info file",
                 kind="launch",
             ) from None
 
@@ -160,40 +177,50 @@ def read_launch_info(path: str | os.PathLike[str]) -> LaunchInfo:
     saying what is wrong with it."""
     path = os.fspath(path)
     try:
-        with open(path) as f:
-            doc = json.load(f)
+        doc = read_json(path, MAX_LAUNCH_INFO_BYTES, what="launch-info file")
     except FileNotFoundError:
         raise RemoteEnvError(
             f"no launch-info file at {path}: start the sims with "
             f"`python -m remoteenv launch <scene> --out {path}` and keep that command running",
             kind="launch",
         ) from None
-    except (OSError, json.JSONDecodeError) as exc:
-        raise RemoteEnvError(f"cannot read launch-info file {path}: {exc}", kind="launch") from None
+    except (OSError, ValueError) as exc:  # ValueError: not a regular file, too large, bad or too deep JSON
+        raise RemoteEnvError(
+            f"cannot read launch-info file {path}: {short_repr(str(exc), 300)}", kind="launch"
+        ) from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
-        raise RemoteEnvError(f"{path} is not a launch-info file of format {FORMAT!r} (found {found!r})", kind="launch")
+        found = short_repr(doc.get("format")) if isinstance(doc, dict) else type(doc).__name__
+        raise RemoteEnvError(f"{path} is not a launch-info file of format {FORMAT!r} (found {found})", kind="launch")
     try:
         host = str(doc.get("host") or socket.gethostname())
         local = host == socket.gethostname()
+        listed = doc["instances"]
+        if not isinstance(listed, list) or len(listed) > MAX_INSTANCES:
+            raise ValueError(f"'instances' must be a list of at most {MAX_INSTANCES} sims")
         instances = [
             AttachedSim(
                 instance=int(s["instance"]),
-                endpoint=str(s["endpoint"]),
+                endpoint=_endpoint(s["endpoint"]),
                 pid=None if s.get("pid") is None else int(s["pid"]),
-                curve_server_key=None if not s.get("curve_server_key") else str(s["curve_server_key"]).encode(),
+                curve_server_key=None if not s.get("curve_server_key") else check_key(str(s["curve_server_key"])),
                 local=local,
                 host=None if local else host,
             )
-            for s in doc["instances"]
+            for s in listed
         ]
+        for key in ("scene", "env_id", "render_mode", "curve_client_secret_key_file"):
+            if not isinstance(doc.get(key), (str, type(None))):
+                raise ValueError(f"{key!r} must be a string or null, got {short_repr(doc.get(key))}")
+        launcher_pid = doc.get("launcher_pid")
+        if launcher_pid is not None and (type(launcher_pid) is not int or launcher_pid < 0):
+            raise ValueError(f"'launcher_pid' must be a pid or null, got {short_repr(launcher_pid)}")
         stepping = doc.get("stepping") or {}
         info = LaunchInfo(
             scene=str(doc.get("scene") or ""),
             instances=instances,
             env_id=doc.get("env_id"),
             host=host,
-            launcher_pid=doc.get("launcher_pid"),
+            launcher_pid=launcher_pid,
             worlds_per_instance=int(doc.get("worlds_per_instance", 1)),
             render_mode=doc.get("render_mode"),
             real_time=bool(stepping.get("real_time", False)),
@@ -202,13 +229,24 @@ def read_launch_info(path: str | os.PathLike[str]) -> LaunchInfo:
             curve_client_secret_key_file=doc.get("curve_client_secret_key_file"),
             path=path,
         )
-    except (KeyError, TypeError, ValueError) as exc:
+        if not 1 <= info.worlds_per_instance <= MAX_WORLDS:
+            raise ValueError(f"'worlds_per_instance' must be in 1..{MAX_WORLDS}, got {info.worlds_per_instance}")
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
         raise RemoteEnvError(
-            f"launch-info file {path} is malformed: {type(exc).__name__}: {exc}", kind="launch"
+            f"launch-info file {path} is malformed: {type(exc).__name__}: {short_repr(str(exc), 300)}", kind="launch"
         ) from None
     if not instances:
         raise RemoteEnvError(f"launch-info file {path} names no sim instances", kind="launch")
     return info
+
+
+def _endpoint(value: Any) -> str:
+    """A launch-info file's endpoint, if it is a ``tcp://`` or ``ipc://`` address (ValueError otherwise)."""
+    if not (isinstance(value, str) and value.startswith(("tcp://", "ipc://")) and len(value) <= _MAX_ENDPOINT_CHARS):
+        raise ValueError(f"endpoint {short_repr(value)} is not a tcp:// or ipc:// address")
+    if not value.isprintable():
+        raise ValueError(f"endpoint {short_repr(value)} holds control characters")
+    return value
 
 
 class AttachedSims:

@@ -6,7 +6,8 @@ over their connections, so the processes compute in parallel. While replies
 have been quick it polls without sleeping first (adaptive, see
 :mod:`remoteenv.wire.hot_wait`); local pipes are read in turn instead, one
 blocking read per reply (fewer system calls); stale replies (to abandoned
-requests) are dropped as they come; a dead sim is reported within
+requests) are dropped as they come, a bounded number per connection and
+round, and the deadline is checked on every round whatever arrived; a dead sim is reported within
 :data:`~remoteenv.agent.sim_connection.LIVENESS_CHECK_S`; after the timeout
 the connections still pending are rebuilt and :class:`remoteenv.RemoteEnvTimeout`
 is raised.
@@ -95,8 +96,9 @@ class FanIn:
             if not events and not arrived:
                 for p in pending:
                     conns[p].check_alive(what)
-                if deadline is not None and time.monotonic() > deadline:
-                    self._time_out(conns, pending, what, timeout)
+            # Checked on every round, whatever arrived: stale frames never extend it.
+            if pending and deadline is not None and time.monotonic() > deadline:
+                self._time_out(conns, pending, what, timeout)
         hot.waited(time.perf_counter() - started)
 
     # ------------------------------------------------------------ internals
@@ -148,14 +150,16 @@ class FanIn:
         self, conns: Sequence[SimConnection], pending: dict[int, int], what: str, timeout: float | None
     ) -> None:
         p = next(iter(pending))
+        why = conns[p].why_silent() or (
+            "the process is alive but stuck or overloaded. Raise the vector env's timeout= or check the scene code"
+        )
         for q in pending:
             conns[q].reconnect()
         self._poller = None
         raise RemoteEnvTimeout(
             f"sim instance {p} (and {len(pending) - 1} more) at {conns[p].endpoint} "
-            f"did not answer {what} within {timeout:g} s; the process is alive but "
-            "stuck or overloaded. Raise the vector env's timeout= or check the scene "
-            "code. The connections were rebuilt; the next call can go ahead.",
+            f"did not answer {what} within {timeout:g} s; {why}. "
+            "The connections were rebuilt; the next call can go ahead.",
             kind="timeout",
             instance=p,
         )

@@ -20,6 +20,12 @@ from remoteenv.wire.stats import DEFAULT_WINDOW, RunningStats
 __all__ = ["DEFAULT_WINDOW", "LatencyStats", "RunningStats"]
 
 
+def _real(value: Any) -> bool:
+    """A finite-or-not real number (not a bool, not a string): what the stats may record.
+    The info values come from the sim: anything else is skipped, not recorded."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
 class LatencyStats:
     """What the agent saw of a real-time (or ``action_delay``) env, step by step.
 
@@ -62,13 +68,14 @@ class LatencyStats:
         if "latency_s" in info:
             if info["latency_s"] is None:
                 self.never_applied += 1
-            else:
+            elif _real(info["latency_s"]):
                 self.latency_s.add(info["latency_s"])
-                self.latency_ticks.add(info["latency_ticks"])
-        if info.get("late"):
+                if _real(info.get("latency_ticks")):
+                    self.latency_ticks.add(info["latency_ticks"])
+        if info.get("late") is True:
             self.late_actions += 1
-        overruns = info.get("pacing_overruns")
-        if overruns is not None:
+        overruns: Any = info.get("pacing_overruns")
+        if _real(overruns):
             self.pacing_overruns = max(self.pacing_overruns, int(overruns))
 
     def record_vector(self, infos: Mapping[str, Any], round_trip_s: float | None = None) -> None:
@@ -85,18 +92,20 @@ class LatencyStats:
             for i in np.flatnonzero(infos["_latency_s"]):
                 if latency[i] is None or latency[i] != latency[i]:  # None, or NaN where a column filled it
                     self.never_applied += 1
-                else:
+                elif _real(latency[i]):
                     self.latency_s.add(latency[i])
-                    if ticks is not None:
+                    if ticks is not None and _real(ticks[i]):
                         self.latency_ticks.add(ticks[i])
         late = infos.get("late")
         if late is not None:
-            self.late_actions += int(np.count_nonzero(np.asarray(late, dtype=bool) & infos["_late"]))
+            flags = [late[i] for i in np.flatnonzero(infos["_late"])]
+            self.late_actions += sum(1 for flag in flags if flag is True or flag is np.True_)
         overruns = infos.get("pacing_overruns")
         if overruns is not None:
-            present = np.flatnonzero(infos["_pacing_overruns"])
-            if len(present):
-                self.pacing_overruns = max(self.pacing_overruns, int(np.max(np.asarray(overruns)[present])))
+            counts = [overruns[i] for i in np.flatnonzero(infos["_pacing_overruns"])]
+            counts = [int(c) for c in counts if _real(c)]
+            if counts:
+                self.pacing_overruns = max(self.pacing_overruns, max(counts))
 
     def reset(self) -> None:
         """Forget everything recorded (the sim's overrun count is re-read on the next step)."""

@@ -193,11 +193,10 @@ class Launcher:
         """Kill instance ``instance`` if it still runs and launch it afresh."""
         state = self._started()
         old = state.sims[instance]
-        if old.proc.poll() is None:
-            try:
-                os.killpg(old.proc.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
+        try:  # the whole group, even if the sim exited: its orphan guard waits in it
+            os.killpg(old.proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
         old.proc.wait()
         old.close_pipe()
         new = self._spawn(instance)

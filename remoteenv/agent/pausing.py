@@ -54,7 +54,11 @@ class Pauser:
         conns = [session.connection(i, cmd) for i in range(max(1, len(session.conns)))]
         timeout = session.timeout_for(cmd)
         seqs = [conn.send(cmd) for conn in conns]
-        return [conn.receive(seq, timeout, what=repr(cmd)) for conn, seq in zip(conns, seqs)]
+        replies = [conn.receive(seq, timeout, what=repr(cmd)) for conn, seq in zip(conns, seqs)]
+        if session.checks is not None:
+            for i, (conn, reply) in enumerate(zip(conns, replies)):
+                session.checks.sim_times(conn, cmd, reply, session.handshakes[i].num_worlds)
+        return replies
 
     def pause(self) -> list[float]:
         """Stop every sim's clock; returns each world's sim time (s) at the pause

@@ -11,6 +11,13 @@ before stepping). The original keeps its own sims.
 An env built around an object (``launcher=`` a group, ``attach=`` an
 :class:`~remoteenv.agent.attach.AttachedSims`) cannot be rebuilt that way;
 pickling it raises a ``TypeError`` that says to pass a factory instead.
+
+Neither can an env attached to running sims (``attach=`` a launch-info path,
+``gymnasium.make(id, attach=path)``, ``OpenAIRemoteEnv.attach``): rebuilding
+it would attach the copy to the *same* sims, so the copy's ``reset`` would
+move the original's worlds. Copying or pickling it raises a ``TypeError``
+saying so; a process that should drive those sims attaches itself (and the
+original then stops driving them).
 """
 
 from __future__ import annotations
@@ -42,6 +49,15 @@ class RebuildOnUnpickle:
 
     def __getstate__(self) -> dict[str, Any]:
         args, kwargs = self.__dict__.get("_init_args", ((), {}))
+        attached = kwargs.get("attach")
+        if isinstance(attached, (str, os.PathLike)):
+            raise TypeError(
+                f"cannot pickle or copy a {type(self).__name__} attached to running sims "
+                f"(attach={os.fspath(attached)!r}): a copy would drive the same sims as this env, and its "
+                "reset would move this env's worlds. Attach in the process that should drive them "
+                "(gymnasium.make(id, attach=path) or OpenAIRemoteEnv.attach(path)), and let one env drive "
+                "a sim at a time; for fresh sims of their own, build copies from a launching env instead"
+            )
         for key in _OBJECT_ARGUMENTS:
             value = kwargs.get(key)
             if value is not None and not isinstance(value, (str, os.PathLike)):

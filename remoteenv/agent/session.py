@@ -5,7 +5,10 @@ Runs in the agent process. A :class:`SimSession` takes a
 it unless its layout is fixed, connects to every sim, does the handshakes
 (all in flight at once) and parses them into
 :class:`~remoteenv.wire.handshake.Handshake`, keeps the connections and the
-restart budget, relaunches one sim when asked and closes everything.
+restart budget, relaunches one sim when asked and closes everything. Every
+reply that comes through :meth:`SimSession.request` is checked against the
+handshake first (:mod:`~remoteenv.agent.reply_checks`); the vector env's own
+fan-out checks its replies with the same :attr:`SimSession.checks`.
 :func:`choose_group` turns an env's ``launcher=``/``attach=`` arguments into
 the group.
 """
@@ -22,6 +25,7 @@ from remoteenv.agent.attach import AttachedSims
 from remoteenv.agent.connection import SimConnection
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launcher import Launcher
+from remoteenv.agent.reply_checks import ReplyChecks
 from remoteenv.agent.restart import RestartBudget
 from remoteenv.agent.scene_signature import check_scene_kwargs
 from remoteenv.agent.sim_group import LaunchSpec, SimGroup
@@ -106,6 +110,8 @@ class SimSession:
         self.conns: list[SimConnection] = []
         #: The latest handshake of each sim, in the group's order.
         self.handshakes: list[Handshake] = []
+        #: The checks of every reply (against the first sim's handshake, whose spaces the env has).
+        self.checks: ReplyChecks | None = None
         self.closed = False
 
     # ------------------------------------------------------------ lifecycle
@@ -126,6 +132,7 @@ class SimSession:
             self.handshakes = [
                 self._parse(conn, conn.receive(seq, timeout, what="'handshake'")) for conn, seq in zip(self.conns, seqs)
             ]
+            self.checks = ReplyChecks(self.handshakes[0].observation_space)
         except BaseException:
             self.close()
             raise
@@ -206,8 +213,27 @@ class SimSession:
         return self.conns[index]
 
     def request(self, index: int, cmd: str, **args: Any) -> dict[str, Any]:
-        """Send ``cmd`` to sim ``index`` and wait for its reply (timeout per :meth:`timeout_for`)."""
-        return self.connection(index, cmd).request(cmd, timeout=self.timeout_for(cmd), **args)
+        """Send ``cmd`` to sim ``index`` and wait for its reply (timeout per
+        :meth:`timeout_for`), checked against the handshake
+        (:class:`~remoteenv.agent.errors.RemoteProtocolError` if it is off)."""
+        conn = self.connection(index, cmd)
+        reply = conn.request(cmd, timeout=self.timeout_for(cmd), **args)
+        checks = self.checks
+        if checks is None:
+            return reply
+        if cmd == "reset":
+            return checks.reset(conn, reply)
+        if cmd == "step":
+            return checks.step(conn, reply)
+        if cmd == "render":
+            return checks.frame(conn, reply)
+        if cmd in ("get_attr", "call"):
+            return checks.attribute(conn, cmd, reply)
+        if cmd == "reset_batch":
+            return checks.batch(conn, cmd, reply, len(args["worlds"]))
+        if cmd == "step_batch" and not args.get("shared"):
+            return checks.batch(conn, cmd, reply, len(args["ops"]))
+        return reply
 
     def _parse(self, conn: SimConnection, reply: dict[str, Any]) -> Handshake:
         try:

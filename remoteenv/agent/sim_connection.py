@@ -10,6 +10,14 @@ still unanswered on the connection: it is raised only when that is the one
 being waited for, else dropped with that request. The transports are
 subclasses: :class:`remoteenv.agent.zmq_connection.ZmqConnection` and
 :class:`remoteenv.agent.pipe_connection.PipeConnection`.
+
+Whatever the peer sends, a wait ends by its deadline: the deadline is checked
+after every frame received, so stale or foreign frames arriving without end
+cannot extend it, and :meth:`SimConnection.try_receive` reads at most
+:data:`DRAIN_FRAMES` frames per call. Frames are decoded one at a time with
+at most :data:`~remoteenv.wire.frame_limits.MAX_REPLY_VALUES` values (counted
+before any is built), and the text of an error reply is capped where it is
+received.
 """
 
 from __future__ import annotations
@@ -21,11 +29,16 @@ from typing import Any
 
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout
 from remoteenv.wire import protocol
+from remoteenv.wire.errors import ERROR_KINDS, short_repr
 
 #: How often (seconds) a waiting call checks that the sim process still lives.
 LIVENESS_CHECK_S = 0.1
 #: Unanswered requests remembered per connection (to place ``seq`` -1 replies).
 _MAX_UNANSWERED = 1024
+#: Most frames one :meth:`SimConnection.try_receive` reads before it returns.
+DRAIN_FRAMES = 64
+#: Longest error ``kind`` shown as received (characters).
+_MAX_KIND_CHARS = 64
 
 
 class SimConnection:
@@ -134,26 +147,19 @@ class SimConnection:
         if timeout is ...:
             timeout = self.timeout
         deadline = None if timeout is None else time.monotonic() + timeout
+        stale = 0
         while True:
             frame = self._recv_frame()
             if frame is None:
                 self._check_alive(what)
-                if deadline is not None and time.monotonic() > deadline:
-                    self._after_timeout()
-                    raise RemoteEnvTimeout(
-                        f"sim instance {self.instance} at {self.endpoint} did not answer "
-                        f"{what} within {timeout:g} s; the process is alive but stuck or "
-                        "overloaded. Raise the env's timeout= or check the scene code. "
-                        "A late reply will be dropped; the next call can go ahead.",
-                        kind="timeout",
-                        instance=self.instance,
-                    ) from None
-                continue
-            reply = self._decode(frame)
-            if self._answers(reply, seq):
-                break
-            # A stale reply to an earlier, abandoned request: drop it.
-        if not reply.get("ok"):
+            else:
+                reply = self._decode(frame, what)
+                if self._answers(reply, seq):
+                    break
+                stale += 1  # a reply to an earlier, abandoned request (or a foreign frame): drop it
+            if deadline is not None and time.monotonic() > deadline:
+                self._time_out(what, timeout, stale)
+        if reply.get("ok") is not True:
             self._raise(reply, what)
         return reply
 
@@ -165,21 +171,20 @@ class SimConnection:
         """The reply to request ``seq`` if it has arrived, else None; never
         blocks, or with ``wait`` waits up to :data:`LIVENESS_CHECK_S` for a frame.
 
-        Drops stale replies and raises like :meth:`receive`. Lets a caller wait
-        on many connections with one ``zmq.Poller`` on their :attr:`pollable`,
-        or on each in turn.
+        Drops stale replies (at most :data:`DRAIN_FRAMES` frames per call) and
+        raises like :meth:`receive`. Lets a caller wait on many connections with
+        one ``zmq.Poller`` on their :attr:`pollable`, or on each in turn.
         """
-        first = wait
-        while True:
-            frame = self._recv_frame() if first else self._recv_frame_nowait()
-            first = False
+        for i in range(DRAIN_FRAMES):
+            frame = self._recv_frame() if wait and i == 0 else self._recv_frame_nowait()
             if frame is None:
                 return None
-            reply = self._decode(frame)
+            reply = self._decode(frame, what)
             if self._answers(reply, seq):
-                if not reply.get("ok"):
+                if reply.get("ok") is not True:
                     self._raise(reply, what)
                 return reply
+        return None  # a stream of stale frames: let the caller look at its deadline
 
     def check_alive(self, what: str = "a reply") -> None:
         """Raise :class:`remoteenv.SimDiedError` (kind ``"died"``) if the sim process is gone."""
@@ -208,33 +213,78 @@ class SimConnection:
                 instance=self.instance,
             )
 
-    def _decode(self, frame: bytes) -> dict[str, Any]:
+    def _time_out(self, what: str, timeout: float | None, stale: int) -> None:
+        """Make the transport usable again and raise the timeout of a wait for ``what``."""
+        why = self.why_silent()
+        self._after_timeout()
+        if why is None and stale:
+            why = (
+                f"{stale} frame(s) that answer no request of this call arrived meanwhile and were dropped "
+                "(a broken or hostile server?)"
+            )
+        if why is None:
+            why = "the process is alive but stuck or overloaded. Raise the env's timeout= or check the scene code"
+        raise RemoteEnvTimeout(
+            f"sim instance {self.instance} at {self.endpoint} did not answer {what} within {timeout:g} s; "
+            f"{why}. A late reply will be dropped; the next call can go ahead.",
+            kind="timeout",
+            instance=self.instance,
+        ) from None
+
+    def why_silent(self) -> str | None:
+        """What the transport saw that explains a missing reply (e.g. a connection
+        dropped for an oversize frame) since it last looked, or None. Used in
+        timeout messages (a vector call asks the first connection still pending)."""
+        return None
+
+    def _decode(self, frame: bytes, what: str) -> dict[str, Any]:
+        """One received frame as a reply map (at most ``MAX_REPLY_VALUES`` values,
+        counted before any is built); a ``protocol`` error naming ``what`` otherwise."""
         try:
-            reply = protocol.unpack(frame)
+            reply = protocol.unpack(frame, max_values=protocol.MAX_REPLY_VALUES)
         except protocol.ProtocolError as exc:
+            problem = str(exc)
+        else:
+            if isinstance(reply, dict):
+                return reply
+            problem = f"a {type(reply).__name__}, not a reply map"
+        raise RemoteEnvError(
+            f"sim instance {self.instance} at {self.endpoint} sent a frame the agent cannot use while it "
+            f"waited for {what}: {problem}",
+            kind="protocol",
+            instance=self.instance,
+        )
+
+    def _raise(self, reply: dict[str, Any], what: str) -> None:
+        """Raise the error a reply that is not ``ok: true`` carries (its text capped)."""
+        err = reply.get("error")
+        if reply.get("ok") is not False or not isinstance(err, dict):
             raise RemoteEnvError(
-                f"sim instance {self.instance} sent an undecodable reply: {exc}",
-                kind="protocol",
-                instance=self.instance,
-            ) from None
-        if not isinstance(reply, dict):
-            raise RemoteEnvError(
-                f"sim instance {self.instance} sent a reply that is not a map",
+                f"sim instance {self.instance} at {self.endpoint} answered {what} with neither 'ok': true "
+                f"nor an error map: {short_repr(reply, 120)}",
                 kind="protocol",
                 instance=self.instance,
             )
-        return reply
-
-    def _raise(self, reply: dict[str, Any], what: str) -> None:
-        err = reply.get("error") or {}
-        kind = str(err.get("kind", "remote"))
-        message = str(err.get("message", "unknown error"))
+        sent = err.get("kind")
+        # Only the spec's kinds pick an exception class: a server cannot pass
+        # its error off as the agent's own "died" or "timeout".
+        kind = sent if sent in ERROR_KINDS else "remote"
+        shown = sent if isinstance(sent, str) and len(sent) <= _MAX_KIND_CHARS else short_repr(sent, _MAX_KIND_CHARS)
+        message = _capped_text(err.get("message"), "unknown error")
         raise RemoteEnvError(
-            f"sim instance {self.instance} failed {what} ({kind}): {message}",
+            f"sim instance {self.instance} failed {what} ({shown}): {message}",
             kind=kind,
             instance=self.instance,
-            remote_traceback=str(err.get("traceback", "")),
+            remote_traceback=_capped_text(err.get("traceback"), ""),
         )
+
+
+def _capped_text(value: Any, default: str) -> str:
+    """An error reply's text field as received, at most :data:`~remoteenv.wire.protocol.MAX_ERROR_CHARS` characters."""
+    if not isinstance(value, str):
+        return default if value is None else short_repr(value)
+    limit = protocol.MAX_ERROR_CHARS
+    return value if len(value) <= limit else f"{value[: limit - 40]}... ({len(value) - limit + 40} more characters)"
 
 
 def _packable(value: Any) -> bool:
@@ -245,4 +295,4 @@ def _packable(value: Any) -> bool:
     return True
 
 
-__all__ = ["LIVENESS_CHECK_S", "SimConnection"]
+__all__ = ["DRAIN_FRAMES", "LIVENESS_CHECK_S", "SimConnection"]

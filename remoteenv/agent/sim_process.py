@@ -89,7 +89,14 @@ class LaunchState:
 
 def stop_all(state: LaunchState, grace: float = 2.0) -> None:
     """Stop every sim of ``state`` (SIGTERM to its process group, SIGKILL after
-    ``grace`` seconds), close the pipes and remove the private dir."""
+    ``grace`` seconds), remove the private dir, then SIGKILL what is left of
+    each sim's process group and close the pipes.
+
+    The order matters when this process is killed on the way (a pool
+    terminating its worker while the env closes): until the dir is gone,
+    each sim's orphan guard (:mod:`remoteenv.sim.orphan_guard`, in the sim's
+    process group; it ignores the SIGTERM) still watches this process and
+    removes the dir if it dies."""
     for sim in state.sims:
         if sim.proc.poll() is None:
             try:
@@ -106,13 +113,14 @@ def stop_all(state: LaunchState, grace: float = 2.0) -> None:
             except (ProcessLookupError, PermissionError):
                 pass
             sim.proc.wait()
-        # Reap the group even if the sim exited by itself but left children.
+    shutil.rmtree(state.workdir, ignore_errors=True)
+    for sim in state.sims:
+        # Reap the group even if the sim exited by itself but left children (its orphan guard).
         try:
             os.killpg(sim.proc.pid, signal.SIGKILL)
         except (ProcessLookupError, PermissionError):
             pass
         sim.close_pipe()
-    shutil.rmtree(state.workdir, ignore_errors=True)
 
 
 __all__ = ["LaunchState", "SimProcess", "stop_all"]

@@ -134,19 +134,20 @@ class AsyncWorlds:
                 else:
                     poller.register(pollable, zmq.POLLIN)
             took = any([self._take(p) for p in waiting])
-            if took:
-                continue
-            events = poller.poll(0 if unpolled else int(LIVENESS_CHECK_S * 1000))
-            if events or unpolled:
-                continue
-            for p in waiting:
-                conns[p].check_alive("'step_batch'")
-            if deadline is not None and time.monotonic() > deadline:
+            if not took:
+                events = poller.poll(0 if unpolled else int(LIVENESS_CHECK_S * 1000))
+                if not (events or unpolled):
+                    for p in waiting:
+                        conns[p].check_alive("'step_batch'")
+            # Checked on every round, whatever arrived: stale frames never extend it.
+            if self._ready_count < count and deadline is not None and time.monotonic() > deadline:
                 p = waiting[0]
+                why = conns[p].why_silent() or (
+                    "the process is alive but stuck or overloaded. Raise the vector env's timeout= "
+                    "or check the scene code"
+                )
                 raise RemoteEnvTimeout(
-                    f"sim instance {p} at {conns[p].endpoint} did not answer 'step_batch' within "
-                    f"{timeout:g} s; the process is alive but stuck or overloaded. Raise the vector "
-                    "env's timeout= or check the scene code.",
+                    f"sim instance {p} at {conns[p].endpoint} did not answer 'step_batch' within {timeout:g} s; {why}.",
                     kind="timeout",
                     instance=p,
                 )
@@ -159,6 +160,9 @@ class AsyncWorlds:
             reply = conn.try_receive(seq, "'step_batch'")
             if reply is None:
                 break
+            checks = self.session.checks
+            if checks is not None:
+                checks.batch(conn, "step_batch", reply, len(ids))
             queue.popleft()
             self._ready.append((ids, ops, reply))
             self._ready_count += len(ids)

@@ -32,9 +32,20 @@ def default_envs_per_process(num_envs: int) -> int:
 
 def check_sims(handshakes: Sequence[Handshake], slices: Sequence[tuple[int, int]], batches: bool) -> None:
     """Refuse sims that cannot serve the worlds ``slices[p]`` of each process
-    (e.g. a server other than the reference one, named in a launch-info file);
+    (e.g. a server other than the reference one, named in a launch-info file),
+    or whose spaces differ from the first sim's (the env's);
     ``batches``: the env drives several worlds per process with ``step_batch``."""
+    first = handshakes[0] if handshakes else None
     for hs, (lo, hi) in zip(handshakes, slices):
+        assert first is not None
+        if hs.observation_space != first.observation_space or hs.action_space != first.action_space:
+            raise RemoteEnvError(
+                f"sim instance {hs.instance} declares spaces {hs.observation_space} / {hs.action_space}, "
+                f"unlike sim instance {first.instance} ({first.observation_space} / {first.action_space}); "
+                "one vector env drives sims of one scene",
+                kind="protocol",
+                instance=hs.instance,
+            )
         if hi - lo > hs.num_worlds:
             problem = f"hosts {hs.num_worlds} world(s), not {hi - lo}"
         elif batches and not hs.offers("step_batch"):

@@ -6,7 +6,8 @@ a vector step is one ``step_batch`` per process and a reset one
 ``reset_batch``; with one world per process (and always in real time, where
 each process runs one paced clock) plain ``step``/``reset`` requests carry
 less, and their replies are put in batch form here, so the caller sees one
-shape. A process lost to a failure the restart budget covers is relaunched
+shape; every reply is checked against the handshake first
+(:attr:`~remoteenv.agent.session.SimSession.checks`). A process lost to a failure the restart budget covers is relaunched
 (:func:`remoteenv.agent.restart.gather_restarting`): its worlds' episodes end
 truncated at their last observation, and a reset is sent again.
 """
@@ -20,6 +21,7 @@ import numpy as np
 
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.fan_in import FanIn
+from remoteenv.agent.reply_checks import ReplyChecks
 from remoteenv.agent.restart import gather_restarting, restarted_info
 from remoteenv.agent.session import SimSession
 from remoteenv.agent.shared_lane import SharedLanes
@@ -49,7 +51,7 @@ class VectorRequests:
         self.same_step = same_step
         self.fan_in = FanIn()
         #: Shared-memory regions of the local sims (batched steps).
-        self.lanes = SharedLanes()
+        self.lanes = SharedLanes(session.handshake.observation_space)
 
     def gather(
         self, pending: dict[int, int], cmd: str, resend: Callable[[int], int] | None = None
@@ -87,8 +89,12 @@ class VectorRequests:
 
         pending = {p: send_reset(p) for p in worlds_of}
         replies, restarted = self.gather(pending, "reset", resend=send_reset)
-        if self.real_time:
-            replies = {p: reset_reply_as_batch(r) for p, r in replies.items()}
+        checks = self._checks()
+        for p, r in replies.items():
+            if self.real_time:
+                replies[p] = reset_reply_as_batch(checks.reset(conns[p], r))
+            else:
+                checks.batch(conns[p], "reset_batch", r, len(worlds_of[p]))
         return replies, restarted
 
     # ------------------------------------------------------------ step
@@ -128,10 +134,13 @@ class VectorRequests:
         if self.plain_steps:
             return self._finish_single_worlds(pending, ops, last_obs, obs_batch)
         results, failed = self.gather(pending, "step_batch")
+        conns, checks = self.session.conns, self._checks()
         for p, reply in results.items():
-            if reply.get("shared") is True:
-                lo, hi = self.slices[p]
+            lo, hi = self.slices[p]
+            shared = reply.get("shared") is True
+            if shared:  # its arrays are in the region (a protocol error if the request did not use it)
                 self.lanes.fill(p, reply, hi - lo)
+            checks.batch(conns[p], "step_batch", reply, hi - lo, shared=shared)
         for p, err in failed.items():
             results[p] = self._restarted_results(p, err, last_obs, obs_batch)
         return results
@@ -141,27 +150,33 @@ class VectorRequests:
     ) -> dict[int, dict[str, Any]]:
         """One world per process: gather the plain ``step``/``reset`` replies, then
         send a ``reset`` to each world whose op asks for one after its step."""
-        conns = self.session.conns
+        conns, checks = self.session.conns, self._checks()
         replies, failed = self.gather(pending, "step")
         results = {p: self._restarted_results(p, e, last_obs, obs_batch) for p, e in failed.items()}
         resets: dict[int, int] = {}
         for p, r in replies.items():
             op = ops[self.slices[p][0]]
             if op == OP_RESET:
-                results[p] = reset_reply_as_batch(r, as_step=True)
+                results[p] = reset_reply_as_batch(checks.reset(conns[p], r), as_step=True)
                 continue
-            results[p] = step_reply_as_batch(r)
+            results[p] = step_reply_as_batch(checks.step(conns[p], r))
             if op == OP_STEP_RESET or (op == OP_STEP_AUTORESET and (r["terminated"] or r["truncated"])):
                 resets[p] = conns[p].send("reset", seed=None, options=None)
         reset_replies: dict[int, dict[str, Any]] = {}
         if resets:
             self.fan_in.gather(conns, resets, "'reset'", self.session.timeout_for("reset"), reset_replies)
         for p, r in reset_replies.items():
+            checks.reset(conns[p], r)
             res = results[p]
             res["final"] = [[0, res["obs"][0], res["info"]["maps"][0]]]
             res["obs"] = [r["obs"]]
             res["info"] = {"maps": [r["info"]]}
         return results
+
+    def _checks(self) -> ReplyChecks:
+        checks = self.session.checks
+        assert checks is not None, "the session is open"
+        return checks
 
     def _restarted_results(self, p: int, err: RemoteEnvError, last_obs: Any, obs_batch: ObsBatch) -> dict[str, Any]:
         """``step_batch``-form results for the worlds of relaunched process ``p``:

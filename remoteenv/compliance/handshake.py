@@ -19,6 +19,8 @@ from gymnasium import spaces
 from remoteenv.compliance.failures import CheckFailed
 from remoteenv.compliance.values import is_int, is_number, type_name
 from remoteenv.wire.errors import short_repr
+from remoteenv.wire.frame_limits import MAX_WORLDS
+from remoteenv.wire.handshake import worlds_problem
 from remoteenv.wire.spaces import space_from_wire
 
 #: Commands every server answers.
@@ -82,12 +84,16 @@ def handshake_problems(reply: dict[str, Any]) -> list[str]:
         ("env_id", lambda v: isinstance(v, str), "a str"),
         ("instance", is_int, "an int"),
         ("pid", lambda v: v is None or is_int(v), "an int or nil"),
-        ("num_worlds", lambda v: is_int(v) and v >= 1, "an int >= 1"),
+        ("num_worlds", lambda v: is_int(v) and 1 <= v <= MAX_WORLDS, f"an int in 1..{MAX_WORLDS}"),
     ):
         if not test(reply.get(key)):
             problems.append(f"{key} must be {want}, got {short_repr(reply.get(key))}")
-    _space(reply, "observation_space", problems)
+    obs_space = _space(reply, "observation_space", problems)
     _space(reply, "action_space", problems)
+    if obs_space is not None and not problems:
+        problem = worlds_problem(reply.get("num_worlds"), obs_space)
+        if problem is not None:
+            problems.append(problem)
     meta = reply.get("metadata")
     if not isinstance(meta, dict):
         problems.append(f"metadata must be a map, got {type_name(meta)}")

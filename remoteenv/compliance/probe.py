@@ -24,6 +24,9 @@ from remoteenv.wire import protocol
 from remoteenv.wire.errors import short_repr
 from remoteenv.wire.keys import KeyPair
 
+#: Frames from the server a probe's socket queues (libzmq stops reading beyond).
+PROBE_RCVHWM = 4
+
 
 @dataclass(frozen=True)
 class Target:
@@ -99,6 +102,7 @@ class Probe:
         sock: zmq.Socket[bytes] = zmq.Context.instance().socket(zmq.DEALER)
         sock.setsockopt(zmq.LINGER, 0)
         sock.setsockopt(zmq.MAXMSGSIZE, protocol.MAX_MESSAGE_BYTES)
+        sock.setsockopt(zmq.RCVHWM, PROBE_RCVHWM)  # a flooding server cannot fill the checker's memory
         if target.curve_server_key is not None:
             keys = target.curve_client_keypair
             public, secret = (keys.public, keys.secret) if keys is not None else zmq.curve_keypair()
@@ -143,7 +147,7 @@ class Probe:
             raise CheckFailed(f"no reply to {what} within {self.timeout:g} s")
         frame = self.socket.recv(copy=True)
         try:
-            reply = protocol.unpack(frame)
+            reply = protocol.unpack(frame, max_values=protocol.MAX_REPLY_VALUES)
         except protocol.ProtocolError as exc:
             raise CheckFailed(f"the reply to {what} is not a frame of the spec: {exc}") from None
         problem = envelope_problem(reply)

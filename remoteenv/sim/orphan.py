@@ -18,6 +18,7 @@ launcher's private dir, and the last one to leave removes the dir itself
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -72,6 +73,11 @@ def start_guard(parent_pid: int, private_dir: str | None, instance: int) -> Guar
     if not sys.platform.startswith("linux") or not hasattr(os, "pidfd_open"):
         return None
     read_end, write_end = os.pipe()  # both close-on-exec: only the guard gets the read end
+    # The launcher's SIGTERM to the sim's process group is not for the guard:
+    # blocked while it is started, the signal stays blocked in the guard across
+    # exec, so none can end it before its first line (the sim's own SIGTERM
+    # waits until the mask is restored).
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
     try:
         proc = subprocess.Popen(
             [
@@ -92,6 +98,7 @@ def start_guard(parent_pid: int, private_dir: str | None, instance: int) -> Guar
         os.close(write_end)
         return None
     finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         os.close(read_end)
     return Guard(proc, write_end)
 

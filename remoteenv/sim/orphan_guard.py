@@ -15,6 +15,13 @@ private dir, and the dir once no other sim's files are left. Being another
 process, it needs nothing from the sim's interpreter. Where pidfds do not
 exist it exits at once and the sim's own watch (:class:`ParentWatch`) is all
 there is.
+
+When the sim ends first (its launcher is stopping it, or it crashed; even
+before the guard started) the guard stays until the agent dies, then tidies
+up, or until the launcher SIGKILLs it with the sim's process group after
+removing the dir (the sim starts it with SIGTERM blocked, and it ignores the
+SIGTERM the launcher sends that group first): an agent killed while it
+closed its env (a pool terminating its worker) leaves no dir behind.
 """
 
 from __future__ import annotations
@@ -27,8 +34,6 @@ import sys
 
 #: Seconds the sim gets to shut down by itself after SIGTERM before SIGKILL.
 GRACE_S = 0.5
-#: Seconds to wait, once the sim is gone, for the agent's pidfd to tell whether it died too.
-_AGENT_SETTLE_S = 0.3
 
 
 def remove_instance_files(private_dir: str, instance: int) -> None:
@@ -53,39 +58,34 @@ def remove_instance_files(private_dir: str, instance: int) -> None:
         shutil.rmtree(private_dir, ignore_errors=True)
 
 
-def _readable(fd: int, timeout_s: float) -> bool:
+def _readable(fd: int, timeout_s: float | None) -> bool:
     poller = select.poll()
     poller.register(fd, select.POLLIN | select.POLLHUP)
-    return bool(poller.poll(timeout_s * 1000))
+    return bool(poller.poll(None if timeout_s is None else timeout_s * 1000))
 
 
 def guard(agent_pid: int, sim_pid: int, private_dir: str, instance: int, sim_gone_fd: int = 0) -> int:
     """Watch ``agent_pid`` and the sim ``sim_pid`` (our parent; ``sim_gone_fd``
     reaches end of file when it exits). Returns the exit status."""
-    try:
-        sim = os.pidfd_open(sim_pid)
-    except (AttributeError, OSError):
-        return 0  # no pidfds here (or the sim is gone): the sim's own watch is the fallback
-    if os.getppid() != sim_pid:
-        return 0  # the sim ended before we started (its pid may be another process's now)
-    try:
-        agent = os.pidfd_open(agent_pid)
-    except OSError:
-        agent = -1  # gone already
-    if agent >= 0 and not _sim_parent_is(sim_pid, agent_pid):
+    if not hasattr(os, "pidfd_open"):
+        return 0  # no pidfds here: the sim's own watch is the fallback
+    agent = _pidfd(agent_pid)
+    # Reparented already: the sim ended before we started (its launcher may
+    # have stopped it at once); its pid may be another process's now.
+    sim = _pidfd(sim_pid) if os.getppid() == sim_pid else -1
+    if agent >= 0 and sim >= 0 and not _sim_parent_is(sim_pid, agent_pid):
         os.close(agent)
         agent = -1  # the agent died before we could watch it
-    if agent >= 0:
-        poller = select.poll()
-        poller.register(sim_gone_fd, select.POLLIN | select.POLLHUP)
-        poller.register(agent, select.POLLIN)
-        fds = {fd for fd, _ in poller.poll()}
-        if agent not in fds:  # the sim ended first
-            if not _readable(agent, _AGENT_SETTLE_S):
-                return 0  # ... while its agent lives: the launcher tidies up
-            if private_dir:
-                remove_instance_files(private_dir, instance)
-            return 0
+    if sim < 0 or (agent >= 0 and not _agent_ends_first(agent, sim_gone_fd)):
+        # The sim ended first (e.g. its launcher is stopping it), so wait for
+        # the launcher to finish: it removes the dir, then SIGKILLs this guard
+        # with the sim's process group. If the launcher dies before that
+        # (killed while it closed the env), tidy up for it.
+        if agent >= 0:
+            _readable(agent, None)
+        if private_dir:
+            remove_instance_files(private_dir, instance)
+        return 0
     _signal(sim, signal.SIGTERM)
     if not _readable(sim_gone_fd, GRACE_S):
         _signal(sim, signal.SIGKILL)
@@ -93,6 +93,22 @@ def guard(agent_pid: int, sim_pid: int, private_dir: str, instance: int, sim_gon
     if private_dir:
         remove_instance_files(private_dir, instance)
     return 0
+
+
+def _pidfd(pid: int) -> int:
+    """A pidfd of ``pid``, or -1 if it is gone."""
+    try:
+        return os.pidfd_open(pid)
+    except OSError:
+        return -1
+
+
+def _agent_ends_first(agent: int, sim_gone_fd: int) -> bool:
+    """Wait until the agent or the sim ends; True if the agent did."""
+    poller = select.poll()
+    poller.register(sim_gone_fd, select.POLLIN | select.POLLHUP)
+    poller.register(agent, select.POLLIN)
+    return agent in {fd for fd, _ in poller.poll()}
 
 
 def _signal(pidfd: int, sig: int) -> None:
@@ -113,6 +129,10 @@ def _sim_parent_is(sim_pid: int, agent_pid: int) -> bool:
 def main(argv: list[str]) -> int:
     agent_pid, sim_pid, private_dir, instance = int(argv[0]), int(argv[1]), argv[2], int(argv[3])
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C in a terminal is for the agent
+    # The launcher's SIGTERM to the sim's process group is for the sim: this
+    # guard lives until the launcher has removed the dir (then SIGKILL). The
+    # sim starts it with SIGTERM blocked, so this holds from its first line.
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     return guard(agent_pid, sim_pid, private_dir, instance)
 
 

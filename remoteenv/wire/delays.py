@@ -27,7 +27,7 @@ state and ``index``:
 from __future__ import annotations
 
 import bisect
-import json
+import io
 import math
 import os
 from collections.abc import Sequence
@@ -36,6 +36,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from remoteenv.wire.errors import ProtocolError, short_repr
+from remoteenv.wire.file_reads import parse_json, read_bytes, read_text
 
 #: Delays in control ticks (whole numbers).
 TICKS = "ticks"
@@ -48,6 +49,8 @@ MAX_DELAY_TICKS = 10_000
 MAX_DELAY_S = 60.0
 #: Most values a :class:`Trace` or :class:`Categorical` may hold.
 MAX_VALUES = 100_000
+#: Room for the header of a ``.npy`` trace file on top of its values (bytes).
+_NPY_HEADER_BYTES = 1 << 16
 #: How far the probabilities of a :class:`Categorical` may sum away from 1.
 PROB_TOLERANCE = 1e-6
 
@@ -306,14 +309,14 @@ def _read_trace_file(path: str, unit: str) -> tuple[Delay, ...]:
     limit = MAX_VALUES * 32
     data: Any
     try:
+        # Never blocking, regular files only, bounded (a FIFO or /dev/zero is refused).
         if path.endswith(".npy"):
-            data = np.load(path, mmap_mode="r", allow_pickle=False)
+            data = np.load(
+                io.BytesIO(read_bytes(path, limit + _NPY_HEADER_BYTES, what="trace file")), allow_pickle=False
+            )
         else:
-            with open(path, encoding="utf-8") as f:
-                text = f.read(limit + 1)
-            if len(text) > limit:
-                raise ValueError(f"more than {limit} characters (a trace holds at most {MAX_VALUES} delays)")
-            data = json.loads(text) if path.endswith(".json") else _parse_text(text)
+            text = read_text(path, limit, what="trace file")
+            data = parse_json(text, what=what) if path.endswith(".json") else _parse_text(text)
     except (OSError, ValueError) as exc:  # ValueError: bad JSON, text or .npy (e.g. an object array)
         raise ValueError(f"cannot read {what}: {exc}") from None
     if isinstance(data, np.ndarray):

@@ -8,6 +8,12 @@ the fields an env needs (``protocol``, both spaces, ``metadata`` with
 the others default when absent (``env_id``/``pid`` nil, ``instance`` 0,
 ``num_worlds`` 1, ``stepping`` lock-step without delay, ``commands`` as the
 spec says a client should assume, see :meth:`Handshake.offers`).
+
+The reply's counts are bounded before anything is built from them: the
+spaces as :func:`~remoteenv.wire.spaces.space_from_wire` says, and
+:func:`worlds_problem`: ``num_worlds`` at most
+:data:`~remoteenv.wire.frame_limits.MAX_WORLDS`, with every world's
+observation fitting in one frame together (a batch reply carries them all).
 """
 
 from __future__ import annotations
@@ -19,8 +25,9 @@ from typing import Any
 from gymnasium import spaces
 
 from remoteenv.wire.errors import ProtocolError, short_repr
+from remoteenv.wire.frame_limits import MAX_MESSAGE_BYTES, MAX_WORLDS
 from remoteenv.wire.protocol import PROTOCOL_VERSION
-from remoteenv.wire.spaces import space_from_wire
+from remoteenv.wire.spaces import space_from_wire, value_nbytes
 
 #: ``stepping["mode"]`` of a sim that advances only when asked.
 LOCK_STEP = "lock_step"
@@ -117,6 +124,26 @@ def _typed(doc: Mapping[str, Any], key: str, types: type | tuple[type, ...], whe
     return value
 
 
+def worlds_problem(num_worlds: Any, observation_space: spaces.Space) -> str | None:
+    """What is wrong with a handshake's ``num_worlds`` for its observation space, if anything."""
+    if not isinstance(num_worlds, int) or isinstance(num_worlds, bool) or not 1 <= num_worlds <= MAX_WORLDS:
+        return f"'num_worlds' must be an int in 1..{MAX_WORLDS}, got {short_repr(num_worlds)}"
+    batch = num_worlds * value_nbytes(observation_space)
+    if batch > MAX_MESSAGE_BYTES:
+        return (
+            f"{num_worlds} worlds' observations take {batch} bytes, above the frame limit of "
+            f"{MAX_MESSAGE_BYTES} bytes: no batch reply could carry them"
+        )
+    return None
+
+
+def _space(reply: Mapping[str, Any], key: str) -> spaces.Space:
+    try:
+        return space_from_wire(_need(reply, key, dict, ""))
+    except ProtocolError as exc:
+        raise ProtocolError(f"handshake {key!r} is a malformed space: {exc}") from None
+
+
 def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_VERSION) -> Handshake:
     """Check a ``handshake`` reply and parse it; :class:`ProtocolError` names what is wrong."""
     if not isinstance(reply, Mapping):
@@ -128,13 +155,13 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
         )
     meta = _need(reply, "metadata", dict, "")
     stepping = _typed(reply, "stepping", dict, "") or {}
-    try:
-        obs_space = space_from_wire(_need(reply, "observation_space", dict, ""))
-        act_space = space_from_wire(_need(reply, "action_space", dict, ""))
-    except ProtocolError:
-        raise
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ProtocolError(f"handshake reply holds a malformed space: {type(exc).__name__}: {exc}") from None
+    obs_space = _space(reply, "observation_space")
+    act_space = _space(reply, "action_space")
+    num_worlds = _typed(reply, "num_worlds", int, "")
+    num_worlds = 1 if num_worlds is None else num_worlds
+    problem = worlds_problem(num_worlds, obs_space)
+    if problem is not None:
+        raise ProtocolError(f"handshake {problem}")
     render_modes = _need(meta, "render_modes", list, "metadata ")
     if not all(isinstance(m, str) for m in render_modes):
         raise ProtocolError(f"handshake metadata 'render_modes' must be strings: {short_repr(render_modes)}")
@@ -154,7 +181,7 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
         env_id=_typed(reply, "env_id", str, ""),
         instance=_typed(reply, "instance", int, "") or 0,
         pid=_typed(reply, "pid", int, ""),
-        num_worlds=_typed(reply, "num_worlds", int, "") or 1,
+        num_worlds=num_worlds,
         timestep=None if timestep is None else float(timestep),
         frame_skip=_typed(meta, "frame_skip", int, "metadata "),
         stepping_mode=_typed(stepping, "mode", str, "stepping ") or LOCK_STEP,
@@ -175,4 +202,5 @@ __all__ = [
     "Handshake",
     "handshake_request",
     "parse_handshake",
+    "worlds_problem",
 ]

@@ -10,6 +10,9 @@ Key files are text: comment lines starting with ``#`` and one line holding a
 40-character Z85 key. Secret key files are created with mode 0600 and never
 overwritten; no key file is written through a symlink
 (:func:`remoteenv.wire.files.create_new`). A file of allowed client keys holds one public key per line.
+Key files are read as :mod:`remoteenv.wire.file_reads` reads any file a
+user names: never blocking, regular files only, at most
+:data:`MAX_KEY_FILE_BYTES`.
 """
 
 from __future__ import annotations
@@ -21,10 +24,13 @@ from dataclasses import dataclass
 import zmq
 from zmq.utils import z85
 
+from remoteenv.wire.file_reads import read_bytes
 from remoteenv.wire.files import create_new
 
 #: Length of a Z85-encoded 32-byte CURVE key.
 Z85_KEY_LENGTH = 40
+#: Largest key file read (bytes): some 25,000 keys of one line each.
+MAX_KEY_FILE_BYTES = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -86,17 +92,21 @@ def write_public_keys(path: str | os.PathLike[str], keys: Iterable[bytes]) -> No
 
 
 def read_keys(path: str | os.PathLike[str]) -> list[bytes]:
-    """Every key in a key file (comment and blank lines skipped), each checked."""
+    """Every key in a key file (comment and blank lines skipped), each checked.
+
+    Raises ``ValueError`` (:class:`~remoteenv.wire.file_reads.UnreadableFile`
+    for a file that is not regular or is too large) naming the file, and
+    ``OSError`` when it cannot be opened."""
     keys = []
-    with open(os.fspath(path), "rb") as f:
-        for n, line in enumerate(f, 1):
-            line = line.strip()
-            if not line or line.startswith(b"#"):
-                continue
-            try:
-                keys.append(check_key(line))
-            except ValueError as exc:
-                raise ValueError(f"{os.fspath(path)}, line {n}: {exc}") from None
+    data = read_bytes(path, MAX_KEY_FILE_BYTES, what="key file")
+    for n, line in enumerate(data.splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith(b"#"):
+            continue
+        try:
+            keys.append(check_key(line))
+        except ValueError as exc:
+            raise ValueError(f"{os.fspath(path)}, line {n}: {exc}") from None
     return keys
 
 
@@ -128,6 +138,7 @@ def load_keypair(secret_path: str | os.PathLike[str]) -> KeyPair:
 
 
 __all__ = [
+    "MAX_KEY_FILE_BYTES",
     "KeyPair",
     "check_key",
     "generate_keypair",

@@ -43,6 +43,37 @@ at most a bounded repr of the request's content
 (:data:`remoteenv.wire.errors.MAX_ECHO_CHARS` characters per value) and are
 at most :data:`MAX_ERROR_CHARS` characters long.
 
+A reply holds at most :data:`MAX_REPLY_VALUES` msgpack values (every map,
+array and scalar counts one; a client counts them before decoding and refuses
+a larger reply). A handshake's counts are bounded too, and a client refuses a
+handshake beyond them before it builds anything from it: ``num_worlds`` is
+an int in ``1 .. MAX_WORLDS`` (:data:`MAX_WORLDS` = 65,536), and one
+observation of every world fits in a frame together (``num_worlds`` times the
+bytes of one observation, a Discrete value counting 8, at most
+:data:`MAX_MESSAGE_BYTES`: a batch reply carries them all); each space map
+holds at most :data:`MAX_SPACE_NODES` spaces (1,024, every Dict and Tuple
+member counted), nested at most :data:`MAX_SPACE_DEPTH` (16) deep, with
+dtypes from :data:`ARRAY_DTYPES`, Discrete ``n`` and ``start`` within int64,
+and one value of the space within :data:`MAX_MESSAGE_BYTES`.
+
+Clients
+-------
+Both ends distrust each other; a client owes the server what the server owes
+a client. A client's wait for a reply ends at its deadline whatever arrives:
+it checks the deadline after every frame, so stale or foreign frames cannot
+extend it, and drops them (a bounded number per look). It bounds what it
+queues (the reference agent: a receive high-water mark of 4 frames, each at
+most :data:`MAX_MESSAGE_BYTES`), caps a received error text at
+:data:`MAX_ERROR_CHARS`, and checks every ``ok`` reply against the handshake
+before it uses it: observations of the observation space's dtype and shape,
+numeric rewards, bool flags, info maps with str keys, batch fields of exactly
+the worlds asked for, ``final`` positions distinct and in ``0 .. n-1``,
+render frames uint8 ``H x W x 3`` or nil. A reply that breaks any of this is a
+protocol error of that call, naming the command, the field and the server;
+none of it is used. It maps a ``shared_batch`` region only if it is sealed
+against shrinking. ``tests/integration/servers/hostile_server.py`` is a
+server that breaks each of these rules on request, for testing a client.
+
 Messages
 --------
 A request is a msgpack map::
@@ -230,7 +261,17 @@ import msgpack
 
 from remoteenv.wire.arrays import ARRAY_DTYPES, _default, _ext_hook, wire_dtype
 from remoteenv.wire.errors import ProtocolError, short_repr
-from remoteenv.wire.frame_limits import MAX_ERROR_CHARS, MAX_MESSAGE_BYTES, MAX_REQUEST_ITEMS, FrameTooLarge
+from remoteenv.wire.frame_limits import (
+    MAX_ERROR_CHARS,
+    MAX_MESSAGE_BYTES,
+    MAX_REPLY_VALUES,
+    MAX_REQUEST_ITEMS,
+    MAX_SPACE_DEPTH,
+    MAX_SPACE_NODES,
+    MAX_WORLDS,
+    FrameTooLarge,
+)
+from remoteenv.wire.value_count import values_within
 
 PROTOCOL_VERSION = 1
 
@@ -264,13 +305,16 @@ def pack(obj: Any) -> bytes:
     return frame
 
 
-def unpack(frame: bytes, max_items: int | None = None) -> Any:
+def unpack(frame: bytes, max_items: int | None = None, max_values: int | None = None) -> Any:
     """Decode one frame. Raises :class:`ProtocolError` for anything off-spec.
 
-    ``max_items`` caps the entries of every array and map (before any is built).
+    ``max_items`` caps the entries of every array and map, ``max_values`` the
+    values of the whole frame (both checked before any value is built).
     """
     if len(frame) > MAX_MESSAGE_BYTES:
         raise FrameTooLarge(len(frame))
+    if max_values is not None and not values_within(frame, max_values):
+        raise ProtocolError(f"a frame of {len(frame)} bytes holds more than {max_values} msgpack values")
     limits = {} if max_items is None else {"max_array_len": max_items, "max_map_len": max_items}
     try:
         return msgpack.unpackb(frame, raw=False, ext_hook=_ext_hook, strict_map_key=True, use_list=True, **limits)
@@ -420,7 +464,11 @@ __all__ = [
     "ARRAY_DTYPES",
     "MAX_ERROR_CHARS",
     "MAX_MESSAGE_BYTES",
+    "MAX_REPLY_VALUES",
     "MAX_REQUEST_ITEMS",
+    "MAX_SPACE_DEPTH",
+    "MAX_SPACE_NODES",
+    "MAX_WORLDS",
     "OPS",
     "OP_RESET",
     "OP_STEP",

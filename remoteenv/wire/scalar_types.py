@@ -8,6 +8,8 @@ MuJoCo envs return an ``np.float64`` reward and, e.g., an ``np.float32``
 So the sim adds a ``"types"`` map to a ``reset``/``step`` reply that had
 such values (:func:`describe_scalars`), and the agent casts them back
 (:func:`restore_scalars`). A reply with only plain values carries no map.
+The map is a hint: a name the client does not know, or a value its type
+cannot hold, leaves the value as it came.
 """
 
 from __future__ import annotations
@@ -62,8 +64,8 @@ def restore_info(info: Any, info_types: Any) -> Any:
     dtype}``, as in a ``"types"`` map's ``"info"``) back to numpy scalars, in place."""
     if isinstance(info, dict) and isinstance(info_types, dict):
         for key, name in info_types.items():
-            if name in _SCALAR_TYPE and _is_number(info.get(key)):
-                info[key] = _SCALAR_TYPE[name](info[key])
+            if isinstance(key, str) and key in info:
+                info[key] = _typed(info[key], name)
     return info
 
 
@@ -75,15 +77,28 @@ def restore_scalars(reply: dict[str, Any]) -> dict[str, Any]:
     types = reply.pop("types", None)
     if not isinstance(types, dict):
         return reply
-    reward = types.get("reward")
-    if reward in _SCALAR_TYPE and _is_number(reply.get("reward")):
-        reply["reward"] = _SCALAR_TYPE[reward](reply["reward"])
+    if "reward" in reply:
+        reply["reward"] = _typed(reply["reward"], types.get("reward"))
     restore_info(reply.get("info"), types.get("info"))
     return reply
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (bool, int, float))
+def _typed(value: Any, name: Any) -> Any:
+    """``value`` as the numpy scalar type ``name``, if it is a plain number that
+    type holds (the same number, or for floats no overflow to infinity); else ``value``."""
+    if not isinstance(value, (bool, int, float)) or not isinstance(name, str):
+        return value
+    cast = _SCALAR_TYPE.get(name)
+    if cast is None:
+        return value
+    try:
+        with np.errstate(over="ignore"):
+            typed = cast(value)
+    except (OverflowError, ValueError):
+        return value
+    if isinstance(value, float) and np.isinf(typed) and not np.isinf(value):
+        return value
+    return typed
 
 
 __all__ = ["describe_scalars", "restore_info", "restore_scalars"]

@@ -21,6 +21,10 @@ Row ``j`` belongs to request position ``j``. Each side writes its blocks only
 while the other waits for the message that follows, so the pipe orders every
 access. The sim checks the actions it reads like any others; the agent reads
 numbers of a fixed dtype and shape, nothing it would interpret further.
+
+The agent maps only a region sealed against shrinking (:func:`map_region`):
+truncating a mapped file would turn its next access into ``SIGBUS``, a
+signal that kills the process instead of an error it can handle.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import fcntl
 import math
 import mmap
 import os
+import stat
 from dataclasses import dataclass
 from typing import Any
 
@@ -166,17 +171,41 @@ def create_region(layout: SharedLayout) -> tuple[int, SharedArrays]:
     return fd, SharedArrays(layout, region)
 
 
+class UnsealedRegion(OSError):
+    """The region's file is not sealed against shrinking: mapping it would let
+    its creator end the mapping process with ``SIGBUS`` by truncating it."""
+
+
 def map_region(path: str, layout: SharedLayout) -> SharedArrays:
-    """Map the region a peer created, opened by ``path`` (agent side). Raises
-    ``OSError`` if it cannot be opened or is smaller than ``layout`` needs."""
-    fd = os.open(path, os.O_RDWR | getattr(os, "O_CLOEXEC", 0))
+    """Map the region a peer created, opened by ``path`` (agent side).
+
+    Raises ``OSError`` if it cannot be opened, is not a regular file or is
+    smaller than ``layout`` needs, and :class:`UnsealedRegion` if it lacks the
+    ``F_SEAL_SHRINK`` seal (where the system has seals): a region that can
+    shrink under its mapping turns the next access into ``SIGBUS``, which
+    kills the process instead of raising."""
+    fd = os.open(path, os.O_RDWR | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     try:
-        if os.fstat(fd).st_size < layout.size:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise OSError(f"{path} is not a regular file")
+        if info.st_size < layout.size:
             raise OSError(f"{path} is smaller than the {layout.size} bytes its layout needs")
+        shrink_seal = getattr(fcntl, "F_SEAL_SHRINK", None)
+        if shrink_seal is not None and not fcntl.fcntl(fd, fcntl.F_GET_SEALS) & shrink_seal:
+            raise UnsealedRegion(f"{path} is not sealed against shrinking (F_SEAL_SHRINK)")
         region = mmap.mmap(fd, layout.size)
     finally:
         os.close(fd)
     return SharedArrays(layout, region)
 
 
-__all__ = ["MAX_SHARED_BYTES", "REGION_SEALS", "SharedArrays", "SharedLayout", "create_region", "map_region"]
+__all__ = [
+    "MAX_SHARED_BYTES",
+    "REGION_SEALS",
+    "SharedArrays",
+    "SharedLayout",
+    "UnsealedRegion",
+    "create_region",
+    "map_region",
+]

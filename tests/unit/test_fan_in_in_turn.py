@@ -93,14 +93,19 @@ def test_a_shared_reply_to_a_request_sent_over_the_wire_is_a_protocol_error():
     from types import SimpleNamespace
 
     import numpy as np
+    from gymnasium.spaces import Box
 
+    from remoteenv.agent.reply_checks import ReplyChecks
     from remoteenv.agent.restart import RestartBudget
     from remoteenv.agent.vector_requests import VectorRequests
     from remoteenv.agent.vector_results import ObsBatch
 
     conns = [LyingSim(0)]
+    obs_space = Box(-1.0, 1.0, (1,), np.float32)
     session = SimpleNamespace(
         conns=conns,
+        handshake=SimpleNamespace(observation_space=obs_space),
+        checks=ReplyChecks(obs_space),
         handshakes=[SimpleNamespace(offers=lambda cmd: cmd != "shared_batch")],  # no region offered
         restarts=RestartBudget(False, 0),
         timeout_for=lambda cmd: 5.0,
