@@ -45,9 +45,13 @@ def add_parser(sub: Any) -> None:
         default=None,
         help="JSON map for the env (default '{\"continuous\": true}' for the default env, else {})",
     )
-    p.add_argument("--delays", default="0,4,8,12", help="constant action delays in ticks (default 0,4,8,12)")
     p.add_argument(
-        "--random-delays", default="4,8,12", help="k of the Uniform(0, k) delays in ticks; '' for none (default 4,8,12)"
+        "--delays", default="0,4,8,12", help="constant action delays in ticks; '' for none (default 0,4,8,12)"
+    )
+    p.add_argument(
+        "--random-delays",
+        default="8,16,24",
+        help="k of the Uniform(0, k) delays in ticks; '' for none (default 8,16,24)",
     )
     p.add_argument("--seeds", default="0,1,2", help="training seeds (default 0,1,2)")
     p.add_argument(
@@ -83,12 +87,13 @@ def _config(args: argparse.Namespace) -> Any:
         kwargs: dict[str, Any] = {"continuous": True} if args.env == DEFAULT_ENV else {}
     else:
         kwargs = json_map(args.env_kwargs, "--env-kwargs")
+    delays = int_list(args.delays, "--delays") if args.delays.strip() else []
     random_delays = int_list(args.random_delays, "--random-delays") if args.random_delays.strip() else []
     try:
         return StudyConfig(
             env_id=args.env,
             env_kwargs=kwargs,
-            delays=tuple(int_list(args.delays, "--delays")),
+            delays=tuple(delays),
             random_delays=tuple(random_delays),
             seeds=tuple(int_list(args.seeds, "--seeds")),
             steps=args.steps,
@@ -112,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
     purpose = "python -m remoteenv latency-study"
     for module in ("torch", "stable_baselines3", "tqdm") + (() if args.no_plot else ("matplotlib",)):
         require(module, purpose)
+    from remoteenv.latency_study.references import reference_returns
     from remoteenv.latency_study.results import markdown_table, plot, write_json
     from remoteenv.latency_study.runner import run_study
     from remoteenv.latency_study.twin_check import run_twin_check
@@ -123,14 +129,17 @@ def run(args: argparse.Namespace) -> int:
     json_path = os.path.join(args.out, "delay_effect.json")
     with tempfile.TemporaryDirectory(prefix="remoteenv-study-policies-") as scratch:
         policy_dir = args.policies or scratch
-        data = run_study(config, json_path, workers=args.workers, resume=args.resume, policy_dir=policy_dir)
-        table = markdown_table(data["records"])
+        references = reference_returns(config)
+        data = run_study(
+            config, json_path, workers=args.workers, resume=args.resume, policy_dir=policy_dir, references=references
+        )
+        table = markdown_table(data["records"], references)
         with open(os.path.join(args.out, "delay_effect.md"), "w") as f:
             f.write(table + "\n")
         if not args.no_plot:
             seeds = f"{len(config.seeds)} seed{'s' if len(config.seeds) > 1 else ''}"
             title = f"{config.env_id}: PPO, {config.steps} steps per run, {seeds}"
-            plot(data["records"], os.path.join(args.out, "delay_effect.png"), title)
+            plot(data["records"], os.path.join(args.out, "delay_effect.png"), title, references)
         print(table)
         print(f"wrote {json_path} (training wall time {data['wall_s']:.0f} s on {data['host']['cpus']} CPUs)")
         if not args.no_rt_replay:

@@ -69,7 +69,7 @@ class StudyConfig:
     env_id: str = "remoteenv/CartPole-v0"
     env_kwargs: dict[str, Any] = field(default_factory=lambda: {"continuous": True})
     delays: tuple[int, ...] = (0, 4, 8, 12)
-    random_delays: tuple[int, ...] = (4, 8, 12)
+    random_delays: tuple[int, ...] = (8, 16, 24)
     seeds: tuple[int, ...] = (0, 1, 2)
     steps: int = 300_000
     eval_episodes: int = 10

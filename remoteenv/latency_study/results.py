@@ -90,16 +90,19 @@ def delay_label(kind: str, delay: int) -> str:
     return f"Uniform(0, {delay})" if kind == "uniform" else f"{delay}"
 
 
-def markdown_table(records: Iterable[dict[str, Any]]) -> str:
-    """Rows: delay model; columns: each variant's mean over seeds (min–max) and the per-seed returns."""
+def markdown_table(
+    records: Iterable[dict[str, Any]], references: dict[str, dict[str, dict[str, float]]] | None = None
+) -> str:
+    """Rows: delay model; columns: each variant's mean over seeds (min–max) and
+    the per-seed returns, then each reference controller's return (– where it
+    was not run)."""
     summary = summarize(records)
     rows: dict[tuple[str, int], dict[str, dict[str, Any]]] = {}
     for s in summary:
         rows.setdefault((s["kind"], s["delay"]), {})[s["variant"]] = s
-    lines = [
-        "| action delay (ticks) | plain: mean (min–max) | plain: per seed | history: mean (min–max) | history: per seed |",
-        "|---|---|---|---|---|",
-    ]
+    names = list(dict.fromkeys(name for by_name in (references or {}).values() for name in by_name))
+    head = "| action delay (ticks) | plain: mean (min–max) | plain: per seed | history: mean (min–max) | history: per seed |"
+    lines = [head + "".join(f" {name} |" for name in names), "|---|---|---|---|---|" + "---|" * len(names)]
     for (kind, delay), by_variant in rows.items():
         cells = [delay_label(kind, delay)]
         for variant in VARIANTS:
@@ -109,16 +112,23 @@ def markdown_table(records: Iterable[dict[str, Any]]) -> str:
                 continue
             cells.append(f"{group['mean']:.0f} ({group['min']:.0f}–{group['max']:.0f})")
             cells.append(", ".join(f"{v:.0f}" for v in group["seed_means"]))
+        for name in names:
+            value = (references or {}).get(kind, {}).get(name, {}).get(str(delay))
+            cells.append("–" if value is None else f"{value:.0f}")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
 def plot(
-    records: list[dict[str, Any]], path: str, title: str, references: dict[str, dict[int, float]] | None = None
+    records: list[dict[str, Any]],
+    path: str,
+    title: str,
+    references: dict[str, dict[str, dict[str, float]]] | None = None,
 ) -> None:
     """One panel per delay model: each seed's mean return as a point, the mean
-    over seeds with ± one standard deviation, per variant; optional reference
-    curves (name -> {delay: return}) on the constant-delay panel."""
+    over seeds with ± one standard deviation, per variant; and the reference
+    controllers' returns (``{kind: {name: {delay: return}}}``, see
+    :mod:`remoteenv.latency_study.references`) as grey lines."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -147,15 +157,16 @@ def plot(
                 capsize=3,
                 label=labels[variant] + (" + latency" if kind == "uniform" and variant == "history" else ""),
             )
-        if kind == "constant" and references:
-            for (name, by_delay), style in zip(references.items(), (":", "--", "-.")):
-                ds = sorted(by_delay)
-                ax.plot(ds, [by_delay[d] for d in ds], linestyle=style, color="0.4", label=name)
+        for (name, by_delay), style in zip((references or {}).get(kind, {}).items(), (":", "--", "-.")):
+            ds = sorted(by_delay, key=int)
+            ax.plot(
+                [int(d) for d in ds], [by_delay[d] for d in ds], linestyle=style, marker=".", color="0.4", label=name
+            )
         ax.set_xticks(sorted({int(r["delay"]) for r in records if r["kind"] == kind}))
         ax.set_ylim(bottom=0)
         ax.set_xlabel("action delay k (ticks)" if kind == "constant" else "action delay Uniform(0, k): k (ticks)")
         ax.set_title("constant delay" if kind == "constant" else "random delay", fontsize=10)
-        ax.legend(fontsize=7, loc="lower left")
+        ax.legend(fontsize=7, loc="best")
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("evaluation return (per seed; mean ± std)")
     fig.suptitle(title, fontsize=10)

@@ -50,6 +50,7 @@ def run_study(
     resume: bool = False,
     policy_dir: str | None = None,
     on_record: Callable[[dict[str, Any]], None] | None = None,
+    references: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Train and evaluate every cell of ``config`` not yet in ``json_path``
     (with ``resume``; otherwise all of them) and return the study's data.
@@ -61,6 +62,7 @@ def run_study(
         resume: keep the records of an earlier run of the same configuration.
         policy_dir: if given, each trained policy is saved there (SB3 zip).
         on_record: called in this process with each finished record.
+        references: the reference controllers' returns, stored as they are.
     """
     from tqdm import tqdm
 
@@ -68,7 +70,13 @@ def run_study(
     done = {record_key(r) for r in records}
     todo = [c for c in cells(config) if c.key not in done]
     started = time.perf_counter()
-    data: dict[str, Any] = {"config": config.to_json(), "wall_s": None, "host": host_facts(), "records": records}
+    data: dict[str, Any] = {
+        "config": config.to_json(),
+        "wall_s": None,
+        "host": host_facts(),
+        "references": references,
+        "records": records,
+    }
     write_json(json_path, data)
 
     def finished(record: dict[str, Any]) -> None:
