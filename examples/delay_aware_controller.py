@@ -11,7 +11,7 @@ Two fixed controllers, no training:
   MuJoCo copy of the scene's model forward through them from the delayed
   observation, and applies the same LQR gains to the predicted state.
 
-If the delays land where docs/latency.md says they do, and the history
+If the delays land where docs/delays.md says they do, and the history
 holds exactly the actions in flight, the predictor balances for the full
 500 steps at every delay where the first action can still arrive before the
 pole falls (on this scene: every k up to 16 and beyond), while the plain LQR

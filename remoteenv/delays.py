@@ -2,7 +2,7 @@
 
 The public path of :mod:`remoteenv.wire.delays` (the specs, in ticks or
 seconds) and :mod:`remoteenv.wire.delay_line` (the lock-step semantics).
-``docs/latency.md`` states what a delay of ``k`` ticks means.
+``docs/delays.md`` states what a delay of ``k`` ticks means.
 """
 
 from remoteenv.wire.delay_line import DelayLine, DelayStream, LockStepDelays, StepDelays, delay_rng

@@ -50,7 +50,7 @@ class OpenAIRemoteEnv(SessionAttributes, Pausable, RebuildOnUnpickle, gym.Env):
         action_delay: lock-step; an action takes effect this many ticks later:
             an int, or a :mod:`remoteenv.delays` spec in ticks (e.g.
             ``Uniform(0, 3)``), drawn per step from a stream seeded by
-            ``reset(seed=...)`` (see ``docs/latency.md``).
+            ``reset(seed=...)`` (see ``docs/delays.md``).
         obs_delay: lock-step; the step returns the newest observation that has
             arrived, observations arriving this many ticks late (int or spec).
         link_delay: real time; an emulated network's extra delay per action,

@@ -25,7 +25,7 @@ effect) is answered at the end of that tick, so its reply reports
 ``ticks_elapsed = floor(L_j) + 1``. The twin holds the same decision for
 those ``ticks_elapsed`` lock-step ticks, re-sending it each tick with the
 countdown delays ``L'_j, L'_j - 1, ...``, so that every copy is due at the
-same tick (docs/latency.md: the newest due copy is in force, older ones are
+same tick (docs/delays.md: the newest due copy is in force, older ones are
 dropped) and the action starts at a whole tick ``L'_j`` after the
 observation. ``L'_j`` is ``L_j`` rounded to the nearest tick (default) or
 down (``rounding="floor"``; see :func:`twin_latency`). The trace of an

@@ -7,7 +7,7 @@ clock: the loop just waits for requests). Both satisfy the interfaces of
 :mod:`remoteenv.sim.stepping`. The delay rules themselves (counting, the
 newest due action in force, the newest arrived observation returned,
 seeding) are :class:`remoteenv.wire.delay_line.LockStepDelays`'s, written
-down in ``docs/latency.md``.
+down in ``docs/delays.md``.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Action and observation delays in lock-step: the exact semantics, as a pure engine.
 
 No physics here: a stepper calls :class:`LockStepDelays` around each control
-tick (``docs/latency.md`` states the same rules for readers). Both processes
+tick (``docs/delays.md`` states the same rules for readers). Both processes
 may use it: the sim's lock-step stepper, and in-process replays that must
 match it exactly.
 

@@ -5,7 +5,7 @@ Both processes use this module: the agent builds a spec (``action_delay=``,
 the sim rebuilds it (:func:`delay_from_wire`, which treats every field as
 hostile) and draws from it. The semantics of the delays themselves (when an
 action takes effect, which observation is returned) live in
-:mod:`remoteenv.wire.delay_line` and ``docs/latency.md``.
+:mod:`remoteenv.wire.delay_line` and ``docs/delays.md``.
 
 Units. A spec is in control ticks (``unit="ticks"``, whole numbers, for
 lock-step experiments) or in seconds (``unit="s"``, for an emulated link in
