@@ -44,8 +44,13 @@ def test_pause_freezes_sim_time_and_counts_in_no_latency_figure():
     # few ticks ran between pause and this step's reply (generous: 0.25 s sim).
     assert info["sim_time"] - at_pause < 0.25
     assert info["latency_s"] < 0.25
-    # No substep was counted late because of the pause.
-    assert after["overruns"] == timing["overruns"]
+    # No substep was counted late because of the pause. Had the pause leaked
+    # into the deadlines, every substep of the 0.5 s (250 of 2 ms) would have
+    # run late at once; a loaded host may still make a few of the substeps
+    # after the resume late on its own (seen: 1 at load 6), so the bound is a
+    # tenth of what a leak would count (timing is the behaviour here).
+    leaked = 0.5 / 0.002  # CartPole's physics timestep is 2 ms
+    assert after["overruns"] - timing["overruns"] < leaked / 10
 
 
 def test_the_context_manager_resumes_even_on_error_and_lock_step_is_a_no_op():
