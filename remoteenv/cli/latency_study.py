@@ -64,6 +64,11 @@ def add_parser(sub: Any) -> None:
         default=min(2, os.cpu_count() or 1),
         help="training runs in parallel, one per core (default min(2, CPUs))",
     )
+    p.add_argument(
+        "--ppo",
+        default="{}",
+        help="JSON map of PPO settings to override (see remoteenv.latency_study.design.PPO_SETTINGS), e.g. '{\"gamma\": 0.98}'",
+    )
     p.add_argument("--out", default="latency-study", help="output directory (default ./latency-study)")
     p.add_argument("--resume", action="store_true", help="keep the finished runs of an interrupted study in --out")
     p.add_argument(
@@ -98,6 +103,7 @@ def _config(args: argparse.Namespace) -> Any:
             seeds=tuple(int_list(args.seeds, "--seeds")),
             steps=args.steps,
             eval_episodes=args.eval_episodes,
+            ppo=json_map(args.ppo, "--ppo"),
         )
     except ValueError as exc:
         raise SystemExit(str(exc)) from None
