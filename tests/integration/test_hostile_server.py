@@ -107,6 +107,19 @@ def test_a_lying_step_reply_is_a_protocol_error_naming_command_field_and_sim(tmp
             env.close()
 
 
+@pytest.mark.parametrize("lie, field", [("reset-obs", "obs"), ("reset-info", "info")])
+@pytest.mark.parametrize("worlds", [1, 4])
+def test_a_lying_reset_reply_is_a_protocol_error(tmp_path, lie, field, worlds):
+    with hostile(tmp_path, lie, worlds=worlds) as path:
+        env = OpenAIRemoteEnv.attach(path, timeout=10) if worlds == 1 else RemoteVectorEnv.attach(path, timeout=10)
+        try:
+            with pytest.raises(RemoteEnvError) as err:
+                env.reset(seed=0)
+            _expect_protocol_error(err, "reset" if worlds == 1 else "reset_batch", field)
+        finally:
+            env.close()
+
+
 def test_a_lying_render_and_attribute_reply_are_protocol_errors(tmp_path):
     with hostile(tmp_path, "frame-str") as path:
         env = OpenAIRemoteEnv.attach(path, timeout=10)

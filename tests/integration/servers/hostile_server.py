@@ -85,6 +85,8 @@ REPLY_LIES = (
     "types-bad",
     "frame-str",
     "attr-missing",
+    "reset-obs",
+    "reset-info",
 )
 LIES = (*HANDSHAKE_LIES, *TIMING_LIES, *REPLY_LIES)
 EPISODE_STEPS = 3
@@ -252,6 +254,10 @@ class Liar:
         elif lie == "attr-missing" and cmd == "get_attr":
             del reply["value"]
             reply["callable"] = "no"
+        elif lie == "reset-obs" and cmd in ("reset", "reset_batch"):
+            reply["obs"] = reply["obs"].astype(np.float64)
+        elif lie == "reset-info" and cmd in ("reset", "reset_batch"):
+            reply["info"] = ["not", "a", "map"]
         elif not stepping:
             return reply
         elif lie == "no-reward":
