@@ -83,6 +83,16 @@ def scene_command(
     return cmd + list(extra_args)
 
 
+def launch_environment(render_mode: str | None) -> dict[str, str]:
+    """The environment of a sim process started here: ours, with
+    ``MUJOCO_GL=egl`` unless it says otherwise or the sim opens a window
+    (``render_mode="human"``)."""
+    env = dict(os.environ)
+    if render_mode != "human":
+        env.setdefault("MUJOCO_GL", "egl")
+    return env
+
+
 def write_sim_delay_file(private_dir: str, instance: int, text: str | None) -> str | None:
     """Write sim ``instance``'s delay file (``text`` from
     :func:`remoteenv.wire.delay_file.delay_file_text`) into ``private_dir`` as

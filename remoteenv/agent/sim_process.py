@@ -12,8 +12,24 @@ import socket
 import subprocess
 import time
 from dataclasses import dataclass, field
+from typing import Protocol
 
 _STDERR_TAIL_LINES = 20
+
+
+class ProcessHandle(Protocol):
+    """What the launcher uses of a started process: a :class:`subprocess.Popen`
+    (started the plain way) or a :class:`remoteenv.agent.zygote.ForkedProcess`."""
+
+    @property
+    def pid(self) -> int: ...
+
+    @property
+    def returncode(self) -> int | None: ...
+
+    def poll(self) -> int | None: ...
+
+    def wait(self, timeout: float | None = None) -> int: ...
 
 
 @dataclass
@@ -21,7 +37,7 @@ class SimProcess:
     """One launched sim process."""
 
     instance: int
-    proc: subprocess.Popen
+    proc: ProcessHandle
     log_path: str
     ready_file: str
     endpoint: str | None = None
@@ -32,6 +48,8 @@ class SimProcess:
     log_offset: int = 0
     #: The launcher's end of the local pipe (see :mod:`remoteenv.protocol`), or None.
     pipe: socket.socket | None = None
+    #: The zygote that forked this process (its parent), or None if it was started the plain way.
+    zygote_pid: int | None = None
 
     def close_pipe(self) -> None:
         if self.pipe is not None:
@@ -71,6 +89,9 @@ class SimProcess:
                 how = f"killed by signal {-code}"
         else:
             how = f"exited with code {code}"
+        note = getattr(self.proc, "exit_note", None)
+        if note:
+            how += f" ({note})"
         tail = self.stderr_tail()
         text = f"pid {self.proc.pid} {how}"
         if tail:

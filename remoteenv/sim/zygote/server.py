@@ -1,0 +1,196 @@
+"""The zygote's loop: answer fork requests, reap the children, follow the agent.
+
+Runs in the zygote process (see :mod:`remoteenv.sim.zygote`). One thread,
+one ``poll`` over the control channel, a pidfd of the agent and a pidfd of
+each live child. A fork request is answered with the child's pid, a pidfd of
+it and the launcher's end of the child's status channel, or refused with a
+reason; when a child exits, its exit status goes down its status channel.
+The loop returns None when the agent is gone or closed the channel (the
+zygote then exits) and, in a forked child, the request that child serves.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import select
+import socket
+import sys
+import threading
+from dataclasses import dataclass
+
+from remoteenv.sim.orphan import adopt_agent_pidfd
+from remoteenv.sim.zygote.child import become_sim, run_script
+from remoteenv.sim.zygote.preload import BASE_MODULES, preload, scene_imports, shadowing
+from remoteenv.wire.errors import ProtocolError, short_repr
+from remoteenv.wire.zygote_channel import (
+    ForkRequest,
+    channel_pair,
+    close_fds,
+    fork_request,
+    receive_message,
+    send_message,
+)
+
+
+@dataclass
+class _Child:
+    pid: int
+    pidfd: int
+    status: socket.socket
+
+
+class ZygoteServer:
+    """Serves fork requests on ``control`` for the agent ``agent_pid`` (our parent).
+
+    Raises ``RuntimeError`` if ``agent_pid`` is not our parent any more (it
+    died before we could watch it)."""
+
+    def __init__(self, control: socket.socket, agent_pid: int) -> None:
+        self.control = control
+        self.agent_pidfd = os.pidfd_open(agent_pid)
+        if os.getppid() != agent_pid:  # checked after opening: the pidfd cannot name another process
+            os.close(self.agent_pidfd)
+            raise RuntimeError(f"the agent (pid {agent_pid}) is gone")
+        self.children: dict[int, _Child] = {}  # by pidfd
+        self.scenes: set[str] = set()
+
+    def preload_scene(self, scene: str) -> list[str]:
+        """Import what ``scene`` imports at its top (once per scene); return what failed."""
+        if scene in self.scenes:
+            return []
+        self.scenes.add(scene)
+        return preload(scene_imports(scene))
+
+    def serve(self) -> tuple[ForkRequest, list[int]] | None:
+        """Serve until the agent is gone (None); in a forked child, return its request and descriptors."""
+        poller = select.poll()
+        poller.register(self.control, select.POLLIN)
+        poller.register(self.agent_pidfd, select.POLLIN)
+        watched: set[int] = set()
+        while True:
+            for fd, _events in poller.poll():
+                if fd == self.agent_pidfd:
+                    return None
+                if fd in self.children:
+                    poller.unregister(fd)
+                    watched.discard(fd)
+                    self._reap(self.children.pop(fd))
+                    continue
+                try:
+                    got = receive_message(self.control)
+                except ProtocolError as exc:
+                    self._answer({"kind": "refused", "reason": str(exc)})
+                    continue
+                except OSError:
+                    return None
+                if got is None:
+                    return None
+                child = self._fork(*got)
+                if child is not None:
+                    return child
+                for pidfd in self.children.keys() - watched:
+                    poller.register(pidfd, select.POLLIN)
+                    watched.add(pidfd)
+
+    # ------------------------------------------------------------ internals
+
+    def _fork(self, message: dict, fds: list[int]) -> tuple[ForkRequest, list[int]] | None:
+        try:
+            request = fork_request(message, fds)
+        except ProtocolError as exc:
+            close_fds(fds)
+            self._answer({"kind": "refused", "reason": str(exc)})
+            return None
+        reason = self._refusal(request)
+        if reason is not None:
+            close_fds(fds)
+            self._answer({"kind": "refused", "reason": reason})
+            return None
+        ours, theirs = channel_pair()
+        pid = os.fork()
+        if pid == 0:
+            ours.close()
+            theirs.close()
+            self._close_in_child()
+            return request, fds
+        close_fds(fds)  # the child's now: a copy here would hide the pipe's end of file from the agent
+        pidfd = os.pidfd_open(pid)
+        self.children[pidfd] = _Child(pid, pidfd, ours)
+        try:
+            send_message(self.control, {"kind": "forked", "pid": pid}, [theirs.fileno(), pidfd])
+        except OSError:
+            pass  # the agent is gone: the loop notices
+        finally:
+            theirs.close()
+        self.preload_scene(os.path.realpath(request.argv[0]))
+        return None
+
+    def _refusal(self, request: ForkRequest) -> str | None:
+        threads = threading.active_count()
+        if threads > 1:
+            return f"the zygote runs {threads} Python threads (an imported module started them): forking is unsafe"
+        shadowed = shadowing(os.path.dirname(os.path.realpath(request.argv[0])))
+        if shadowed:
+            return f"files in the scene's folder shadow modules the zygote imported: {short_repr(shadowed)}"
+        return None
+
+    def _reap(self, child: _Child) -> None:
+        try:
+            _, status = os.waitpid(child.pid, 0)
+            returncode = os.waitstatus_to_exitcode(status)
+            send_message(child.status, {"kind": "exit", "returncode": returncode})
+        except OSError:
+            pass  # the launcher dropped the child's handle
+        finally:
+            child.status.close()
+            os.close(child.pidfd)
+
+    def _answer(self, message: dict) -> None:
+        try:
+            send_message(self.control, message)
+        except OSError:
+            pass
+
+    def _close_in_child(self) -> None:
+        """Drop the zygote's descriptors in a forked child (detached first, so
+        that no socket object closes a number the sim reuses later), all but
+        the agent's pidfd: the sim watches the agent through it."""
+        os.close(self.control.detach())
+        for child in self.children.values():
+            os.close(child.status.detach())
+            os.close(child.pidfd)
+        self.children.clear()
+
+
+def main(argv: list[str]) -> int:
+    """The zygote: preload, say ready, serve; in a forked child, run the scene script."""
+    parser = argparse.ArgumentParser(description="remoteenv zygote (started by the launcher)")
+    parser.add_argument("--agent-pid", type=int, required=True)
+    parser.add_argument("--control-fd", type=int, required=True)
+    parser.add_argument("--scene", action="append", default=[])
+    args = parser.parse_args(argv)
+    control = socket.socket(fileno=args.control_fd)
+    failed = preload(BASE_MODULES)
+    try:
+        server = ZygoteServer(control, args.agent_pid)
+    except RuntimeError:
+        return 0
+    for scene in args.scene:
+        failed += server.preload_scene(os.path.realpath(scene))
+    try:
+        send_message(control, {"kind": "ready", "pid": os.getpid(), "failed": failed})
+    except OSError:
+        return 0
+    got = server.serve()
+    if got is None:
+        sys.stdout.flush()
+        os._exit(0)  # nothing to tidy up; a fast exit lets the sims' guards act at once
+    request, fds = got
+    adopt_agent_pidfd(args.agent_pid, server.agent_pidfd)
+    del server, control
+    run_script(become_sim(request, fds))
+    return 0
+
+
+__all__ = ["ZygoteServer", "main"]
