@@ -18,6 +18,7 @@ import pytest
 
 import remoteenv
 from remoteenv import Launcher, OpenAIRemoteEnv
+from remoteenv.agent.sim_command import launch_environment
 from remoteenv.agent.zygote import registry
 from remoteenv.cli.new_scene import write_package
 
@@ -227,3 +228,16 @@ def test_a_process_forked_from_the_agent_starts_its_own_zygote(zygotes_on, closi
     assert wait_gone(theirs, 5.0), "the worker's zygote must end with the worker"
     env.reset(seed=0)  # ours is untouched
     assert _parent(ours) == os.getpid()
+
+
+def test_prestart_starts_the_zygote_the_next_launch_forks_from(monkeypatch, closing):
+    monkeypatch.setenv(registry.SWITCH, "0")
+    assert remoteenv.prestart(CARTPOLE) is False
+    monkeypatch.setenv(registry.SWITCH, "1")
+    assert remoteenv.prestart(CARTPOLE, render_mode="human") is False
+    assert remoteenv.prestart(CARTPOLE) is True
+    zygote = registry.zygote_for(launch_environment(None))
+    assert zygote is not None
+    env = gym.make(CARTPOLE)
+    closing(env)
+    assert _sim(env).zygote_pid == zygote.pid
