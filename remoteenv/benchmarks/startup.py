@@ -12,7 +12,9 @@ imports Gymnasium and remoteenv first (not timed), then times:
   another in that process (each closed before the next);
 - ``restart``: the sim of an env made with ``restart_on_failure=True`` is
   killed (SIGKILL), then the next ``step`` (which relaunches it) and the
-  ``reset`` after it.
+  ``reset`` after it;
+- ``vector``: ``gym.make_vec(id, N, envs_per_process=1)`` → first ``reset``:
+  N sim processes at once (``--startup-vector N``, 0 to skip).
 
 Wall seconds (median and min over repeats) and CPU seconds of the agent and
 every process below it. With ``--hog`` a second pass runs with that many
@@ -36,7 +38,7 @@ from remoteenv.benchmarks.report import emit, progress_log
 
 #: The ways of starting sims compared, with the environment each agent runs in.
 MODES = {"zygote": {"REMOTEENV_ZYGOTE": "1"}, "plain": {"REMOTEENV_ZYGOTE": "0"}}
-ROWS = ("first make", "later make", "restart")
+ROWS = ("first make", "later make", "restart", "vector")
 TARGET_S = 0.3
 
 #: One agent process: times its envs and prints one JSON line.
@@ -47,8 +49,8 @@ AGENT = textwrap.dedent(
     import remoteenv
     from remoteenv.benchmarks.anchors import cpu_seconds
 
-    env_id, later = sys.argv[1], int(sys.argv[2])
-    out = {"first make": [], "later make": [], "restart": []}
+    env_id, later, vector = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+    out = {"first make": [], "later make": [], "restart": [], "vector": []}
 
     def timed(row, work):
         cpu, wall = cpu_seconds(), time.perf_counter()
@@ -78,6 +80,14 @@ AGENT = textwrap.dedent(
     timed("restart", relaunch)
     out["zygote"] = env.unwrapped.launcher.sims[0].zygote_pid is not None
     env.close()
+
+    def make_vector():
+        envs = gym.make_vec(env_id, num_envs=vector, vectorization_mode="vector_entry_point", envs_per_process=1)
+        envs.reset(seed=0)
+        return envs
+
+    if vector:
+        timed("vector", make_vector).close()
     print(json.dumps(out))
     """
 )
@@ -88,6 +98,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--startup-id", default="remoteenv/CartPole-v0", help="the env id to make (default CartPole)")
     g.add_argument("--startup-repeats", type=int, default=7, help="fresh agent processes per mode (default 7)")
     g.add_argument("--startup-later", type=int, default=3, help="later makes per agent process (default 3)")
+    g.add_argument("--startup-vector", type=int, default=8, help="sims of the vector row (default 8; 0: no row)")
     g.add_argument("--startup-json", default=None, metavar="PATH", help="also write the result as JSON ('-': stdout)")
     try:  # shared with --batched, which defines it when present
         g.add_argument(
@@ -97,12 +108,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         pass
 
 
-def run_agent(env_id: str, mode: str, later: int) -> dict[str, Any]:
+def run_agent(env_id: str, mode: str, later: int, vector: int) -> dict[str, Any]:
     """One fresh agent process in ``mode``; its timings."""
     env = {**os.environ, **MODES[mode]}
-    done = subprocess.run(
-        [sys.executable, "-c", AGENT, env_id, str(later)], env=env, capture_output=True, text=True, timeout=600
-    )
+    argv = [sys.executable, "-c", AGENT, env_id, str(later), str(vector)]
+    done = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=600)
     if done.returncode != 0:
         raise RuntimeError(f"the {mode} agent failed ({done.returncode}):\n{done.stderr[-2000:]}")
     result: dict[str, Any] = json.loads(done.stdout.strip().splitlines()[-1])
@@ -111,7 +121,7 @@ def run_agent(env_id: str, mode: str, later: int) -> dict[str, Any]:
     return result
 
 
-def measure(env_id: str, repeats: int, later: int, log: Any) -> dict[str, Any]:
+def measure(env_id: str, repeats: int, later: int, vector: int, log: Any) -> dict[str, Any]:
     """``{mode: {row: {"wall": [...], "cpu": [...]}}}`` over ``repeats`` alternating rounds."""
     samples: dict[str, dict[str, dict[str, list[float]]]] = {
         mode: {row: {"wall": [], "cpu": []} for row in ROWS} for mode in MODES
@@ -119,7 +129,7 @@ def measure(env_id: str, repeats: int, later: int, log: Any) -> dict[str, Any]:
     for r in range(repeats):
         order = list(MODES) if r % 2 == 0 else list(reversed(MODES))
         for mode in order:
-            for row, pairs in run_agent(env_id, mode, later).items():
+            for row, pairs in run_agent(env_id, mode, later, vector).items():
                 for wall, cpu in pairs:
                     samples[mode][row]["wall"].append(wall)
                     samples[mode][row]["cpu"].append(cpu)
@@ -137,6 +147,7 @@ def summary(samples: dict[str, Any]) -> dict[str, Any]:
                 "n": len(v["wall"]),
             }
             for row, v in rows.items()
+            if v["wall"]
         }
         for mode, rows in samples.items()
     }
@@ -146,13 +157,16 @@ def format_table(result: dict[str, Any]) -> str:
     lines = [f"{result['env_id']}: gym.make -> first reset, and a restart (wall s, median / min; CPU s, median)"]
     for name, passes in result["passes"].items():
         lines.append(f"\n{name} (load average {passes['load_before']:.2f} before, {passes['load_after']:.2f} after)")
-        lines.append(f"{'':12s} {'zygote':>24s} {'plain':>24s}")
+        lines.append(f"{'':12s} | {'zygote':^26s} | {'plain':^26s}")
         for row in ROWS:
+            if row not in passes["summary"]["zygote"]:
+                continue
             cells = []
             for mode in MODES:
                 c = passes["summary"][mode][row]
                 cells.append(f"{c['median_s']:.3f} / {c['min_s']:.3f}  cpu {c['cpu_median_s']:.3f}")
-            lines.append(f"{row:12s} {cells[0]:>24s} {cells[1]:>24s}")
+            label = f"vector, {result['vector']}" if row == "vector" else row
+            lines.append(f"{label:12s} | {cells[0]:^26s} | {cells[1]:^26s}")
     lines.append(f"\ntarget: gym.make -> first reset <= {TARGET_S} s on a quiet host; {os.cpu_count()} CPUs")
     lines.append(f"{time.strftime('%Y-%m-%d %H:%M %Z')}")
     return "\n".join(lines)
@@ -167,14 +181,15 @@ def run(args: argparse.Namespace) -> int:
         log(f"# {name}")
         load_before = os.getloadavg()[0]
         with CpuHog(hog):
-            samples = measure(args.startup_id, args.startup_repeats, args.startup_later, log)
+            samples = measure(args.startup_id, args.startup_repeats, args.startup_later, args.startup_vector, log)
         passes[name] = {
             "load_before": load_before,
             "load_after": os.getloadavg()[0],
             "summary": summary(samples),
             "samples": samples,
         }
-    emit({"env_id": args.startup_id, "passes": passes}, args.startup_json, format_table)
+    result = {"env_id": args.startup_id, "vector": args.startup_vector, "passes": passes}
+    emit(result, args.startup_json, format_table)
     return 0
 
 

@@ -13,12 +13,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import select
+import signal
 import socket
-import sys
 import threading
 from dataclasses import dataclass
 
+from remoteenv.sim.limits import raise_fd_limit
 from remoteenv.sim.orphan import adopt_agent_pidfd
 from remoteenv.sim.zygote.child import become_sim, run_script
 from remoteenv.sim.zygote.preload import BASE_MODULES, preload, scene_imports, shadowing
@@ -107,7 +109,12 @@ class ZygoteServer:
             close_fds(fds)
             self._answer({"kind": "refused", "reason": reason})
             return None
-        ours, theirs = channel_pair()
+        try:
+            ours, theirs = channel_pair()
+        except OSError as exc:  # out of descriptors, say: the launcher starts this one the plain way
+            close_fds(fds)
+            self._answer({"kind": "refused", "reason": f"no status channel: {exc}"})
+            return None
         pid = os.fork()
         if pid == 0:
             ours.close()
@@ -115,7 +122,15 @@ class ZygoteServer:
             self._close_in_child()
             return request, fds
         close_fds(fds)  # the child's now: a copy here would hide the pipe's end of file from the agent
-        pidfd = os.pidfd_open(pid)
+        try:
+            pidfd = os.pidfd_open(pid)
+        except OSError as exc:
+            os.kill(pid, signal.SIGKILL)  # unwatched, it must not serve: the launcher starts another
+            os.waitpid(pid, 0)
+            ours.close()
+            theirs.close()
+            self._answer({"kind": "refused", "reason": f"no pidfd of the child: {exc}"})
+            return None
         self.children[pidfd] = _Child(pid, pidfd, ours)
         try:
             send_message(self.control, {"kind": "forked", "pid": pid}, [theirs.fileno(), pidfd])
@@ -171,6 +186,8 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--scene", action="append", default=[])
     args = parser.parse_args(argv)
     control = socket.socket(fileno=args.control_fd)
+    inherited = resource.getrlimit(resource.RLIMIT_NOFILE)
+    raise_fd_limit()  # two descriptors per live child
     failed = preload(BASE_MODULES)
     try:
         server = ZygoteServer(control, args.agent_pid)
@@ -184,9 +201,9 @@ def main(argv: list[str]) -> int:
         return 0
     got = server.serve()
     if got is None:
-        sys.stdout.flush()
-        os._exit(0)  # nothing to tidy up; a fast exit lets the sims' guards act at once
+        os._exit(0)  # nothing to tidy up: the sims watch the agent themselves
     request, fds = got
+    resource.setrlimit(resource.RLIMIT_NOFILE, inherited)  # the sim's own, as a plain start gives it
     adopt_agent_pidfd(args.agent_pid, server.agent_pidfd)
     del server, control
     run_script(become_sim(request, fds))
