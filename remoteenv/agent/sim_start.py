@@ -88,13 +88,21 @@ def _fork(
         cwd = os.getcwd()
     except OSError:  # our working dir is gone: the plain start says what it makes of that
         return None
-    fds = [1, log_fd] + ([] if pipe is None else [pipe.fileno()])
+    try:
+        os.fstat(1)
+        stdout = 1
+    except OSError:  # no stdout here: the sim gets /dev/null (a plain start would get none)
+        stdout = os.open(os.devnull, os.O_WRONLY | os.O_CLOEXEC)
+    fds = [stdout, log_fd] + ([] if pipe is None else [pipe.fileno()])
     try:
         return zygote.fork(ForkRequest(cmd[1:], cwd, pipe is not None), fds, timeout)
     except ZygoteUnavailable as exc:
         if not exc.refused and not zygote.ready:
             zygotes.failed(env)
         return None
+    finally:
+        if stdout != 1:
+            os.close(stdout)
 
 
 __all__ = ["StartedSim", "start_sim"]

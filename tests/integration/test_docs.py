@@ -30,6 +30,7 @@ DOCUMENTS = [
     "docs/protocol.md",
     "docs/troubleshooting.md",
     "docs/latency-twin.md",
+    "docs/startup.md",
 ]
 SKIP = "<!-- skip-test -->"
 _BLOCK = re.compile(r"^(?P<indent>[ \t]*)```python[ \t]*\n(?P<code>.*?)^(?P=indent)```[ \t]*$", re.M | re.S)
