@@ -87,14 +87,14 @@ def test_the_plain_start_when_zygotes_are_off(monkeypatch, closing):
     assert _sim(env).zygote_pid is None and _parent(env.unwrapped.pid) == os.getpid()
 
 
-SHADOWED_SCENE = textwrap.dedent(
+SHADOWING_SCENE = textwrap.dedent(
     """
-    import helper_mod
+    import farama_notifications
     from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
     from remoteenv.sim import run_scene
 
     class Where(CartPoleEnv):
-        helper = helper_mod.WHERE
+        helper = getattr(farama_notifications, "WHERE", "site-packages")
 
     if __name__ == "__main__":
         run_scene(Where)
@@ -102,23 +102,49 @@ SHADOWED_SCENE = textwrap.dedent(
 )
 
 
-def test_a_scene_folder_that_shadows_a_preloaded_module_gets_the_plain_start(
-    zygotes_on, monkeypatch, tmp_path, closing
-):
-    # helper_mod exists on PYTHONPATH (the zygote preloads it for this scene) and in
-    # the scene's folder, which a fresh interpreter searches first.
-    lib, folder = tmp_path / "lib", tmp_path / "scene"
-    lib.mkdir()
-    folder.mkdir()
-    (lib / "helper_mod.py").write_text("WHERE = 'lib'\n")
-    (folder / "helper_mod.py").write_text("WHERE = 'scene folder'\n")
-    (folder / "where_scene.py").write_text(SHADOWED_SCENE)
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(lib), os.environ.get("PYTHONPATH", "")]))
+def test_a_scene_folder_that_shadows_a_preloaded_module_gets_the_plain_start(zygotes_on, tmp_path, closing):
+    # Gymnasium imports farama_notifications (and tolerates anything there), so the
+    # zygote has it; a fresh interpreter imports the scene folder's file instead.
+    (tmp_path / "farama_notifications.py").write_text("notifications = {}\nWHERE = 'scene folder'\n")
+    (tmp_path / "where_scene.py").write_text(SHADOWING_SCENE)
     for _ in range(2):
-        env = OpenAIRemoteEnv(str(folder / "where_scene.py"))
+        env = OpenAIRemoteEnv(str(tmp_path / "where_scene.py"))
         closing(env)
         assert env.get_scene_attr("helper") == "scene folder"
         assert env.launcher.sims[0].zygote_pid is None
+
+
+USER_MODULE_SCENE = textwrap.dedent(
+    """
+    import sys
+    import argv_reader
+    from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
+    from remoteenv.sim import run_scene
+
+    class Seen(CartPoleEnv):
+        argv_at_import = argv_reader.ARGV
+
+    if __name__ == "__main__":
+        run_scene(Seen)
+    """
+)
+
+
+def test_a_scene_imports_its_users_modules_itself(zygotes_on, monkeypatch, tmp_path, closing):
+    # argv_reader (on PYTHONPATH, not installed) reads sys.argv when imported: the
+    # zygote must not import it ahead of the scene, or every sim would see the zygote's.
+    lib, folder = tmp_path / "lib", tmp_path / "scene"
+    lib.mkdir()
+    folder.mkdir()
+    (lib / "argv_reader.py").write_text("import sys\nARGV = list(sys.argv)\n")
+    (folder / "seen_scene.py").write_text(USER_MODULE_SCENE)
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(lib), os.environ.get("PYTHONPATH", "")]))
+    for instance in range(2):
+        env = OpenAIRemoteEnv(str(folder / "seen_scene.py"), seed=instance)
+        closing(env)
+        assert env.launcher.sims[0].zygote_pid is not None
+        argv = env.get_scene_attr("argv_at_import")
+        assert argv[0] == str(folder / "seen_scene.py") and argv[argv.index("--seed") + 1] == str(instance)
 
 
 def test_a_user_scene_from_new_scene_is_forked(zygotes_on, tmp_path, closing):

@@ -12,7 +12,7 @@ import pytest
 
 from remoteenv.agent.zygote import registry
 from remoteenv.agent.zygote.forked import LOST_STATUS, ForkedProcess
-from remoteenv.sim.zygote.preload import preload, scene_imports, shadowing
+from remoteenv.sim.zygote.preload import installed, preload, scene_imports, shadowing
 from remoteenv.sim.zygote.server import ZygoteServer
 from remoteenv.wire.errors import ProtocolError
 from remoteenv.wire.zygote_channel import (
@@ -117,6 +117,14 @@ def test_preload_counts_attributes_as_found_and_missing_modules_as_failed():
     assert preload(["os", "os.path", "os.getcwd", "remoteenv_no_such_module", "json.no_such"]) == [
         "remoteenv_no_such_module"
     ]
+
+
+def test_only_modules_of_installed_packages_count_as_safe_to_preload(tmp_path, monkeypatch):
+    (tmp_path / "remoteenv_user_module.py").write_text("raise SystemExit('never imported')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert installed("json") and installed("sys") and installed("pip")  # stdlib, built in, site-packages
+    assert not installed("remoteenv_user_module")  # the user's own: the sim imports it itself
+    assert not installed("remoteenv_no_such_module")
 
 
 def test_shadowing_names_loaded_modules_a_folder_would_replace(tmp_path):

@@ -2,9 +2,14 @@
 
 Runs in the zygote process. :data:`BASE_MODULES` is what every sim imports
 before its handshake; :func:`scene_imports` reads a scene script's top-level
-imports from its source (without running it). :func:`shadowing` names the
-imported modules that a file in a scene's folder would replace in a fresh
-interpreter (which puts that folder first on ``sys.path``).
+imports from its source (without running it), of which the zygote imports
+only those :func:`installed` says come from the standard library or an
+installed distribution: a module of the user's own (on ``PYTHONPATH``, in
+the scene's folder, an editable install) may read ``sys.argv``, the working
+directory or the clock when it is imported, and must be imported by the sim
+itself. :func:`shadowing` names the imported modules that a file in a
+scene's folder would replace in a fresh interpreter (which puts that folder
+first on ``sys.path``).
 """
 
 from __future__ import annotations
@@ -12,8 +17,11 @@ from __future__ import annotations
 import ast
 import importlib
 import importlib.machinery
+import importlib.util
 import os
+import site
 import sys
+import sysconfig
 
 #: Modules every sim imports before its handshake (a scene's own come on top).
 BASE_MODULES = (
@@ -48,6 +56,33 @@ def scene_imports(path: str) -> list[str]:
             names.append(node.module)
             names += [f"{node.module}.{alias.name}" for alias in node.names if alias.name != "*"]
     return list(dict.fromkeys(names))
+
+
+def _installed_roots() -> tuple[str, ...]:
+    paths = sysconfig.get_paths()
+    roots = [paths[key] for key in ("stdlib", "platstdlib", "purelib", "platlib") if key in paths]
+    roots += site.getsitepackages() if hasattr(site, "getsitepackages") else []
+    roots.append(site.getusersitepackages())
+    return tuple(os.path.join(os.path.realpath(root), "") for root in roots)
+
+
+def installed(name: str) -> bool:
+    """Whether module ``name`` is safe to import ahead of a scene: its top-level
+    package is imported already, built in, or found (without importing it) in
+    the standard library or an installed distribution's site-packages."""
+    top = name.partition(".")[0]
+    if top in sys.modules or top in sys.builtin_module_names:
+        return True
+    try:
+        spec = importlib.util.find_spec(top)
+    except (ImportError, ValueError):
+        return False
+    if spec is None:
+        return False
+    where = spec.origin if spec.has_location and spec.origin else None
+    if where is None and spec.submodule_search_locations:
+        where = next(iter(spec.submodule_search_locations), None)
+    return where is not None and os.path.realpath(where).startswith(_installed_roots())
 
 
 def preload(modules: list[str] | tuple[str, ...]) -> list[str]:

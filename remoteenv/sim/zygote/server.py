@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from remoteenv.sim.limits import raise_fd_limit
 from remoteenv.sim.orphan import adopt_agent_pidfd
 from remoteenv.sim.zygote.child import become_sim, run_script
-from remoteenv.sim.zygote.preload import BASE_MODULES, preload, scene_imports, shadowing
+from remoteenv.sim.zygote.preload import BASE_MODULES, installed, preload, scene_imports, shadowing
 from remoteenv.wire.errors import ProtocolError, short_repr
 from remoteenv.wire.zygote_channel import (
     ForkRequest,
@@ -50,7 +50,10 @@ class ZygoteServer:
 
     def __init__(self, control: socket.socket, agent_pid: int) -> None:
         self.control = control
-        self.agent_pidfd = os.pidfd_open(agent_pid)
+        try:
+            self.agent_pidfd = os.pidfd_open(agent_pid)
+        except OSError:
+            raise RuntimeError(f"the agent (pid {agent_pid}) is gone") from None
         if os.getppid() != agent_pid:  # checked after opening: the pidfd cannot name another process
             os.close(self.agent_pidfd)
             raise RuntimeError(f"the agent (pid {agent_pid}) is gone")
@@ -58,11 +61,12 @@ class ZygoteServer:
         self.scenes: set[str] = set()
 
     def preload_scene(self, scene: str) -> list[str]:
-        """Import what ``scene`` imports at its top (once per scene); return what failed."""
+        """Import what ``scene`` imports at its top from installed packages
+        (once per scene, see :func:`~.preload.installed`); return what failed."""
         if scene in self.scenes:
             return []
         self.scenes.add(scene)
-        return preload(scene_imports(scene))
+        return preload([name for name in scene_imports(scene) if installed(name)])
 
     def serve(self) -> tuple[ForkRequest, list[int]] | None:
         """Serve until the agent is gone (None); in a forked child, return its request and descriptors."""
