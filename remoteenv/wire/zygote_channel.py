@@ -16,8 +16,10 @@ Messages (``kind`` and fields):
 
 - ``ready`` (zygote → launcher, once, after its imports): ``pid`` (int),
   ``failed`` (list of str: modules it could not import).
-- ``fork`` (launcher → zygote): ``argv`` (list of str: the scene script and its
-  arguments, as ``python`` would get them), ``cwd`` (str), ``pipe`` (bool).
+- ``fork`` (launcher → zygote): ``argv`` (a non-empty list of str: the scene
+  script and its arguments, as ``python`` would get them), ``cwd`` (str, an
+  absolute path), ``pipe`` (bool). No string may hold a NUL character (no
+  command line or path can).
   Descriptors: the child's stdout, its stderr, and with ``pipe`` the sim's end
   of the launcher's socketpair (the child appends ``--pipe-fd N`` to ``argv``).
 - ``forked`` (zygote → launcher): ``pid`` (int). Descriptors: the launcher's
@@ -137,7 +139,9 @@ def fork_request(message: dict[str, Any], fds: list[int]) -> ForkRequest:
         or not argv
         or not all(isinstance(a, str) for a in argv)
         or not isinstance(cwd, str)
+        or not os.path.isabs(cwd)
         or not isinstance(pipe, bool)
+        or any("\0" in text for text in (*argv, cwd))
     ):
         raise ProtocolError(f"a malformed fork request: {short_repr(message)}")
     request = ForkRequest(argv, cwd, pipe)

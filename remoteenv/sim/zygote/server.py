@@ -17,6 +17,7 @@ import resource
 import select
 import signal
 import socket
+import sys
 import threading
 from dataclasses import dataclass
 
@@ -119,7 +120,17 @@ class ZygoteServer:
             close_fds(fds)
             self._answer({"kind": "refused", "reason": f"no status channel: {exc}"})
             return None
-        pid = os.fork()
+        for stream in (sys.stdout, sys.stderr):  # nothing buffered here may be written again by the child
+            if stream is not None:
+                stream.flush()
+        try:
+            pid = os.fork()
+        except OSError as exc:  # out of processes or memory: the launcher starts this one the plain way
+            close_fds(fds)
+            ours.close()
+            theirs.close()
+            self._answer({"kind": "refused", "reason": f"fork failed: {exc}"})
+            return None
         if pid == 0:
             ours.close()
             theirs.close()
@@ -142,14 +153,14 @@ class ZygoteServer:
             pass  # the agent is gone: the loop notices
         finally:
             theirs.close()
-        self.preload_scene(os.path.realpath(request.argv[0]))
+        self.preload_scene(script_path(request))
         return None
 
     def _refusal(self, request: ForkRequest) -> str | None:
-        threads = threading.active_count()
+        threads = thread_count()
         if threads > 1:
-            return f"the zygote runs {threads} Python threads (an imported module started them): forking is unsafe"
-        shadowed = shadowing(os.path.dirname(os.path.realpath(request.argv[0])))
+            return f"the zygote runs {threads} threads (an imported module started them): forking is unsafe"
+        shadowed = shadowing(os.path.dirname(script_path(request)))
         if shadowed:
             return f"files in the scene's folder shadow modules the zygote imported: {short_repr(shadowed)}"
         return None
@@ -180,6 +191,21 @@ class ZygoteServer:
             os.close(child.status.detach())
             os.close(child.pidfd)
         self.children.clear()
+
+
+def script_path(request: ForkRequest) -> str:
+    """The real path of the scene script of ``request`` (a relative one is
+    relative to the sim's working directory, not the zygote's)."""
+    return os.path.realpath(os.path.join(request.cwd, request.argv[0]))
+
+
+def thread_count() -> int:
+    """The threads of this process: Python's and those a native library
+    started (which a fork would not copy, whatever locks they held)."""
+    try:
+        return len(os.listdir("/proc/self/task"))
+    except OSError:
+        return threading.active_count()
 
 
 def main(argv: list[str]) -> int:
@@ -214,4 +240,4 @@ def main(argv: list[str]) -> int:
     return 0
 
 
-__all__ = ["ZygoteServer", "main"]
+__all__ = ["ZygoteServer", "main", "script_path", "thread_count"]
