@@ -30,16 +30,16 @@ def prestart(env_id: str | None = None, render_mode: str | None = None) -> bool:
     Returns False, starting nothing, where zygotes are off (``REMOTEENV_ZYGOTE=0``,
     not Linux 5.3+) or with ``render_mode="human"``.
     """
-    importlib.import_module("remoteenv.remote_env")
-    importlib.import_module("remoteenv.vector_env")
     scene = None
     if env_id is not None:
         from remoteenv.registration import find_spec
 
         scene = find_spec(env_id).kwargs.get("scene")
-    if render_mode == "human":
-        return False
-    return registry.prestart(launch_environment(render_mode), scene)
+    # The zygote first: it imports on another core while we import the env classes.
+    started = render_mode != "human" and registry.prestart(launch_environment(render_mode), scene)
+    importlib.import_module("remoteenv.remote_env")
+    importlib.import_module("remoteenv.vector_env")
+    return started
 
 
 __all__ = ["prestart"]

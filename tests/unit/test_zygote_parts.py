@@ -13,7 +13,7 @@ import pytest
 from remoteenv.agent.zygote import registry
 from remoteenv.agent.zygote.forked import LOST_STATUS, ForkedProcess
 from remoteenv.sim.zygote.preload import installed, preload, scene_imports, shadowing
-from remoteenv.sim.zygote.server import ZygoteServer
+from remoteenv.sim.zygote.server import ZygoteServer, script_path, thread_count
 from remoteenv.wire.errors import ProtocolError
 from remoteenv.wire.zygote_channel import (
     MAX_CONTROL_BYTES,
@@ -94,6 +94,9 @@ def test_an_oversized_or_unknown_message_is_refused_and_its_descriptors_closed(p
         ({"kind": "fork", "argv": ["s.py"], "cwd": "/", "pipe": 1}, 2, "malformed"),
         ({"kind": "fork", "argv": ["s.py"], "cwd": "/", "pipe": True}, 2, "expected 3"),
         ({"kind": "ready", "argv": ["s.py"], "cwd": "/", "pipe": False}, 2, "malformed"),
+        ({"kind": "fork", "argv": ["s\0.py"], "cwd": "/", "pipe": False}, 2, "malformed"),
+        ({"kind": "fork", "argv": ["s.py"], "cwd": "/tmp\0", "pipe": False}, 2, "malformed"),
+        ({"kind": "fork", "argv": ["s.py"], "cwd": "tmp", "pipe": False}, 2, "malformed"),
     ],
 )
 def test_a_malformed_fork_request_is_refused(message, fds, match):
@@ -144,19 +147,21 @@ def _server(control: socket.socket) -> ZygoteServer:
     return ZygoteServer(control, os.getppid())  # our parent stands in for the agent
 
 
-def test_the_zygote_refuses_to_fork_beside_another_python_thread(pair, tmp_path):
+def test_the_zygote_refuses_to_fork_beside_another_thread(pair, tmp_path):
     server = _server(pair[0])
     script = tmp_path / "scene.py"
     script.write_text("")
     request = ForkRequest([str(script)], "/", False)
-    alone = threading.active_count() == 1
+    alone = thread_count() == 1  # this test process may run native threads of its own
     if alone:
         assert server._refusal(request) is None
+    before = thread_count()
     stop = threading.Event()
     thread = threading.Thread(target=stop.wait)
     thread.start()
     try:
-        assert "Python threads" in (server._refusal(request) or "")
+        assert thread_count() == before + 1
+        assert "threads (an imported module started them)" in (server._refusal(request) or "")
     finally:
         stop.set()
         thread.join()
@@ -164,6 +169,39 @@ def test_the_zygote_refuses_to_fork_beside_another_python_thread(pair, tmp_path)
     if alone:
         assert "shadow modules the zygote imported: ['json']" in (server._refusal(request) or "")
     os.close(server.agent_pidfd)
+
+
+def test_a_relative_script_is_found_from_the_sims_working_dir_not_the_zygotes(tmp_path, monkeypatch):
+    (tmp_path / "scene").mkdir()
+    (tmp_path / "scene" / "json.py").write_text("")
+    monkeypatch.chdir("/")
+    request = ForkRequest(["scene/s.py", "--x"], str(tmp_path), False)
+    assert script_path(request) == os.path.realpath(tmp_path / "scene" / "s.py")
+    import json  # noqa: F401  (loaded, so shadowable)
+
+    assert shadowing(os.path.dirname(script_path(request))) == ["json"]
+
+
+def test_a_fork_that_fails_is_refused_and_the_descriptors_closed(pair, tmp_path, monkeypatch):
+    server = _server(pair[0])
+    monkeypatch.setattr("remoteenv.sim.zygote.server.thread_count", lambda: 1)
+
+    def no_fork() -> int:
+        raise BlockingIOError(11, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(os, "fork", no_fork)
+    r, w = os.pipe()
+    try:
+        request = ForkRequest([str(tmp_path / "s.py")], "/", False)
+        assert server._fork(request.to_message(), [os.dup(r), os.dup(w)]) is None
+        message, fds = receive_message(pair[1])
+        assert message["kind"] == "refused" and "fork failed" in message["reason"] and fds == []
+        os.close(w)
+        assert os.read(r, 1) == b""  # the zygote's copy of the write end is closed too
+        assert server.children == {}
+    finally:
+        os.close(r)
+        os.close(server.agent_pidfd)
 
 
 def test_the_zygote_will_not_serve_an_agent_that_is_not_its_parent(pair):
@@ -207,3 +245,18 @@ def test_the_switch_turns_zygotes_off(monkeypatch, value, on):
     assert registry.enabled() is on
     if not on:
         assert registry.zygote_for(dict(os.environ)) is None
+
+
+def test_a_relative_pythonpath_makes_the_working_dir_part_of_a_zygotes_key(tmp_path, monkeypatch):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    keys = {}
+    for name, pythonpath in (("absolute", "/opt"), ("empty entry", "/opt:"), ("relative", "lib")):
+        for folder in ("a", "b"):
+            monkeypatch.chdir(tmp_path / folder)
+            keys[name, folder] = registry._key({"PYTHONPATH": pythonpath})
+    assert keys["absolute", "a"] == keys["absolute", "b"]
+    assert keys["empty entry", "a"] != keys["empty entry", "b"]  # an interpreter reads "" as its working dir
+    assert keys["relative", "a"] != keys["relative", "b"]
+    monkeypatch.chdir(tmp_path / "a")
+    assert registry._key({}) == registry._key({})

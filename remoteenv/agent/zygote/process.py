@@ -60,7 +60,10 @@ class Zygote:
         try:
             self.proc = subprocess.Popen(
                 cmd,
+                # Its sims get our stdout with each fork request; the zygote
+                # itself holds none (a pipe reading our stdout ends with us).
                 stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
                 stderr=subprocess.DEVNULL,
                 env=dict(env),
                 pass_fds=(theirs.fileno(),),

@@ -1,7 +1,8 @@
 """This agent process's zygotes: one per sim environment, reused by every launch.
 
 Runs in the agent process. :func:`zygote_for` hands the launcher the zygote
-for sims that run with a given environment (starting it on first use), or
+for sims that run with a given environment (and working directory, where
+``PYTHONPATH`` names a relative path; starting it on first use), or
 None where none can be used: turned off (``REMOTEENV_ZYGOTE=0`` or
 ``Launcher(zygote=False)``), not Linux with pidfds (Linux 5.3+), or a zygote
 for that environment failed before. A zygote lives as long as this process
@@ -89,7 +90,17 @@ def close_all() -> None:
 
 
 def _key(env: Mapping[str, str]) -> tuple[str, tuple[tuple[str, str], ...]]:
-    return sys.executable, tuple(sorted(env.items()))
+    """What a zygote's sims would see differently from a plain start's if it
+    changed: the interpreter, the environment and, where ``PYTHONPATH`` has a
+    relative or empty entry (which an interpreter resolves against its working
+    directory when it starts), our working directory."""
+    items = sorted(env.items())
+    if any(not os.path.isabs(entry) for entry in env.get("PYTHONPATH", "/").split(os.pathsep)):
+        try:
+            items.append(("", os.getcwd()))  # no environment variable has an empty name
+        except OSError:
+            pass
+    return sys.executable, tuple(items)
 
 
 def _close_idle(keep: tuple[str, tuple[tuple[str, str], ...]]) -> None:
