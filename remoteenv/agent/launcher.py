@@ -26,7 +26,7 @@ from remoteenv.agent.connection import SimConnection, connect_sim
 from remoteenv.agent.processes import pid_alive
 from remoteenv.agent.sim_command import launch_environment, scene_command, wait_ready, write_sim_delay_file
 from remoteenv.agent.sim_group import LaunchSpec, SimLayout
-from remoteenv.agent.sim_process import LaunchState, SimProcess, stop_all
+from remoteenv.agent.sim_process import LaunchState, SimProcess, kill_group, stop_all
 from remoteenv.agent.sim_start import start_sim
 from remoteenv.wire.addresses import ipc_address, ipc_path, is_loopback, tcp_loopback_address, zmq_transport
 from remoteenv.wire.keys import KeyPair, generate_keypair, write_public_keys, write_secret_key
@@ -203,10 +203,9 @@ class Launcher:
         """Kill instance ``instance`` if it still runs and launch it afresh."""
         state = self._started()
         old = state.sims[instance]
-        try:  # the whole group, even if the sim exited: its orphan guard waits in it
-            os.killpg(old.proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
+        kill_group(
+            old.proc.pid, signal.SIGKILL
+        )  # the whole group, even if the sim exited: its orphan guard waits in it
         old.proc.wait()
         old.close_pipe()
         new = self._spawn(instance)

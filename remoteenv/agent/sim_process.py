@@ -99,6 +99,19 @@ class SimProcess:
         return text
 
 
+def kill_group(pid: int, sig: int) -> None:
+    """Send ``sig`` to the process group a sim leads (its pid), if it still exists.
+
+    Refuses (``ValueError``) a pid below 2: ``killpg(1)`` is ``kill(-1)``,
+    which signals every process we may signal, and ``killpg(0)`` our own group."""
+    if pid < 2:
+        raise ValueError(f"refusing to signal process group {pid}: not a sim's")
+    try:
+        os.killpg(pid, sig)
+    except (ProcessLookupError, PermissionError):
+        pass
+
+
 @dataclass
 class LaunchState:
     """What a launcher's finalizer needs (its private dir and its sims); holds
@@ -120,28 +133,19 @@ def stop_all(state: LaunchState, grace: float = 2.0) -> None:
     removes the dir if it dies."""
     for sim in state.sims:
         if sim.proc.poll() is None:
-            try:
-                os.killpg(sim.proc.pid, signal.SIGTERM)
-            except (ProcessLookupError, PermissionError):
-                pass
+            kill_group(sim.proc.pid, signal.SIGTERM)
     deadline = time.monotonic() + grace
     for sim in state.sims:
         try:
             sim.proc.wait(timeout=max(0.0, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
-            try:
-                os.killpg(sim.proc.pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
+            kill_group(sim.proc.pid, signal.SIGKILL)
             sim.proc.wait()
     shutil.rmtree(state.workdir, ignore_errors=True)
     for sim in state.sims:
         # Reap the group even if the sim exited by itself but left children (its orphan guard).
-        try:
-            os.killpg(sim.proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
+        kill_group(sim.proc.pid, signal.SIGKILL)
         sim.close_pipe()
 
 
-__all__ = ["LaunchState", "SimProcess", "stop_all"]
+__all__ = ["LaunchState", "SimProcess", "kill_group", "stop_all"]

@@ -267,3 +267,18 @@ def test_prestart_starts_the_zygote_the_next_launch_forks_from(monkeypatch, clos
     env = gym.make(CARTPOLE)
     closing(env)
     assert _sim(env).zygote_pid == zygote.pid
+
+
+def test_a_zygote_that_names_another_pid_is_not_believed(zygotes_on, monkeypatch, closing, wait_gone):
+    # The launcher signals a sim's process group by the pid the zygote names:
+    # it must be the pid of the pidfd that came with it, or the sim starts the plain way.
+    liar = os.path.join(os.path.dirname(os.path.abspath(__file__)), "servers", "lying_zygote.py")
+    monkeypatch.setattr("remoteenv.agent.zygote.process.START_SCRIPT", liar)
+    monkeypatch.setenv("REMOTEENV_TEST_LYING_ZYGOTE", "1")  # a key of its own: no real zygote is reused
+    zygote = registry.zygote_for(launch_environment(None))
+    assert zygote is not None
+    env = gym.make(CARTPOLE)
+    closing(env)
+    env.reset(seed=0)
+    assert _sim(env).zygote_pid is None and _parent(env.unwrapped.pid) == os.getpid()
+    assert not zygote.alive and wait_gone(zygote.pid)

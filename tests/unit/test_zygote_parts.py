@@ -4,14 +4,17 @@ preloads, when it refuses to fork, the forked sim's handle, the switch."""
 from __future__ import annotations
 
 import os
+import signal
 import socket
 import subprocess
 import threading
 
 import pytest
 
+from remoteenv.agent.sim_process import kill_group
 from remoteenv.agent.zygote import registry
 from remoteenv.agent.zygote.forked import LOST_STATUS, ForkedProcess
+from remoteenv.agent.zygote.process import pidfd_pid
 from remoteenv.sim.zygote.preload import installed, preload, scene_imports, shadowing
 from remoteenv.sim.zygote.server import ZygoteServer, script_path, thread_count
 from remoteenv.wire.errors import ProtocolError
@@ -260,3 +263,28 @@ def test_a_relative_pythonpath_makes_the_working_dir_part_of_a_zygotes_key(tmp_p
     assert keys["relative", "a"] != keys["relative", "b"]
     monkeypatch.chdir(tmp_path / "a")
     assert registry._key({}) == registry._key({})
+
+
+def test_a_pidfd_names_its_process():
+    fd = os.pidfd_open(os.getpid())
+    r, w = os.pipe()
+    try:
+        assert pidfd_pid(fd) == os.getpid()
+        assert pidfd_pid(r) is None  # not a pidfd
+    finally:
+        for each in (fd, r, w):
+            os.close(each)
+
+
+@pytest.mark.parametrize("pid", [1, 0, -1])
+def test_no_sim_pid_below_2_is_ever_signalled(pair, monkeypatch, pid):
+    # killpg(1) is kill(-1): every process this user may signal.
+    sent = []
+    monkeypatch.setattr(os, "killpg", lambda *args: sent.append(args))
+    with pytest.raises(ValueError, match="refusing to signal process group"):
+        kill_group(pid, signal.SIGKILL)
+    with pytest.raises(ValueError, match="above 1"):
+        ForkedProcess(pid, pair[1], -1, zygote_pid=999)
+    assert sent == []
+    kill_group(12345, signal.SIGTERM)
+    assert sent == [(12345, signal.SIGTERM)]

@@ -31,6 +31,8 @@ class ForkedProcess:
     """
 
     def __init__(self, pid: int, status: socket.socket, pidfd: int, zygote_pid: int) -> None:
+        if pid < 2:
+            raise ValueError(f"a forked sim's pid must be above 1, got {pid}")
         self.pid = pid
         self.zygote_pid = zygote_pid
         self.returncode: int | None = None

@@ -129,8 +129,12 @@ class Zygote:
             raise ZygoteUnavailable(f"zygote pid {self.pid} refused: {message.get('reason')}", refused=True)
         try:
             pid = int_field(message, "forked", "pid")
+            if pid < 2:  # the launcher signals the group ``pid``: killpg(1) would signal every process
+                raise ProtocolError(f"a forked reply named pid {pid}, which no child can have")
             if len(got) != 2:
                 raise ProtocolError(f"a forked reply came with {len(got)} descriptors, expected 2")
+            if pidfd_pid(got[1]) not in (pid, None):  # we signal that pid's group: it must be the child's
+                raise ProtocolError(f"a forked reply named pid {pid}, but its pidfd is not that process's")
         except ProtocolError as exc:
             close_fds(got)
             self.close()
@@ -179,6 +183,23 @@ class Zygote:
         return got
 
 
+def pidfd_pid(fd: int) -> int | None:
+    """The pid of the process the pidfd ``fd`` refers to (from ``/proc/self/fdinfo``);
+    None if the kernel does not say (or ``fd`` is no pidfd)."""
+    try:
+        with open(f"/proc/self/fdinfo/{fd}", "rb") as f:
+            info = f.read(4096)
+    except OSError:
+        return None
+    for line in info.splitlines():
+        if line.startswith(b"Pid:"):
+            try:
+                return int(line[4:])
+            except ValueError:
+                return None
+    return None
+
+
 def _stop(proc: subprocess.Popen[bytes], control: socket.socket) -> None:
     """Close the channel and reap the zygote (it exits at the end of file; SIGKILL if not within 2 s)."""
     control.close()
@@ -189,4 +210,4 @@ def _stop(proc: subprocess.Popen[bytes], control: socket.socket) -> None:
         proc.wait()
 
 
-__all__ = ["START_SCRIPT", "Zygote", "ZygoteUnavailable"]
+__all__ = ["START_SCRIPT", "Zygote", "ZygoteUnavailable", "pidfd_pid"]
