@@ -155,7 +155,7 @@ def test_the_zygote_refuses_to_fork_beside_another_thread(pair, tmp_path):
     script = tmp_path / "scene.py"
     script.write_text("")
     request = ForkRequest([str(script)], "/", False)
-    alone = thread_count() == 1  # this test process may run native threads of its own
+    alone = thread_count() == 1
     if alone:
         assert server._refusal(request) is None
     before = thread_count()
@@ -164,7 +164,7 @@ def test_the_zygote_refuses_to_fork_beside_another_thread(pair, tmp_path):
     thread.start()
     try:
         assert thread_count() == before + 1
-        assert "threads (an imported module started them)" in (server._refusal(request) or "")
+        assert "Python threads (an imported module started them)" in (server._refusal(request) or "")
     finally:
         stop.set()
         thread.join()

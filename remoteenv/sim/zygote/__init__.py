@@ -13,7 +13,7 @@ script run as ``__main__``. The child builds its own ``MjModel``/``MjData``,
 seeds its own RNGs and binds its own sockets: the zygote holds none of
 these, so sims share nothing but the modules imported before the fork.
 
-The zygote forks only while it is safe to: no thread but its own (Python's or a native library's),
+The zygote forks only while it is safe to: no Python thread but its own,
 and no module it imported shadowed by a file in the scene's folder (which a
 fresh interpreter would import instead); otherwise it refuses and the
 launcher starts the sim the plain way. It is the sims' parent, but they

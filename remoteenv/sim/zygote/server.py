@@ -159,7 +159,7 @@ class ZygoteServer:
     def _refusal(self, request: ForkRequest) -> str | None:
         threads = thread_count()
         if threads > 1:
-            return f"the zygote runs {threads} threads (an imported module started them): forking is unsafe"
+            return f"the zygote runs {threads} Python threads (an imported module started them): forking is unsafe"
         shadowed = shadowing(os.path.dirname(script_path(request)))
         if shadowed:
             return f"files in the scene's folder shadow modules the zygote imported: {short_repr(shadowed)}"
@@ -200,12 +200,10 @@ def script_path(request: ForkRequest) -> str:
 
 
 def thread_count() -> int:
-    """The threads of this process: Python's and those a native library
-    started (which a fork would not copy, whatever locks they held)."""
-    try:
-        return len(os.listdir("/proc/self/task"))
-    except OSError:
-        return threading.active_count()
+    """The Python threads of this process. Native thread pools are not
+    counted: numpy's BLAS starts one at import, and the common ones stop and
+    restart their threads around a fork themselves (``pthread_atfork``)."""
+    return threading.active_count()
 
 
 def main(argv: list[str]) -> int:
