@@ -1,7 +1,7 @@
 """remoteenv: a MuJoCo simulation in its own process, driven as a Gymnasium env.
 
 Agent-side API: :class:`OpenAIRemoteEnv`, :class:`RemoteVectorEnv`, :class:`Launcher`,
-:class:`RemoteEnvError` and its subclasses. Sim-side API lives in
+:class:`RemoteEnvError` and its subclasses, :func:`prestart`. Sim-side API lives in
 :mod:`remoteenv.sim`; the wire format in :mod:`remoteenv.wire`. Importing this
 package registers the shipped scenes (``remoteenv/CartPole-v0``,
 ``remoteenv/Reacher-v0``, ``remoteenv/Hexapod-v0``) and nothing else: the agent-side classes are loaded
@@ -46,6 +46,7 @@ _LAZY = {
     "InvalidActionError": "remoteenv.agent.errors",
     "StateError": "remoteenv.agent.errors",
     "SimDiedError": "remoteenv.agent.errors",
+    "prestart": "remoteenv.startup",
 }
 #: Submodules reachable as attributes (``remoteenv.protocol``, ...), loaded on first access.
 _SUBMODULES = frozenset(
@@ -82,6 +83,7 @@ if TYPE_CHECKING:
     from remoteenv.agent.launcher import Launcher
     from remoteenv.agent.sim_group import SimGroup
     from remoteenv.remote_env import OpenAIRemoteEnv
+    from remoteenv.startup import prestart
     from remoteenv.vector_env import RemoteVectorEnv
 
 
@@ -124,6 +126,7 @@ __all__ = [
     "SimGroup",
     "StateError",
     "UnsendableValueError",
+    "prestart",
     "scene_path",
 ]
 

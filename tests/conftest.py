@@ -23,25 +23,35 @@ def wait_gone(pid: int, timeout: float = 5.0) -> bool:
     return not pid_alive(pid)
 
 
-def _sim_children() -> set[int]:
-    """Pids of running scene processes whose parent is this test process."""
-    me = os.getpid()
-    found = set()
+def _processes() -> dict[int, tuple[int, bytes]]:
+    """``{pid: (parent pid, command line)}`` of the live processes (no zombies)."""
+    found = {}
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
             continue
         try:
             with open(f"/proc/{entry}/stat") as f:
                 rest = f.read().rsplit(")", 1)[1].split()
-            if int(rest[1]) != me or rest[0] == "Z":
+            if rest[0] == "Z":
                 continue
             with open(f"/proc/{entry}/cmdline", "rb") as f:
-                cmd = f.read()
+                found[int(entry)] = (int(rest[1]), f.read())
         except (FileNotFoundError, ProcessLookupError, IndexError):
             continue
-        if b"--ready-file" in cmd:
-            found.add(int(entry))
     return found
+
+
+def _sim_children() -> set[int]:
+    """Pids of running scene processes this test process started: its children
+    that run a scene, and the children of its zygotes (which fork sims)."""
+    me = os.getpid()
+    processes = _processes()
+    zygotes = {pid for pid, (parent, cmd) in processes.items() if parent == me and b"sim/zygote/start.py" in cmd}
+    return {
+        pid
+        for pid, (parent, cmd) in processes.items()
+        if (parent == me and b"--ready-file" in cmd) or parent in zygotes
+    }
 
 
 @pytest.fixture(autouse=True)

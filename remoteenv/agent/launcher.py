@@ -3,11 +3,13 @@
 Runs in the agent process; the local :class:`~remoteenv.agent.sim_group.SimGroup`.
 Each sim is ``python <scene script> --address ...`` in a session (process group) of its own, bound to a collision-free address:
 an ipc socket in a private temp dir, or tcp on 127.0.0.1 with a port the OS
-assigns. The launcher waits until each sim reports its bound endpoint (never a
+assigns; it is forked by a zygote that has imported what sims need where one
+can be used (:mod:`remoteenv.agent.sim_start`), so that it serves in
+milliseconds. The launcher waits until each sim reports its bound endpoint (never a
 fixed sleep), and stops them on :meth:`close`, on interpreter exit or when it
 is garbage collected: SIGTERM to the process group, then SIGKILL, then the
-private dir (socket files, logs, delay files) is removed. Each sim also watches its parent
-and exits if the agent dies.
+private dir (socket files, logs, delay files) is removed. Each sim also watches this
+process (its parent, or its zygote's) and exits if the agent dies.
 """
 
 from __future__ import annotations
@@ -15,8 +17,6 @@ from __future__ import annotations
 import dataclasses
 import os
 import signal
-import socket
-import subprocess
 import tempfile
 import weakref
 from collections.abc import Mapping, Sequence
@@ -24,9 +24,10 @@ from typing import Any
 
 from remoteenv.agent.connection import SimConnection, connect_sim
 from remoteenv.agent.processes import pid_alive
-from remoteenv.agent.sim_command import scene_command, wait_ready, write_sim_delay_file
+from remoteenv.agent.sim_command import launch_environment, scene_command, wait_ready, write_sim_delay_file
 from remoteenv.agent.sim_group import LaunchSpec, SimLayout
-from remoteenv.agent.sim_process import LaunchState, SimProcess, stop_all
+from remoteenv.agent.sim_process import LaunchState, SimProcess, kill_group, stop_all
+from remoteenv.agent.sim_start import start_sim
 from remoteenv.wire.addresses import ipc_address, ipc_path, is_loopback, tcp_loopback_address, zmq_transport
 from remoteenv.wire.keys import KeyPair, generate_keypair, write_public_keys, write_secret_key
 
@@ -72,6 +73,12 @@ class Launcher:
             launcher holds the one client key pair the sims admit
             (:attr:`curve_client_keypair`). Default: on iff ``bind_host`` is
             beyond loopback.
+        zygote: fork each sim from this process's zygote for its environment
+            (:mod:`remoteenv.agent.zygote`: a process that has imported what
+            sims need, so a sim serves in milliseconds instead of most of a
+            second). Where none can be used (``REMOTEENV_ZYGOTE=0``, not Linux
+            5.3+, ``render_mode="human"``, a refusal) the sim is started the
+            plain way, ``python <scene script> ...``. False: always the plain way.
     """
 
     #: Closing the launcher stops its sims; an env may relaunch them.
@@ -94,6 +101,7 @@ class Launcher:
         extra_args: Sequence[str] = (),
         bind_host: str | None = None,
         curve: bool | None = None,
+        zygote: bool = True,
     ) -> None:
         launch = {
             "num_instances": num_instances,
@@ -133,6 +141,8 @@ class Launcher:
         #: Whether each sim gets a local pipe to this process.
         self.local_pipe = transport == "pipe"
         self.extra_args = list(extra_args)
+        #: Whether sims are forked from a zygote where one can be used.
+        self.zygote = bool(zygote)
         self.bind_address: str | None = None
         if bind_host is not None:
             self.transport = "tcp"
@@ -193,10 +203,9 @@ class Launcher:
         """Kill instance ``instance`` if it still runs and launch it afresh."""
         state = self._started()
         old = state.sims[instance]
-        try:  # the whole group, even if the sim exited: its orphan guard waits in it
-            os.killpg(old.proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
+        kill_group(
+            old.proc.pid, signal.SIGKILL
+        )  # the whole group, even if the sim exited: its orphan guard waits in it
         old.proc.wait()
         old.close_pipe()
         new = self._spawn(instance)
@@ -310,39 +319,24 @@ class Launcher:
             allow_remote=self.remote,
             extra_args=self.extra_args,
         )
-        env = dict(os.environ)
-        if spec.render_mode != "human":
-            env.setdefault("MUJOCO_GL", "egl")
-        ours = theirs = None
-        if self.local_pipe:
-            ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
-            cmd += ["--pipe-fd", str(theirs.fileno())]
-        try:
-            with open(log_path, "ab") as log:
-                log_offset = log.tell()
-                proc = subprocess.Popen(
-                    cmd,
-                    stdin=subprocess.DEVNULL,
-                    stderr=log,
-                    env=env,
-                    start_new_session=True,
-                    pass_fds=() if theirs is None else (theirs.fileno(),),
-                )
-        except BaseException:
-            if ours is not None:
-                ours.close()
-            raise
-        finally:
-            if theirs is not None:
-                theirs.close()
+        started = start_sim(
+            cmd,
+            env=launch_environment(spec.render_mode),
+            log_path=log_path,
+            local_pipe=self.local_pipe,
+            use_zygote=self.zygote and spec.render_mode != "human",
+            scene=spec.scene,
+            timeout=spec.startup_timeout,
+        )
         return SimProcess(
             instance=instance,
-            proc=proc,
+            proc=started.proc,
             log_path=log_path,
             ready_file=ready_file,
             curve_server_key=server_key,
-            log_offset=log_offset,
-            pipe=ours,
+            log_offset=started.log_offset,
+            pipe=started.pipe,
+            zygote_pid=started.zygote_pid,
         )
 
     def _wait_ready(self, sim: SimProcess) -> None:

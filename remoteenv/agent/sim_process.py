@@ -12,8 +12,24 @@ import socket
 import subprocess
 import time
 from dataclasses import dataclass, field
+from typing import Protocol
 
 _STDERR_TAIL_LINES = 20
+
+
+class ProcessHandle(Protocol):
+    """What the launcher uses of a started process: a :class:`subprocess.Popen`
+    (started the plain way) or a :class:`remoteenv.agent.zygote.ForkedProcess`."""
+
+    @property
+    def pid(self) -> int: ...
+
+    @property
+    def returncode(self) -> int | None: ...
+
+    def poll(self) -> int | None: ...
+
+    def wait(self, timeout: float | None = None) -> int: ...
 
 
 @dataclass
@@ -21,7 +37,7 @@ class SimProcess:
     """One launched sim process."""
 
     instance: int
-    proc: subprocess.Popen
+    proc: ProcessHandle
     log_path: str
     ready_file: str
     endpoint: str | None = None
@@ -32,6 +48,8 @@ class SimProcess:
     log_offset: int = 0
     #: The launcher's end of the local pipe (see :mod:`remoteenv.protocol`), or None.
     pipe: socket.socket | None = None
+    #: The zygote that forked this process (its parent), or None if it was started the plain way.
+    zygote_pid: int | None = None
 
     def close_pipe(self) -> None:
         if self.pipe is not None:
@@ -71,11 +89,27 @@ class SimProcess:
                 how = f"killed by signal {-code}"
         else:
             how = f"exited with code {code}"
+        note = getattr(self.proc, "exit_note", None)
+        if note:
+            how += f" ({note})"
         tail = self.stderr_tail()
         text = f"pid {self.proc.pid} {how}"
         if tail:
             text += f"; last lines of its stderr:\n{tail}"
         return text
+
+
+def kill_group(pid: int, sig: int) -> None:
+    """Send ``sig`` to the process group a sim leads (its pid), if it still exists.
+
+    Refuses (``ValueError``) a pid below 2: ``killpg(1)`` is ``kill(-1)``,
+    which signals every process we may signal, and ``killpg(0)`` our own group."""
+    if pid < 2:
+        raise ValueError(f"refusing to signal process group {pid}: not a sim's")
+    try:
+        os.killpg(pid, sig)
+    except (ProcessLookupError, PermissionError):
+        pass
 
 
 @dataclass
@@ -99,28 +133,19 @@ def stop_all(state: LaunchState, grace: float = 2.0) -> None:
     removes the dir if it dies."""
     for sim in state.sims:
         if sim.proc.poll() is None:
-            try:
-                os.killpg(sim.proc.pid, signal.SIGTERM)
-            except (ProcessLookupError, PermissionError):
-                pass
+            kill_group(sim.proc.pid, signal.SIGTERM)
     deadline = time.monotonic() + grace
     for sim in state.sims:
         try:
             sim.proc.wait(timeout=max(0.0, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
-            try:
-                os.killpg(sim.proc.pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
+            kill_group(sim.proc.pid, signal.SIGKILL)
             sim.proc.wait()
     shutil.rmtree(state.workdir, ignore_errors=True)
     for sim in state.sims:
         # Reap the group even if the sim exited by itself but left children (its orphan guard).
-        try:
-            os.killpg(sim.proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
+        kill_group(sim.proc.pid, signal.SIGKILL)
         sim.close_pipe()
 
 
-__all__ = ["LaunchState", "SimProcess", "stop_all"]
+__all__ = ["LaunchState", "SimProcess", "kill_group", "stop_all"]

@@ -15,6 +15,7 @@ BENCHMARKS = {
     "pacing": "--real-time",
     "soak": "--soak",
     "sb3_ppo": "--sb3",
+    "startup": "--startup",
 }
 
 

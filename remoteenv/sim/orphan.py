@@ -1,6 +1,8 @@
 """What a sim process does when the agent that launched it dies.
 
-Runs in the sim process. First line: the orphan guard
+Runs in the sim process. The agent is the sim's parent, or for a sim a
+zygote forked the zygote's parent, watched through the zygote's pidfd of it
+(:func:`adopt_agent_pidfd`). First line: the orphan guard
 (:mod:`remoteenv.sim.orphan_guard`, :func:`start_guard`), a tiny separate
 process that ends the sim within a second of the agent's death whatever the
 sim is doing (SIGTERM, then SIGKILL after 0.5 s) and removes its files.
@@ -18,6 +20,7 @@ launcher's private dir, and the last one to leave removes the dir itself
 from __future__ import annotations
 
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -32,8 +35,26 @@ CHECK_INTERVAL_S = 0.25
 GRACE_S = 1.0
 
 
+#: ``{agent pid: pidfd}`` of an agent that is not our parent: a sim forked by a
+#: zygote (:mod:`remoteenv.sim.zygote`) watches the launching agent through the
+#: zygote's pidfd of it, which it inherits.
+_agent_pidfds: dict[int, int] = {}
+
+
+def adopt_agent_pidfd(agent_pid: int, pidfd: int) -> None:
+    """Watch ``agent_pid`` through ``pidfd`` (opened while it was known to be
+    alive) instead of as our parent: it launched us through a zygote."""
+    _agent_pidfds[agent_pid] = pidfd
+
+
 def parent_alive(parent_pid: int) -> bool:
-    """True while ``parent_pid`` is still our parent (we are reparented when it dies)."""
+    """True while the agent ``parent_pid`` lives: while it is still our parent
+    (we are reparented when it dies), or for a forked sim while its pidfd says so."""
+    pidfd = _agent_pidfds.get(parent_pid)
+    if pidfd is not None:
+        poller = select.poll()
+        poller.register(pidfd, select.POLLIN)
+        return not poller.poll(0)
     return os.getppid() == parent_pid
 
 
@@ -73,6 +94,7 @@ def start_guard(parent_pid: int, private_dir: str | None, instance: int) -> Guar
     if not sys.platform.startswith("linux") or not hasattr(os, "pidfd_open"):
         return None
     read_end, write_end = os.pipe()  # both close-on-exec: only the guard gets the read end
+    agent_fd = _agent_pidfds.get(parent_pid)
     # The launcher's SIGTERM to the sim's process group is not for the guard:
     # blocked while it is started, the signal stays blocked in the guard across
     # exec, so none can end it before its first line (the sim's own SIGTERM
@@ -89,10 +111,12 @@ def start_guard(parent_pid: int, private_dir: str | None, instance: int) -> Guar
                 str(os.getpid()),
                 private_dir or "",
                 str(instance),
+                *([] if agent_fd is None else [str(agent_fd)]),
             ],
             stdin=read_end,
             stdout=subprocess.DEVNULL,
             close_fds=True,
+            pass_fds=() if agent_fd is None else (agent_fd,),
         )
     except OSError:
         os.close(write_end)

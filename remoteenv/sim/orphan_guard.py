@@ -1,11 +1,13 @@
 """The orphan guard: a tiny process that ends a sim within a second of its agent's death.
 
 Started by the sim (:func:`remoteenv.sim.orphan.start_guard`) as a script
-(``python -I -S orphan_guard.py AGENT_PID SIM_PID PRIVATE_DIR INSTANCE``) that
+(``python -I -S orphan_guard.py AGENT_PID SIM_PID PRIVATE_DIR INSTANCE [AGENT_PIDFD]``) that
 imports only the standard library, with its stdin the read end of a pipe
 whose write end only the sim holds: end of file there means the sim is gone.
 It watches the agent through a pidfd (Linux 5.3+), which fires when the agent
-*process* exits, whichever of its threads launched the sim.
+*process* exits, whichever of its threads launched the sim: its own, or for a
+sim that a zygote forked (whose parent is the zygote, not the agent) the
+sim's, inherited as ``AGENT_PIDFD``.
 
 When the agent dies, the guard sends the sim SIGTERM (the sim shuts down and
 removes its files itself: the usual case), waits :data:`GRACE_S`, then sends
@@ -64,16 +66,19 @@ def _readable(fd: int, timeout_s: float | None) -> bool:
     return bool(poller.poll(None if timeout_s is None else timeout_s * 1000))
 
 
-def guard(agent_pid: int, sim_pid: int, private_dir: str, instance: int, sim_gone_fd: int = 0) -> int:
+def guard(
+    agent_pid: int, sim_pid: int, private_dir: str, instance: int, sim_gone_fd: int = 0, agent_fd: int = -1
+) -> int:
     """Watch ``agent_pid`` and the sim ``sim_pid`` (our parent; ``sim_gone_fd``
-    reaches end of file when it exits). Returns the exit status."""
+    reaches end of file when it exits). ``agent_fd`` is the sim's pidfd of the
+    agent when the agent is not the sim's parent (else -1). Returns the exit status."""
     if not hasattr(os, "pidfd_open"):
         return 0  # no pidfds here: the sim's own watch is the fallback
-    agent = _pidfd(agent_pid)
+    agent = agent_fd if agent_fd >= 0 else _pidfd(agent_pid)
     # Reparented already: the sim ended before we started (its launcher may
     # have stopped it at once); its pid may be another process's now.
     sim = _pidfd(sim_pid) if os.getppid() == sim_pid else -1
-    if agent >= 0 and sim >= 0 and not _sim_parent_is(sim_pid, agent_pid):
+    if agent_fd < 0 and agent >= 0 and sim >= 0 and not _sim_parent_is(sim_pid, agent_pid):
         os.close(agent)
         agent = -1  # the agent died before we could watch it
     if sim < 0 or (agent >= 0 and not _agent_ends_first(agent, sim_gone_fd)):
@@ -128,12 +133,13 @@ def _sim_parent_is(sim_pid: int, agent_pid: int) -> bool:
 
 def main(argv: list[str]) -> int:
     agent_pid, sim_pid, private_dir, instance = int(argv[0]), int(argv[1]), argv[2], int(argv[3])
+    agent_fd = int(argv[4]) if len(argv) > 4 else -1
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C in a terminal is for the agent
     # The launcher's SIGTERM to the sim's process group is for the sim: this
     # guard lives until the launcher has removed the dir (then SIGKILL). The
     # sim starts it with SIGTERM blocked, so this holds from its first line.
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    return guard(agent_pid, sim_pid, private_dir, instance)
+    return guard(agent_pid, sim_pid, private_dir, instance, agent_fd=agent_fd)
 
 
 if __name__ == "__main__":

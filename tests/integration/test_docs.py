@@ -32,6 +32,7 @@ DOCUMENTS = [
     "docs/latency-twin.md",
     "docs/latency.md",
     "docs/delays.md",
+    "docs/startup.md",
 ]
 SKIP = "<!-- skip-test -->"
 _BLOCK = re.compile(r"^(?P<indent>[ \t]*)```python[ \t]*\n(?P<code>.*?)^(?P=indent)```[ \t]*$", re.M | re.S)

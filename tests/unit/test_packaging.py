@@ -25,6 +25,17 @@ def test_package_data_lists_py_typed_templates_and_models() -> None:
         assert data[f"remoteenv.scenes.{scene}"] == ["*.xml"]
 
 
+def test_every_package_of_the_tree_is_listed() -> None:
+    with open(os.path.join(ROOT, "pyproject.toml"), "rb") as f:
+        listed = set(tomllib.load(f)["tool"]["setuptools"]["packages"])
+    found = {
+        os.path.relpath(folder, ROOT).replace(os.sep, ".")
+        for folder, _, files in os.walk(os.path.join(ROOT, "remoteenv"))
+        if "__init__.py" in files and "__pycache__" not in folder
+    }
+    assert found <= listed, f"packages missing from pyproject.toml: {sorted(found - listed)}"
+
+
 def test_cartpole_registration_carries_cartpole_v1_threshold() -> None:
     import gymnasium as gym
 
