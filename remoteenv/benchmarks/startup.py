@@ -47,6 +47,7 @@ AGENT = textwrap.dedent(
     import json, os, signal, sys, time
     import gymnasium as gym
     import remoteenv
+    from remoteenv.agent.sim_process import kill_group
     from remoteenv.benchmarks.anchors import cpu_seconds
 
     env_id, later, vector = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
@@ -68,7 +69,7 @@ AGENT = textwrap.dedent(
         timed("later make", make_and_reset).close()
     env = make_and_reset(restart_on_failure=True)
     pid = env.unwrapped.pid
-    os.killpg(pid, signal.SIGKILL)
+    kill_group(pid, signal.SIGKILL)
     while env.unwrapped.launcher.sims[0].death() is None:
         time.sleep(0.001)
 
