@@ -41,6 +41,8 @@ relies on the processor keeping stores in order and loads in order (total
 store order: x86-64). Elsewhere :data:`SILENT` is False: every request and
 reply then also goes as its frame, and the reader waits for the frame (the
 kernel's socket locks order the region's accesses, as for the plain region).
+A loud side never sets its ``*_WATCHING`` word, so a silent peer always
+sends it frames too: the two ends need not agree on :data:`SILENT`.
 """
 
 from __future__ import annotations
@@ -72,12 +74,17 @@ def fence() -> None:
 
 
 class Doorbell:
-    """One side's view of a region's header words (``header``: 16 ``<i8``)."""
+    """One side's view of a region's header words (``header``: 16 ``<i8``).
 
-    def __init__(self, header: np.ndarray, silent: bool = SILENT) -> None:
+    ``silent`` (default :data:`SILENT`, read when the doorbell is made): whether
+    the sequence words may be read without waiting for frames."""
+
+    def __init__(self, header: np.ndarray, silent: bool | None = None) -> None:
         self._words = memoryview(header).cast("B").cast("q")  # type: ignore[arg-type]
         #: Whether the sequence words may be read without waiting for frames.
-        self.silent = silent
+        self.silent = SILENT if silent is None else bool(silent)
+        #: The value this side's ``*_WATCHING`` word takes while it is awake (0 when loud).
+        self._watching = 1 if self.silent else 0
 
     def word(self, index: int) -> int:
         return int(self._words[index])
@@ -90,7 +97,7 @@ class Doorbell:
         words = self._words
         words[REQ_N] = n
         words[REQ_NAMED] = 1 if named else 0
-        words[AGENT_WATCHING] = 1
+        words[AGENT_WATCHING] = self._watching
         fence()
         words[REQ_SEQ] = seq
         if not self.silent:
@@ -112,12 +119,12 @@ class Doorbell:
         words[AGENT_WATCHING] = 0
         fence()
         if self.answered(seq):
-            words[AGENT_WATCHING] = 1
+            words[AGENT_WATCHING] = self._watching
             return False
         return True
 
     def agent_wakes(self) -> None:
-        self._words[AGENT_WATCHING] = 1
+        self._words[AGENT_WATCHING] = self._watching
 
     # ------------------------------------------------------------ sim side
 
@@ -126,7 +133,7 @@ class Doorbell:
         if not self.silent:
             return 0
         seq = self._words[REQ_SEQ]
-        if seq != served:
+        if seq > served:  # seq numbers increase: an older one is not a request
             fence()
             return int(seq)
         return 0
@@ -146,18 +153,18 @@ class Doorbell:
         fence()
         seq = self.posted(served)
         if seq:
-            words[SIM_WATCHING] = 1
+            words[SIM_WATCHING] = self._watching
         return seq
 
     def sim_watches(self) -> None:
         """The sim is awake and will look before it blocks."""
-        self._words[SIM_WATCHING] = 1
+        self._words[SIM_WATCHING] = self._watching
 
     def reply(self, seq: int, info_version: int) -> bool:
         """Publish the region's reply to ``seq`` (its blocks written); True if the
         agent must be woken (it sleeps, or the doorbell is not silent)."""
         words = self._words
-        words[SIM_WATCHING] = 1
+        words[SIM_WATCHING] = self._watching
         words[REP_INFO] = info_version
         fence()
         words[REP_SEQ] = seq
