@@ -228,7 +228,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
             real_time=self.real_time,
             same_step=self.autoreset_mode == AutoresetMode.SAME_STEP,
         )
-        self._async = AsyncWorlds(self._session, self.slices, self.num_envs)
+        self._async = AsyncWorlds(self._session, self.slices, self.num_envs, self._requests.lanes)
         self._pending_step: tuple[np.ndarray, Any, dict[int, int], float] | None = None
         self.latency_stats = LatencyStats()
         self._pauser = Pauser(self._session)

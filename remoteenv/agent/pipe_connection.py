@@ -19,6 +19,7 @@ from typing import Any
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.sim_connection import LIVENESS_CHECK_S, SimConnection
 from remoteenv.wire import protocol
+from remoteenv.wire.doorbell import Doorbell
 from remoteenv.wire.hot_wait import HotWait
 
 #: How long (seconds) to wait for a sim that closed its pipe to be reaped, so
@@ -59,6 +60,13 @@ class PipeConnection(SimConnection):
         self.pipe = pipe
         self._decoder = protocol.StreamDecoder()
         self._frames: deque[bytes] = deque()
+        #: The request posted in the shared region whose reply is awaited there, and its doorbell.
+        self._watch: tuple[int, Doorbell] | None = None
+        #: The request a wait is for (a region reply is taken only for its own request).
+        self._awaiting = 0
+        #: Replies to later requests that came while the awaited one's reply was due in
+        #: the region (at most one per request in flight).
+        self._held: dict[int, dict[str, Any]] = {}
         self._eof = False
         self._hot = HotWait(AGENT_SPIN_S)
         pipe.setblocking(True)
@@ -99,21 +107,123 @@ class PipeConnection(SimConnection):
                 f"sim instance {self.instance} broke the pipe framing: {exc}", kind="protocol", instance=self.instance
             ) from None
 
-    def _recv_frame(self) -> bytes | None:
+    # ------------------------------------------------------------ the shared region's fast lane
+
+    def post(self, doorbell: Doorbell, n: int, named: bool) -> int:
+        """Post a ``step_batch`` whose ops, worlds and actions are in the shared
+        region (written by the caller; see :mod:`remoteenv.wire.doorbell`);
+        its frame goes on the pipe only when the sim sleeps. Returns its ``seq``:
+        its reply comes as a frame or in the region (a reply map with
+        ``"region": true`` either way)."""
+        if self.closed:
+            raise RemoteEnvError(
+                f"connection to sim instance {self.instance} is closed", kind="state", instance=self.instance
+            )
+        self._seq += 1
+        seq = self._seq
+        self._unanswered[seq] = None
+        self._watch = (seq, doorbell)
+        if doorbell.post(seq, n, named):
+            self._send_frame(protocol.pack({"seq": seq, "cmd": "step_batch", "region": True}))
+        return seq
+
+    def _region_reply(self) -> dict[str, Any] | None:
+        """The awaited reply, if it is the region's and the region holds it
+        (then the watch ends). Frames for requests sent later may be buffered
+        already: they wait for their turn (replies come in request order)."""
+        watch = self._watch
+        if watch is None or watch[0] != self._awaiting or not watch[1].answered(watch[0]):
+            return None
+        self._watch = None
+        return {"seq": watch[0], "ok": True, "region": True}
+
+    def will_block(self) -> bool:
+        """The caller is about to block on :attr:`pollable`: make the sim send a
+        frame when it answers the region's request. False if the region holds
+        the reply already (then do not block); call :meth:`woke` after the block."""
+        watch = self._watch
+        return watch is None or watch[1].agent_sleeps(watch[0])
+
+    def woke(self) -> None:
+        """After a block that :meth:`will_block` prepared: back to watching the region."""
+        if self._watch is not None:
+            self._watch[1].agent_wakes()
+
+    def receive(self, seq: int, timeout: float | None = ..., what: str = "reply") -> dict[str, Any]:  # type: ignore[assignment]
+        self._awaiting = seq
+        return super().receive(seq, timeout, what)
+
+    def try_receive(self, seq: int, what: str = "reply", wait: bool = False) -> dict[str, Any] | None:
+        self._awaiting = seq
+        return super().try_receive(seq, what, wait)
+
+    def _answers(self, reply: dict[str, Any], seq: int) -> bool:
+        got = reply.get("seq")
+        if type(got) is int and got > seq and got in self._unanswered:
+            # A later request's reply read before the awaited one was seen in the region
+            # (the sim answered in order): kept for its own wait.
+            self._held[got] = reply
+            return False
+        return super()._answers(reply, seq)
+
+    def _take_held(self) -> dict[str, Any] | None:
+        held = self._held
+        if not held:
+            return None
+        reply = held.pop(self._awaiting, None)
+        for seq in [s for s in held if s < self._awaiting]:  # their requests were abandoned
+            del held[seq]
+        if reply is not None and self._watch is not None and self._watch[0] == self._awaiting:
+            self._watch = None  # answered on the pipe
+        return reply
+
+    def _decode(self, frame: Any, what: str) -> dict[str, Any]:
+        if isinstance(frame, dict):  # a reply found in the region, or held
+            return frame
+        reply = super()._decode(frame, what)
+        if self._watch is not None and reply.get("seq") == self._watch[0]:
+            self._watch = None
+        return reply
+
+    # ------------------------------------------------------------ frames
+
+    def _recv_frame(self) -> Any:
+        region = self._region_reply() or self._take_held()
+        if region is not None:
+            return region
         if not self._frames and self._hot.worth_it():
             start = time.perf_counter()
             self._read(False)
             while not self._frames and self._hot.spin():
+                region = self._region_reply()
+                if region is not None:
+                    self._hot.waited(time.perf_counter() - start)
+                    return region
                 self._read(False)
             if self._frames:
                 self._hot.waited(time.perf_counter() - start)
                 return self._frames.popleft()
             self._hot.waited(float("inf"))
         if not self._frames:
-            self._read(True)
+            watch = self._watch if self._watch is not None and self._watch[0] == self._awaiting else None
+            if watch is not None and not watch[1].agent_sleeps(watch[0]):
+                region = self._region_reply()  # the reply came just now
+                if region is not None:
+                    return region
+            else:
+                # Blocks until a frame comes (the sim wakes a sleeping agent with one), at
+                # most LIVENESS_CHECK_S (SO_RCVTIMEO).
+                try:
+                    self._read(True)
+                finally:
+                    if watch is not None:
+                        watch[1].agent_wakes()
         return self._frames.popleft() if self._frames else None
 
-    def _recv_frame_nowait(self) -> bytes | None:
+    def _recv_frame_nowait(self) -> Any:
+        region = self._region_reply() or self._take_held()
+        if region is not None:
+            return region
         if not self._frames:
             self._read(False)
         return self._frames.popleft() if self._frames else None

@@ -17,6 +17,11 @@ and shape comparison, which also hands the later assembly arrays in place of
 lists (a reply's ``reward``, ``terminated``, ``truncated`` and info columns
 are replaced by the checked arrays). Per-world Python runs only where the
 reply is per-world already (lists of observations, info maps, ``final``).
+A reply in a shared region (the fast lane) holds numbers of the dtypes and
+shapes its layout fixed: the region's when it was mapped, the info columns'
+when the sim announced them (:meth:`ReplyChecks.info_layout`); each such
+reply is taken only for the request it names and the layout it was written
+in (:mod:`remoteenv.agent.shared_lane`).
 """
 
 from __future__ import annotations
@@ -35,6 +40,11 @@ _ARRAY_SPACES = (spaces.Box, spaces.MultiDiscrete, spaces.MultiBinary)
 _NUMBER_KINDS = frozenset("iuf")
 #: What a list of bools may hold (0 and 1 hash and compare as False and True).
 _BOOL_VALUES = frozenset({False, True})
+#: dtypes an info column in a shared region may have, and those of python scalars.
+_COLUMN_DTYPES = frozenset(["|b1", "|i1", "|u1", "<i2", "<u2", "<i4", "<u4", "<i8", "<u8", "<f2", "<f4", "<f8"])
+_PYTHON_DTYPES = frozenset(["|b1", "<i8", "<f8"])
+#: Longest info key of a shared region's column (characters).
+_MAX_KEY_CHARS = 256
 
 
 def _describe(value: Any) -> str:
@@ -194,6 +204,39 @@ class ReplyChecks:
         if types is not None and not isinstance(types, list):
             self._fail(conn, cmd, "final_types", f"is {_describe(types)}, not nil or a list")
         return reply
+
+    def info_layout(
+        self, conn: Any, layout: Any, capacity: int, after: int
+    ) -> tuple[int, list[tuple[str, np.dtype, bool]]]:
+        """A ``step_batch`` reply's ``info_layout`` (the typed info columns the sim
+        will put in its shared region): ``(version, [(key, dtype, python), ...])``.
+        The version must exceed ``after`` (the last one), the columns be at most
+        ``capacity``, with distinct str keys and bool, int or float dtypes of at
+        most 8 bytes (python scalars: ``|b1``, ``<i8`` or ``<f8``)."""
+        cmd = "step_batch"
+        if type(layout) is not dict:
+            self._fail(conn, cmd, "info_layout", f"is {_describe(layout)}, not a map")
+        version, columns = layout.get("version"), layout.get("columns")
+        if type(version) is not int or not after < version < 1 << 62:
+            self._fail(conn, cmd, "info_layout", f"version is {_describe(version)}, not an int above {after}")
+        if not isinstance(columns, list) or len(columns) > capacity:
+            self._fail(conn, cmd, "info_layout", f"columns are {_describe(columns)}, not a list of at most {capacity}")
+        out: list[tuple[str, np.dtype, bool]] = []
+        for entry in columns:
+            key, dtype, python = entry if isinstance(entry, list) and len(entry) == 3 else (None, None, None)
+            if type(key) is not str or len(key) > _MAX_KEY_CHARS or any(key == k for k, _, _ in out):
+                self._fail(
+                    conn, cmd, "info_layout", f"names a column {short_repr(entry)}: not [distinct str key, dtype, bool]"
+                )
+            if type(python) is not bool or dtype not in (_PYTHON_DTYPES if python else _COLUMN_DTYPES):
+                self._fail(
+                    conn,
+                    cmd,
+                    "info_layout",
+                    f"column {key!r} has dtype {short_repr(dtype)} (python {short_repr(python)}): not allowed",
+                )
+            out.append((str(key), np.dtype(str(dtype)), bool(python)))
+        return version, out
 
     def _finals_problem(self, final: Any, n: int) -> str | None:
         if not isinstance(final, list) or len(final) > n:

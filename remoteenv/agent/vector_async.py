@@ -29,6 +29,7 @@ import zmq
 
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout, StateError
 from remoteenv.agent.session import SimSession
+from remoteenv.agent.shared_lane import RegionReply, SharedLanes
 from remoteenv.agent.sim_connection import LIVENESS_CHECK_S
 from remoteenv.agent.vector_results import ObsBatch, assemble
 from remoteenv.wire.batch import AddInfo
@@ -40,14 +41,21 @@ Chunk = tuple[np.ndarray, np.ndarray, dict[str, Any]]
 class AsyncWorlds:
     """The requests in flight of one vector env and the replies not yet returned.
 
+    A request goes through the process's shared region (the fast lane) when
+    it has one and no other request of the lane is unread; else as msgpack.
+
     Args:
         session: the sims and their connections.
         slices: ``(first, end)`` world indices of each process.
         num_envs: N.
+        lanes: the sims' shared regions (None: msgpack only).
     """
 
-    def __init__(self, session: SimSession, slices: Sequence[tuple[int, int]], num_envs: int) -> None:
+    def __init__(
+        self, session: SimSession, slices: Sequence[tuple[int, int]], num_envs: int, lanes: SharedLanes | None = None
+    ) -> None:
         self.session = session
+        self.lanes = lanes
         self.slices = list(slices)
         self._owner = np.repeat(np.arange(len(self.slices)), [hi - lo for lo, hi in self.slices])
         #: Worlds sent and not yet returned by :meth:`recv`.
@@ -67,18 +75,20 @@ class AsyncWorlds:
             busy = ids[self.in_flight[ids]][:8].tolist()
             raise StateError(f"worlds {busy} are in flight already: recv() them before sending to them again")
         owners = self._owner[ids]
-        conns = self.session.conns
+        conns, lanes, handshakes = self.session.conns, self.lanes, self.session.handshakes
         ops_list = ops.tolist()
         for p in np.unique(owners).tolist():
             sel = np.flatnonzero(owners == p)
             lo = self.slices[p][0]
             picked = actions[sel] if isinstance(actions, np.ndarray) else [actions[j] for j in sel]
-            seq = conns[p].send(
-                "step_batch",
-                ops=[ops_list[j] for j in sel],
-                actions=picked,
-                worlds=(ids[sel] - lo).tolist(),
-            )
+            worlds = ids[sel] - lo
+            seq = None
+            if lanes is not None:
+                seq = lanes.post(p, conns[p], handshakes[p].offers("shared_batch"), ops[sel], picked, worlds)
+            if seq is None:
+                seq = conns[p].send(
+                    "step_batch", ops=[ops_list[j] for j in sel], actions=picked, worlds=worlds.tolist()
+                )
             self._queues[p].append((seq, ids[sel], ops[sel]))
         self.in_flight[ids] = True
 
@@ -111,7 +121,9 @@ class AsyncWorlds:
     def abandon(self) -> None:
         """Forget every request in flight and every reply not yet returned (after a
         failure; replies that come later are stale and dropped)."""
-        for queue in self._queues:
+        for p, queue in enumerate(self._queues):
+            if queue and self.lanes is not None:
+                self.lanes.forget(p)
             queue.clear()
         self._ready.clear()
         self._ready_count = 0
@@ -135,8 +147,14 @@ class AsyncWorlds:
                     poller.register(pollable, zmq.POLLIN)
             took = any([self._take(p) for p in waiting])
             if not took:
-                events = poller.poll(0 if unpolled else int(LIVENESS_CHECK_S * 1000))
-                if not (events or unpolled):
+                # Before blocking, the sims must know to send a frame for replies they put in a region.
+                blocking = not unpolled and all([getattr(conns[p], "will_block", _yes)() for p in waiting])
+                try:
+                    events = poller.poll(int(LIVENESS_CHECK_S * 1000) if blocking else 0)
+                finally:
+                    for p in waiting:
+                        getattr(conns[p], "woke", _nothing)()
+                if blocking and not events:
                     for p in waiting:
                         conns[p].check_alive("'step_batch'")
             # Checked on every round, whatever arrived: stale frames never extend it.
@@ -161,13 +179,28 @@ class AsyncWorlds:
             if reply is None:
                 break
             checks = self.session.checks
-            if checks is not None:
-                checks.batch(conn, "step_batch", reply, len(ids))
+            if self.lanes is not None:
+                self.lanes.vouch(p, seq, reply)
+            if checks is not None and reply.get("region") is not True:
+                checks.batch(conn, "step_batch", reply, len(ids), shared=reply.get("shared") is True)
+            if self.lanes is not None:
+                # A shared reply's arrays come from the region; a region reply is copied out of it
+                # (the next request to this process may use the region before recv() returns it).
+                taken = self.lanes.take(p, conn, seq, reply, len(ids))
+                reply = taken.as_reply() if isinstance(taken, RegionReply) else taken
             queue.popleft()
             self._ready.append((ids, ops, reply))
             self._ready_count += len(ids)
             took = True
         return took
+
+
+def _yes() -> bool:
+    return True
+
+
+def _nothing() -> None:
+    pass
 
 
 def split_reply(reply: dict[str, Any], cut: int) -> tuple[dict[str, Any], dict[str, Any]]:

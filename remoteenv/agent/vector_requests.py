@@ -51,7 +51,7 @@ class VectorRequests:
         self.same_step = same_step
         self.fan_in = FanIn()
         #: Shared-memory regions of the local sims (batched steps).
-        self.lanes = SharedLanes(session.handshake.observation_space)
+        self.lanes = SharedLanes(session.handshake.observation_space, session.checks)
 
     def gather(
         self, pending: dict[int, int], cmd: str, resend: Callable[[int], int] | None = None
@@ -116,12 +116,19 @@ class VectorRequests:
                 else:
                     pending[p] = conns[p].send("step", action=actions[lo])
             return pending
-        ops_list = ops.tolist()
         pending = {}
         handshakes, lanes = self.session.handshakes, self.lanes
+        ops_list: list[int] | None = None
         for p, (lo, hi) in enumerate(self.slices):
             acts = actions[lo:hi]
-            if lanes.put_actions(p, conns[p], handshakes[p].offers("shared_batch"), acts):
+            offered = handshakes[p].offers("shared_batch")
+            seq = lanes.post(p, conns[p], offered, ops[lo:hi], acts)
+            if seq is not None:
+                pending[p] = seq
+                continue
+            if ops_list is None:
+                ops_list = ops.tolist()
+            if lanes.put_actions(p, conns[p], offered, acts):
                 pending[p] = conns[p].send("step_batch", ops=ops_list[lo:hi], shared=True)
             else:
                 pending[p] = conns[p].send("step_batch", ops=ops_list[lo:hi], actions=acts)
@@ -129,19 +136,28 @@ class VectorRequests:
 
     def finish_step(
         self, pending: dict[int, int], ops: np.ndarray, actions: Any, last_obs: Any, obs_batch: ObsBatch
-    ) -> dict[int, dict[str, Any]]:
+    ) -> dict[int, Any]:
         """Gather the replies of a vector step :meth:`start_step` sent (see :meth:`step`)."""
         if self.plain_steps:
             return self._finish_single_worlds(pending, ops, last_obs, obs_batch)
-        results, failed = self.gather(pending, "step_batch")
-        conns, checks = self.session.conns, self._checks()
-        for p, reply in results.items():
-            lo, hi = self.slices[p]
-            shared = reply.get("shared") is True
-            if shared:  # its arrays are in the region (a protocol error if the request did not use it)
-                self.lanes.fill(p, reply, hi - lo)
-            checks.batch(conns[p], "step_batch", reply, hi - lo, shared=shared)
+        sent = dict(pending)
+        results: dict[int, Any] = {}
+        conns, checks, lanes = self.session.conns, self._checks(), self.lanes
+        try:
+            replies, failed = self.gather(pending, "step_batch")
+            for p, reply in replies.items():
+                lo, hi = self.slices[p]
+                lanes.vouch(p, sent[p], reply)  # a reply from the region answers a request that used it
+                if reply.get("region") is not True:  # a region reply's numbers have the layouts checked before
+                    checks.batch(conns[p], "step_batch", reply, hi - lo, shared=reply.get("shared") is True)
+                # A shared reply's arrays come from the region; an announcement of its info columns is checked there.
+                results[p] = lanes.take(p, conns[p], sent[p], reply, hi - lo)
+        except BaseException:
+            for p in sent:  # abandoned: their replies will not be read
+                lanes.forget(p)
+            raise
         for p, err in failed.items():
+            lanes.forget(p)
             results[p] = self._restarted_results(p, err, last_obs, obs_batch)
         return results
 

@@ -19,6 +19,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector.utils import concatenate, create_empty_array
 
+from remoteenv.agent.shared_lane import RegionReply
 from remoteenv.wire.batch import AddInfo, merge_infos
 from remoteenv.wire.scalar_types import restore_info, restore_scalars
 
@@ -113,6 +114,11 @@ def assemble(
     ``infos["final_obs"]`` and ``infos["final_info"]``."""
     n = obs_batch.num_envs
     infos: dict[str, Any] = {}
+    regions = [r for r in results.values() if isinstance(r, RegionReply)]
+    if regions:
+        if len(regions) == len(results) and obs_batch.box:
+            return _from_regions(results, slices, obs_batch)  # type: ignore[arg-type]
+        results = {p: r.as_reply() if isinstance(r, RegionReply) else r for p, r in results.items()}
     if len(results) == 1 and obs_batch.box and isinstance(results[0]["obs"], np.ndarray):
         r = results[0]  # one process: its fresh arrays are the batch
         idx = np.arange(n)
@@ -140,6 +146,35 @@ def assemble(
         for w, fobs, finfo in _finals(r):
             add_info(infos, {"final_obs": fobs, "final_info": finfo}, lo + w)
         merge_infos(infos, r["info"], idx, n, add_info)
+    return obs, rewards, terminated, truncated, infos
+
+
+def _from_regions(
+    results: dict[int, RegionReply], slices: Sequence[tuple[int, int]], obs_batch: ObsBatch
+) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+    """:func:`assemble` when every process answered in its shared region: each
+    block copied once into fresh arrays, the info columns merged as
+    :func:`~remoteenv.wire.batch.merge_infos` merges columns every world has."""
+    n = obs_batch.num_envs
+    space = obs_batch.space
+    obs = np.empty((n, *space.shape), dtype=space.dtype)  # type: ignore[misc]
+    rewards = np.empty(n, dtype=np.float64)
+    terminated = np.empty(n, dtype=np.bool_)
+    truncated = np.empty(n, dtype=np.bool_)
+    infos: dict[str, Any] = {}
+    for p, (lo, hi) in enumerate(slices):
+        r = results[p]
+        obs[lo:hi] = r.obs
+        rewards[lo:hi] = r.reward
+        np.not_equal(r.terminated, 0, out=terminated[lo:hi])  # any nonzero byte is true
+        np.not_equal(r.truncated, 0, out=truncated[lo:hi])
+        for key, mask_key, dtype, values in r.columns:
+            column = infos.get(key)
+            if column is None:
+                column = infos[key] = np.zeros(n, dtype=dtype)
+                infos[mask_key] = np.zeros(n, dtype=np.bool_)
+            column[lo:hi] = values
+            infos[mask_key][lo:hi] = True
     return obs, rewards, terminated, truncated, infos
 
 

@@ -48,6 +48,11 @@ class BaseEnv:
         check_finite: also check that observations and rewards hold no NaN
             or infinity (the kind and count of what the hooks return are
             always checked, see :mod:`remoteenv.sim.step_check`).
+        stacked_hooks: the scene's batched hooks (:meth:`prepare_steps`,
+            :meth:`post_steps`) read and write the worlds' state only through
+            :func:`remoteenv.sim.batch_worlds.stacked` (never through a world's
+            ``data``, nor views of it kept from earlier): the worlds of a process
+            may then step in one ``mujoco.batch.Batch`` (see :attr:`data`).
     """
 
     env_id: ClassVar[str] = "scene"
@@ -55,6 +60,12 @@ class BaseEnv:
     default_camera: ClassVar[str | None] = None
     check_obs_bounds: ClassVar[bool] = False
     check_finite: ClassVar[bool] = False
+    stacked_hooks: ClassVar[bool] = False
+
+    #: While the world steps in a batch (:mod:`remoteenv.sim.batch_worlds`): the
+    #: batch and this world's index in it, through which :attr:`data` is kept current.
+    _batch_link: Any = None
+    _batch_index: int = 0
 
     observation_space: spaces.Space
     action_space: spaces.Space
@@ -77,7 +88,7 @@ class BaseEnv:
                 f"supported: {self.metadata['render_modes']}"
             )
         self.model = mujoco.MjModel.from_xml_path(self._model_file(os.fspath(model_path)))
-        self.data = mujoco.MjData(self.model)
+        self._data = mujoco.MjData(self.model)
         self.frame_skip = int(frame_skip)
         self.observation_space = observation_space
         self.action_space = action_space
@@ -93,6 +104,25 @@ class BaseEnv:
         self._np_random_seed: int | None = None
 
     # ------------------------------------------------------------ properties
+
+    @property
+    def data(self) -> mujoco.MjData:
+        """This world's ``MjData``. While the world steps in a batch with others
+        (a scene with :attr:`stacked_hooks`), the batch holds its state between
+        batched steps; reading ``data`` first brings it up to date, exactly as
+        ``mj_step`` would have left it, and the batch takes the state back from
+        here before the world's next batched step (so changes made through
+        ``data`` count). Views of ``data`` kept from earlier are not updated."""
+        link = self._batch_link
+        if link is not None:
+            link.pull(self._batch_index)
+        return self._data
+
+    @data.setter
+    def data(self, value: mujoco.MjData) -> None:
+        if self._batch_link is not None:
+            self._batch_link.claim(self._batch_index)
+        self._data = value
 
     @property
     def dt(self) -> float:
@@ -183,7 +213,9 @@ class BaseEnv:
         """Start an episode. ``seed`` reseeds the RNG; None continues the current stream."""
         if seed is not None:
             self.seed_rng(seed)
-        mujoco.mj_resetData(self.model, self.data)
+        if self._batch_link is not None:  # mj_resetData rewrites all of it: no need to bring it up to date
+            self._batch_link.claim(self._batch_index)
+        mujoco.mj_resetData(self.model, self._data)
         result = self.reset_model(options)
         if not isinstance(result, tuple) or len(result) != 2 or not isinstance(result[1], dict):
             raise StepResultError(

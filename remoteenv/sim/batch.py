@@ -31,7 +31,7 @@ from remoteenv.sim.lock_step import LockStepper
 from remoteenv.sim.shared_lane import SharedLane
 from remoteenv.wire.actions import check_actions
 from remoteenv.wire.batch import columnar_infos, stack
-from remoteenv.wire.errors import PROTOCOL, short_repr
+from remoteenv.wire.errors import PROTOCOL, STATE, short_repr
 from remoteenv.wire.protocol import OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET, OPS
 from remoteenv.wire.scalar_types import describe_scalars
 
@@ -63,6 +63,8 @@ class BatchCommands:
         self.stepper = WorldsStepper(envs, threads) if together else None
         #: The local pipe's shared-memory region (``shared_batch``), for worlds stepped together.
         self.lane = SharedLane(action_space, envs[0].observation_space, len(worlds)) if together else None
+        #: Every world has been reset (then no step needs the per-world check).
+        self._all_reset = False
 
     def close(self) -> None:
         """Stop the physics threads; unmap the shared region."""
@@ -89,16 +91,18 @@ class BatchCommands:
             infos.append(info)
         return {"obs": stack(obs), "info": columnar_infos(infos)}
 
-    def step_batch(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+    def step_batch(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
+        """A ``step_batch``: its ops, worlds and actions in the message, or with
+        ``"region": true`` posted in the region (see :meth:`from_region`)."""
+        if msg.get("region") is True:
+            return self.from_region(msg, channel)
         num = len(self.worlds)
         ops = msg.get("ops")
         if not isinstance(ops, list) or not 0 < len(ops) <= num or not all(type(op) is int and op in OPS for op in ops):
             raise RequestError(PROTOCOL, f"ops must be a list of 1..{num} ints from {OPS}, got {short_repr(ops)}")
         n = len(ops)
         worlds = self._request_worlds(msg.get("worlds"), n)
-        for j, w in enumerate(worlds):
-            if ops[j] != OP_RESET:
-                require_reset(self.worlds[w].has_reset, w, self.instance)
+        self._require_reset(ops, worlds)
         shared = msg.get("shared") is True
         if shared:
             if self.lane is None or msg.get("worlds") is not None:
@@ -106,22 +110,75 @@ class BatchCommands:
             actions = check_actions(self._space, self.lane.actions(n, channel), n)
         else:
             actions = check_actions(self._space, msg.get("actions"), n)
-        stepped = [j for j in range(n) if ops[j] != OP_RESET]
+        reply = self._step(ops, worlds, actions, shared=shared)
+        assert reply is not None
+        return reply
+
+    def from_region(self, msg: dict[str, Any], channel: Channel | None) -> dict[str, Any] | None:
+        """The ``step_batch`` posted in the region as request ``msg["seq"]`` (its
+        ``{"region": true}`` frame, or found there by the pipe's watch): answered
+        in the region where it fits (no reply here, or ``{"region": true}`` to
+        wake the agent), else on the pipe as usual. Nothing for a request
+        served already (its frame came after the watch had found it)."""
+        lane = self.lane
+        if lane is None:
+            raise RequestError(STATE, "a region step_batch needs the region of shared_batch")
+        taken = lane.take(msg["seq"], channel)
+        if taken is None:
+            return None
+        ops, named, n = taken
+        worlds = list(range(n)) if named is None else self._request_worlds(named, n)
+        op_list = ops.tolist()
+        self._require_reset(op_list, worlds)
+        actions = check_actions(self._space, lane.actions(n, channel), n)
+        return self._step(op_list, worlds, actions, shared=True, seq=msg["seq"])
+
+    def _require_reset(self, ops: list[int], worlds: list[int]) -> None:
+        """A ``state`` error for a world stepped before its first reset (once every
+        world has been reset, nothing to look at)."""
+        if self._all_reset:
+            return
+        for j, w in enumerate(worlds):
+            if ops[j] != OP_RESET:
+                require_reset(self.worlds[w].has_reset, w, self.instance)
+        self._all_reset = all(w.has_reset for w in self.worlds)
+
+    def _step(
+        self, ops: list[int], worlds: list[int], actions: Any, *, shared: bool, seq: int = 0
+    ) -> dict[str, Any] | None:
+        """One tick of positions ``0 .. n-1`` (``ops[j]`` for world ``worlds[j]``,
+        checked); the reply's fields (None: answered in the region, ``seq``)."""
+        n = len(ops)
+        all_step = OP_RESET not in ops
         # Actions sent as a list reach the hooks as sent (e.g. floats, not float32): per world.
-        if self.stepper is not None and stepped and isinstance(actions, np.ndarray):
-            if len(stepped) < n:
-                picked = actions[stepped] if isinstance(actions, np.ndarray) else [actions[j] for j in stepped]
+        if (
+            self.stepper is not None
+            and isinstance(actions, np.ndarray)
+            and (all_step or any(op != OP_RESET for op in ops))
+        ):
+            if all_step:
+                stepped, picked, stepped_worlds = None, actions, worlds
             else:
-                picked = actions
-            batch = self.stepper.step([worlds[j] for j in stepped], picked)
-            resets = len(stepped) < n or OP_STEP_RESET in ops or (OP_STEP_AUTORESET in ops and batch.terminated.any())
+                stepped = [j for j in range(n) if ops[j] != OP_RESET]
+                picked = actions[stepped]
+                stepped_worlds = [worlds[j] for j in stepped]
+            batch = self.stepper.step(stepped_worlds, picked)
+            resets = not all_step or OP_STEP_RESET in ops or (OP_STEP_AUTORESET in ops and batch.terminated.any())
             if not resets:
-                if shared and self.lane is not None:
-                    reply = self.lane.reply(batch, batch_infos(batch))
+                lane = self.lane
+                if seq and lane is not None:
+                    done, reply = lane.answer(seq, batch)
+                    if done:
+                        return reply
+                    if reply is not None:
+                        reply["info"] = batch_infos(batch)
+                        return reply
+                elif shared and lane is not None:
+                    reply = lane.reply(batch, batch_infos(batch))
                     if reply is not None:
                         return reply
                 return plain_step_reply(batch)  # the scene's arrays as they are
-            results = _per_world_results(batch, stepped, n)
+            results = _per_world_results(batch, stepped if stepped is not None else list(range(n)), n)
         else:
             if isinstance(actions, np.ndarray) and self._discrete:
                 actions = actions.tolist()

@@ -9,13 +9,15 @@ per-world :meth:`~remoteenv.sim.BaseEnv.post_step` would have returned.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 #: numpy kinds an info column may have, and the python type of one element.
 _COLUMN_KINDS = {"b": bool, "i": int, "u": int, "f": float}
+#: The dtype whose ``tolist()`` gives the python scalars of a column of each kind.
+_WIDE = {"b": np.bool_, "i": np.int64, "u": np.int64, "f": np.float64}
 
 
 @dataclass
@@ -31,12 +33,17 @@ class BatchResult:
             of a bool, int or float dtype (world ``w``'s value is then the
             numpy scalar ``values[w]``, as a per-world hook returning numpy
             scalars gives it) or a list of ``n`` python bools, ints or floats.
+        python_scalars: the keys of array columns that stand for python bools,
+            ints or floats (world ``w``'s value is ``values[w].item()``, and the
+            column travels as a list), as a per-world hook returning python
+            numbers gives them, without a list built per step.
     """
 
     obs: Any
     reward: np.ndarray
     terminated: np.ndarray
     infos: list[dict[str, Any]] | dict[str, Any]
+    python_scalars: frozenset[str] = field(default_factory=frozenset)
 
     def world_obs(self, w: int) -> Any:
         """World ``w``'s obs (a fresh array for an array batch)."""
@@ -46,7 +53,8 @@ class BatchResult:
         """World ``w``'s info map (numpy scalars from array columns, python ones from lists)."""
         if isinstance(self.infos, list):
             return self.infos[w]
-        return {key: column[w] for key, column in self.infos.items()}
+        python = self.python_scalars
+        return {key: column[w].item() if key in python else column[w] for key, column in self.infos.items()}
 
     def wire_columns(self) -> dict[str, Any] | None:
         """The infos in the wire's column form, exactly as
@@ -62,7 +70,10 @@ class BatchResult:
             if isinstance(column, np.ndarray):
                 if column.dtype.kind not in _COLUMN_KINDS or column.shape != (n,):
                     return None
-                columns[key] = [np.ascontiguousarray(column), present]
+                if key in self.python_scalars:
+                    columns[key] = [column.astype(_WIDE[column.dtype.kind]).tolist(), present]
+                else:
+                    columns[key] = [np.ascontiguousarray(column), present]
                 continue
             if len(column) != n or not all(type(v) in (bool, int, float) for v in column):
                 return None

@@ -1,13 +1,16 @@
-"""One control tick for many worlds of one process: batched hooks, threaded physics.
+"""One control tick for many worlds of one process: batched hooks, batched physics.
 
 Runs in the sim process (lock-step, no action or observation delay). :class:`WorldsStepper`
 drives a ``step_batch`` request's stepped worlds as
-:meth:`BaseEnv.prepare_steps` -> physics of every world on threads
-(:class:`~remoteenv.sim.batch_physics.PhysicsThreads`) -> :meth:`BaseEnv.post_steps`.
-Scenes that keep the per-world hooks get the same sequence per world
-(``BaseEnv``'s default batched hooks loop over them), so every scene's
-physics runs off the GIL; scenes that override the batched hooks also drop
-the per-world Python.
+:meth:`BaseEnv.prepare_steps` -> physics of every world -> :meth:`BaseEnv.post_steps`.
+The physics of a scene with :attr:`~BaseEnv.stacked_hooks` runs in one native
+call over all the worlds (:class:`~remoteenv.sim.batch_worlds.BatchedWorlds`,
+MuJoCo's ``mujoco.batch``), and its hooks work on stacked arrays of all the
+worlds' state (:func:`~remoteenv.sim.batch_worlds.stacked`); other scenes'
+physics runs on threads over each world's ``MjData``
+(:class:`~remoteenv.sim.batch_physics.PhysicsThreads`). Scenes that keep the
+per-world hooks get the same sequence per world (``BaseEnv``'s default
+batched hooks loop over them), so every scene's physics runs off the GIL.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import numpy as np
 from remoteenv.sim.base_env import BaseEnv
 from remoteenv.sim.batch_physics import PhysicsThreads, default_threads
 from remoteenv.sim.batch_result import BatchResult
+from remoteenv.sim.batch_worlds import BatchedWorlds, StackedWorlds, available, batch_state
 from remoteenv.sim.step_check import check_batch
 
 
@@ -57,19 +61,37 @@ class WorldsStepper:
         #: The hook that produced a batch's results, as its errors name it.
         self._hook = "post_steps" if own else "post_step"
         self._all = list(range(len(self.envs)))
-        self.physics = PhysicsThreads(threads if threads is not None else default_threads(len(self.envs)))
+        nthreads = threads if threads is not None else default_threads(len(self.envs))
+        #: The worlds' physics in one ``mujoco.batch.Batch`` (scenes with stacked hooks), else None.
+        self.batched = BatchedWorlds(self.envs, nthreads) if self._cls.stacked_hooks and available() else None
+        self.physics = PhysicsThreads(1 if self.batched is not None else nthreads)
+        #: Every world, with the batch's state (the common request: built once).
+        self._every = StackedWorlds(self.envs, batch_state(self.batched, None)) if self.batched is not None else None
 
     def step(self, worlds: Sequence[int], actions: Any) -> BatchResult:
         """One tick of worlds ``worlds`` (indices, in order) with ``actions[j]``
         for ``worlds[j]`` (checked and stacked, see :meth:`BaseEnv.prepare_steps`)."""
-        if list(worlds) == self._all:
-            envs, models, datas = self.envs, self._models, self._datas
+        every = list(worlds) == self._all
+        batched = self.batched
+        if batched is not None:
+            if every and self._every is not None:
+                envs: Sequence[BaseEnv] = self._every
+                self._cls.prepare_steps(envs, actions)
+                batched.step(None, self._frame_skip)
+            else:
+                ids = np.asarray(worlds, dtype=np.intp)
+                envs = StackedWorlds([self.envs[w] for w in worlds], batch_state(batched, ids))
+                self._cls.prepare_steps(envs, actions)
+                batched.step(np.sort(ids).astype(np.int32), self._frame_skip)
         else:
-            envs = [self.envs[w] for w in worlds]
-            models = [self._models[w] for w in worlds]
-            datas = [self._datas[w] for w in worlds]
-        self._cls.prepare_steps(envs, actions)
-        self.physics.step(models, datas, self._frame_skip)
+            if every:
+                envs, models, datas = self.envs, self._models, self._datas
+            else:
+                envs = [self.envs[w] for w in worlds]
+                models = [self._models[w] for w in worlds]
+                datas = [self._datas[w] for w in worlds]
+            self._cls.prepare_steps(envs, actions)
+            self.physics.step(models, datas, self._frame_skip)
         env = self.envs[0]
         result = check_batch(
             self._cls.post_steps(envs, actions),
@@ -94,7 +116,11 @@ class WorldsStepper:
             env._check_obs(row, self._hook)
 
     def close(self) -> None:
+        """Stop the physics threads; give every world its state back (its ``MjData``)."""
         self.physics.close()
+        if self.batched is not None:
+            self.batched.close()
+            self.batched = None
 
 
 __all__ = ["WorldsStepper", "steps_together"]

@@ -143,12 +143,34 @@ class ZmqChannel:
         self.socket.send_multipart([reply_to, payload])
 
 
+class LaneWatch(Protocol):
+    """The fast lane of a pipe's shared region (:class:`remoteenv.sim.shared_lane.SharedLane`)."""
+
+    def posted(self) -> int:
+        """``seq`` of a request posted in the region and not yet served (0: none)."""
+        ...
+
+    def settle(self) -> int:
+        """About to block: stop watching; a request posted meanwhile (0: none)."""
+        ...
+
+
+def region_frame(seq: int) -> bytes:
+    """The frame of request ``seq`` posted in the region (as the agent sends it when rung)."""
+    return protocol.pack({"seq": seq, "cmd": "step_batch", "region": True})
+
+
 class PipeChannel:
     """The inherited end of the launcher's socketpair; one peer, no routing id.
 
     ``closed`` becomes True at end of file (the agent closed its end or died).
     A frame above the frame limit is skipped and answered here with a
     ``protocol`` error (``seq`` -1); the frames after it are served as usual.
+    Once the agent has the pipe's shared region (:attr:`lane`), a request
+    posted there counts as a frame that arrived (:meth:`receive_nowait` looks
+    at the region's doorbell too), and :meth:`settle` must be called before
+    the loop blocks on the pipe, so that requests posted from then on come
+    with a frame (:mod:`remoteenv.wire.doorbell`).
     """
 
     def __init__(self, fd: int) -> None:
@@ -160,23 +182,42 @@ class PipeChannel:
         self.fd: int = self.sock.fileno()
         #: The pipe has no backlog the loop must come back for (see :class:`ZmqChannel`).
         self.more = False
+        #: The fast lane of the pipe's shared region, once the agent has it.
+        self.lane: LaneWatch | None = None
 
     def receive_nowait(self) -> list[tuple[Any, bytes]]:
         if self.closed:
             return []
-        data = self._decoder.recv_from(self.sock)
-        if data is None:
-            return []
-        if not data:
-            self.closed = True
-            return []
+        # The region first: a frame the agent sent before it posted there is then read below.
+        lane = self.lane
+        posted = lane.posted() if lane is not None else 0
         out: list[tuple[Any, bytes]] = []
-        for frame in self._decoder.items(data):
-            if isinstance(frame, protocol.FrameTooLarge):
-                self.send(None, protocol.pack(protocol.error_reply(-1, PROTOCOL, f"{frame}; dropped unread")))
-            else:
-                out.append((None, frame))
+        data = self._decoder.recv_from(self.sock)
+        if data is not None:
+            if not data:
+                self.closed = True
+                return []
+            for frame in self._decoder.items(data):
+                if isinstance(frame, protocol.FrameTooLarge):
+                    self.send(None, protocol.pack(protocol.error_reply(-1, PROTOCOL, f"{frame}; dropped unread")))
+                else:
+                    out.append((None, frame))
+        if posted:
+            # Served in the agent's order (its seq numbers increase): after the frames sent before it.
+            at = len(out)
+            while at and protocol.peek_seq(out[at - 1][1]) > posted:
+                at -= 1
+            out.insert(at, (None, region_frame(posted)))
         return out
+
+    def settle(self) -> list[tuple[Any, bytes]]:
+        """The loop is about to block: a request posted in the region from now on
+        comes with its frame. Returns the one posted meanwhile, if any (then do not block)."""
+        lane = self.lane
+        if lane is None or self.closed:
+            return []
+        # A request came meanwhile: take it with the frames the agent sent before it (in order).
+        return self.receive_nowait() if lane.settle() else []
 
     def receive_spinning(self, hot: HotWait) -> list[tuple[Any, bytes]]:
         """Like :meth:`receive_nowait`, but busy-wait while ``hot`` (whose

@@ -241,6 +241,12 @@ class RemoteControlledAgent:
                     if pipe.closed:
                         self.pipe_closed()
                         continue
+                if pipe is not None and not router.more:
+                    # About to block: a request posted in the pipe's region comes with a frame from now on.
+                    frames = pipe.settle()
+                    if frames:
+                        self._answer(pipe, frames)
+                        continue
                 # Frames left waiting in the router's backlog: look, do not wait.
                 events = dict(poller.poll(0 if router.more else _CHECK_INTERVAL_MS))
                 for channel in served:

@@ -181,6 +181,40 @@ resets, the reply then is ``{"shared": true, "info": infos, "final": []}``
 with ``obs``, ``reward``, ``terminated`` and ``truncated`` in rows ``0 .. n-1``
 of the region; any other outcome is answered in the usual form.
 
+The fast lane. A region whose layout has ``"info_columns": M`` (``M > 0``)
+also holds a header of 16 ``<i8`` doorbell words, the request's ``ops`` and
+``worlds`` and ``M`` typed info columns (:mod:`remoteenv.wire.shared_batch`).
+The agent may then post a whole ``step_batch`` there: it writes ops, worlds
+(when it names them) and actions, then the words ``REQ_N`` (``n``),
+``REQ_NAMED`` (1: the worlds block names the worlds) and last ``REQ_SEQ``
+(the request's ``seq``), and sends ``{"seq": s, "cmd": "step_batch",
+"region": true}`` on the pipe unless the sim's ``SIM_WATCHING`` word says it
+will look at ``REQ_SEQ`` before it blocks. The sim serves such a request
+like a sent one (``n``, ops, worlds and actions checked as sent ones are;
+its frame, if it comes after the request was served, is dropped). If every
+world steps, none resets and every info value is a column the region can
+hold (at most ``M`` keys, bool, int or float values of at most 8 bytes),
+the sim answers in the region: rows ``0 .. n-1`` of ``obs``, ``reward``,
+``terminated``, ``truncated`` and the info columns, then the words
+``REP_INFO`` (the info layout's version) and last ``REP_SEQ`` (``s``), and
+sends ``{"seq": s, "ok": true, "region": true}`` unless ``AGENT_WATCHING``
+says the agent will look at ``REP_SEQ`` before it blocks. The info columns
+are announced before their first use, in a pipe reply to a region request
+(``{"shared": true, ..., "info_layout": {"version": int, "columns": [[key,
+dtype, python], ...]}}``, the version above every earlier one; ``python``:
+the values are python scalars, carried as ``|b1``, ``<i8`` or ``<f8``); a
+region reply uses the last announced layout. Any other outcome (a reset, an
+error, other infos) is answered on the pipe as usual. Replies keep request
+order. Before a side blocks it clears its ``*_WATCHING`` word, then a full
+fence, then it looks at the peer's sequence word once more (and does not
+block if it moved). Without total store order (off x86-64) a side sets no
+``*_WATCHING`` word and reads no sequence word without its frame, so every
+request and reply then goes as its frame. The agent takes a region reply
+only for the request it awaits, in the announced layout, and refuses
+(``protocol``) a region reply to a request that was not posted there, an
+``info_layout`` off these rules, and a ``REP_SEQ`` or ``REP_INFO`` that does
+not match. The words: :mod:`remoteenv.wire.doorbell`.
+
 In both, ``obs`` is one array of shape ``(n, *obs_shape)`` when every world's
 obs is an array of one shape and dtype, else a list of ``n`` obs. ``infos`` is
 ``{"columns": {key: [values, present]}}`` when every info value is a bool,

@@ -17,10 +17,22 @@ block starting on a 64-byte boundary in this order:
 - ``reward``: ``K`` ``<f8``; ``terminated``, ``truncated``: ``K`` ``|b1``;
   written by the sim before it sends the reply.
 
+A region laid out with ``info_columns = M > 0`` (the fast lane, see
+:mod:`remoteenv.wire.doorbell`) continues with:
+
+- ``header``: 16 ``<i8`` words, the doorbell's (words 0-7 written by the
+  agent, 8-15 by the sim; see :mod:`remoteenv.wire.doorbell`);
+- ``ops``: ``K`` ``|i1``, the request's ops; ``worlds``: ``K`` ``<i4``, the
+  worlds it addresses when it names them (both written by the agent);
+- ``info``: ``M`` columns of ``K`` values of at most 8 bytes each (column
+  ``c`` starts at byte ``c * 8 * K`` of the block), written by the sim, laid
+  out as the sim last announced (a ``step_batch`` reply's ``info_layout``).
+
 Row ``j`` belongs to request position ``j``. Each side writes its blocks only
-while the other waits for the message that follows, so the pipe orders every
-access. The sim checks the actions it reads like any others; the agent reads
-numbers of a fixed dtype and shape, nothing it would interpret further.
+while the other waits for the message that follows, so the pipe (or the
+doorbell's sequence words) orders every access. The sim checks the ops,
+worlds and actions it reads like sent ones; the agent reads numbers of a
+fixed dtype and shape, nothing it would interpret further.
 
 The agent maps only a region sealed against shrinking (:func:`map_region`):
 truncating a mapped file would turn its next access into ``SIGBUS``, a
@@ -47,6 +59,10 @@ MAX_SHARED_BYTES = 1 << 28
 _ALIGN = 64
 _MAX_WORLDS = 1 << 16
 _MAX_NDIM = 8
+#: Most info columns a region's fast lane holds.
+MAX_INFO_COLUMNS = 64
+#: Words of the doorbell's header (two 64-byte lines of ``<i8``).
+HEADER_WORDS = 16
 
 
 def _aligned(n: int) -> int:
@@ -74,16 +90,26 @@ class SharedLayout:
     action_shape: tuple[int, ...]
     obs_dtype: str
     obs_shape: tuple[int, ...]
+    #: Info columns of the fast lane (0: the region has no lane blocks).
+    info_columns: int = 0
 
     def _blocks(self) -> list[tuple[str, str, tuple[int, ...]]]:
         k = self.worlds
-        return [
+        blocks = [
             ("actions", self.action_dtype, (k, *self.action_shape)),
             ("obs", self.obs_dtype, (k, *self.obs_shape)),
             ("reward", "<f8", (k,)),
             ("terminated", "|b1", (k,)),
             ("truncated", "|b1", (k,)),
         ]
+        if self.info_columns:
+            blocks += [
+                ("header", "<i8", (HEADER_WORDS,)),
+                ("ops", "|i1", (k,)),
+                ("worlds", "<i4", (k,)),
+                ("info", "|u1", (self.info_columns, 8 * k)),
+            ]
+        return blocks
 
     @property
     def size(self) -> int:
@@ -94,11 +120,14 @@ class SharedLayout:
         return total
 
     def to_wire(self) -> dict[str, Any]:
-        return {
+        out: dict[str, Any] = {
             "worlds": self.worlds,
             "actions": [self.action_dtype, list(self.action_shape)],
             "obs": [self.obs_dtype, list(self.obs_shape)],
         }
+        if self.info_columns:
+            out["info_columns"] = self.info_columns
+        return out
 
     @classmethod
     def from_wire(cls, value: Any) -> SharedLayout:
@@ -110,7 +139,12 @@ class SharedLayout:
             raise ProtocolError(f"shared_batch layout: worlds must be 1..{_MAX_WORLDS}, got {short_repr(worlds)}")
         action_dtype, action_shape = _block(value.get("actions"), "actions")
         obs_dtype, obs_shape = _block(value.get("obs"), "obs")
-        layout = cls(worlds, action_dtype, action_shape, obs_dtype, obs_shape)
+        columns = value.get("info_columns", 0)
+        if type(columns) is not int or not 0 <= columns <= MAX_INFO_COLUMNS:
+            raise ProtocolError(
+                f"shared_batch layout: info_columns must be 0..{MAX_INFO_COLUMNS}, got {short_repr(columns)}"
+            )
+        layout = cls(worlds, action_dtype, action_shape, obs_dtype, obs_shape, columns)
         if layout.size > MAX_SHARED_BYTES:
             raise ProtocolError(f"shared_batch region of {layout.size} bytes exceeds {MAX_SHARED_BYTES}")
         return layout
@@ -133,10 +167,21 @@ class SharedArrays:
         self.reward = views["reward"]
         self.terminated = views["terminated"]
         self.truncated = views["truncated"]
+        #: The fast lane's blocks (None without them, see :attr:`SharedLayout.info_columns`).
+        self.header: np.ndarray | None = views.get("header")
+        self.ops: np.ndarray | None = views.get("ops")
+        self.worlds: np.ndarray | None = views.get("worlds")
+        self.info: np.ndarray | None = views.get("info")
+
+    def info_column(self, c: int, dtype: np.dtype) -> np.ndarray:
+        """Info column ``c`` of the lane as ``K`` values of ``dtype`` (itemsize at most 8)."""
+        assert self.info is not None
+        k = self.layout.worlds
+        return self.info[c, : k * dtype.itemsize].view(dtype)
 
     def close(self) -> None:
         """Drop the views and unmap the region (later use of the views is an error)."""
-        for name in ("actions", "obs", "reward", "terminated", "truncated"):
+        for name in ("actions", "obs", "reward", "terminated", "truncated", "header", "ops", "worlds", "info"):
             setattr(self, name, None)
         try:
             self._region.close()
@@ -201,6 +246,8 @@ def map_region(path: str, layout: SharedLayout) -> SharedArrays:
 
 
 __all__ = [
+    "HEADER_WORDS",
+    "MAX_INFO_COLUMNS",
     "MAX_SHARED_BYTES",
     "REGION_SEALS",
     "SharedArrays",

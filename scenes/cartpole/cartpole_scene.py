@@ -22,6 +22,7 @@ from gymnasium import spaces
 
 from remoteenv.sim import BaseEnv, run_scene
 from remoteenv.sim.batch_result import BatchResult
+from remoteenv.sim.batch_worlds import stacked
 
 MODEL_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "cartpole.xml")
 
@@ -33,6 +34,9 @@ class CartPoleEnv(BaseEnv):
     env_id = "remoteenv/CartPole-v0"
     metadata = {"render_modes": ["rgb_array", "human"]}
     default_camera = "side"
+    # The batched hooks read and write state through stacked(): the worlds of a
+    # process step in one mujoco.batch call.
+    stacked_hooks = True
 
     def __init__(
         self,
@@ -106,20 +110,20 @@ class CartPoleEnv(BaseEnv):
     def prepare_steps(cls, envs: Sequence[BaseEnv], actions: np.ndarray) -> None:
         carts: Sequence[CartPoleEnv] = envs  # type: ignore[assignment]
         if carts[0].continuous:
-            fractions = np.clip(actions[:, 0], -1.0, 1.0).astype(np.float64).tolist()
+            fractions = np.clip(actions[:, 0], -1.0, 1.0).astype(np.float64)
         else:
-            fractions = np.where(actions == 1, 1.0, -1.0).tolist()
-        for env, fraction in zip(carts, fractions):
-            env.data.ctrl[0] = fraction
+            fractions = np.where(actions == 1, 1.0, -1.0)
+        stacked(envs).set("ctrl", fractions[:, None])
 
     @classmethod
     def post_steps(cls, envs: Sequence[BaseEnv], actions: np.ndarray) -> BatchResult:
         """:meth:`post_step` for all worlds at once, with numpy over their stacked state."""
         carts: Sequence[CartPoleEnv] = envs  # type: ignore[assignment]
-        state = np.array([(env.data.qpos[0], env.data.qvel[0], env.data.qpos[1], env.data.qvel[1]) for env in carts])
-        obs = state.astype(np.float32)
+        worlds = stacked(envs)
+        qpos, qvel = worlds.get("qpos"), worlds.get("qvel")
+        obs = np.stack((qpos[:, 0], qvel[:, 0], qpos[:, 1], qvel[:, 1]), axis=1).astype(np.float32)
         wide = obs.astype(np.float64)  # post_step compares float(obs[i]) with the thresholds
-        already = np.array([env._terminated for env in carts], dtype=np.bool_)
+        already = np.fromiter((env._terminated for env in carts), np.bool_, len(carts))
         terminated = already | (np.abs(wide[:, 0]) > X_THRESHOLD) | (np.abs(wide[:, 2]) > THETA_THRESHOLD)
         for env, ended in zip(carts, terminated.tolist()):
             env._terminated = ended

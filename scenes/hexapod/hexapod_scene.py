@@ -61,12 +61,15 @@ Run by the launcher as ``python hexapod_scene.py --address ... --seed ...``.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
 from remoteenv.sim import BaseEnv, run_scene
+from remoteenv.sim.batch_result import BatchResult
+from remoteenv.sim.batch_worlds import stacked
 
 MODEL_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "hexapod.xml")
 
@@ -78,6 +81,9 @@ class HexapodEnv(BaseEnv):
     env_id = "remoteenv/Hexapod-v0"
     metadata = {"render_modes": ["rgb_array", "human"]}
     default_camera = "track"
+    # The batched hooks read and write state through stacked(): the worlds of a
+    # process step in one mujoco.batch call.
+    stacked_hooks = True
 
     def __init__(
         self,
@@ -135,6 +141,36 @@ class HexapodEnv(BaseEnv):
         flipped = bool(self.data.xmat[self._torso, 8] < 0.0)
         info = {"reward_forward": reward_forward, "reward_ctrl": reward_ctrl, "x_position": x}
         return self._obs(), reward_forward + reward_ctrl, flipped, info
+
+    @classmethod
+    def prepare_steps(cls, envs: Sequence[BaseEnv], actions: np.ndarray) -> None:
+        """:meth:`prepare_step` for all worlds at once (the same operations, stacked)."""
+        bots: Sequence[HexapodEnv] = envs  # type: ignore[assignment]
+        centre = np.array([bot._ctrl_centre for bot in bots])
+        half = np.array([bot._ctrl_half for bot in bots])
+        stacked(envs).set("ctrl", centre + np.clip(actions, -1.0, 1.0) * half)
+
+    @classmethod
+    def post_steps(cls, envs: Sequence[BaseEnv], actions: np.ndarray) -> BatchResult:
+        """:meth:`post_step` for all worlds at once, with numpy over their stacked state."""
+        bots: Sequence[HexapodEnv] = envs  # type: ignore[assignment]
+        n = len(bots)
+        state = stacked(envs)
+        qpos, qvel = state.get("qpos"), state.get("qvel")
+        x = qpos[:, 0].copy()
+        x_before = np.fromiter((bot._x_before for bot in bots), np.float64, n)
+        dt = np.fromiter((bot.dt for bot in bots), np.float64, n)
+        reward_forward = (x - x_before) / dt
+        for bot, now in zip(bots, x.tolist()):
+            bot._x_before = now
+        # A stacked matmul of float32 rows is the dot product np.dot takes (same rounding).
+        ctrl = np.matmul(actions[:, None, :], actions[:, :, None])[:, 0, 0].astype(np.float64)
+        weight = np.fromiter((bot.ctrl_cost_weight for bot in bots), np.float64, n)
+        reward_ctrl = -weight * ctrl
+        flipped = state.get("xmat")[:, bots[0]._torso, 8] < 0.0
+        obs = np.concatenate((qpos[:, 7:], qvel[:, 6:], state.get("actuator_force"), qpos[:, :7], qvel[:, :6]), axis=1)
+        info = {"reward_forward": reward_forward, "reward_ctrl": reward_ctrl, "x_position": x}
+        return BatchResult(obs, reward_forward + reward_ctrl, flipped, info, python_scalars=frozenset(info))
 
     def _obs(self) -> np.ndarray:
         d = self.data

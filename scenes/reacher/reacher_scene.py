@@ -20,6 +20,7 @@ from gymnasium import spaces
 
 from remoteenv.sim import BaseEnv, run_scene
 from remoteenv.sim.batch_result import BatchResult
+from remoteenv.sim.batch_worlds import stacked
 
 MODEL_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "reacher.xml")
 
@@ -28,6 +29,9 @@ class ReacherEnv(BaseEnv):
     env_id = "remoteenv/Reacher-v0"
     metadata = {"render_modes": ["rgb_array", "human"]}
     default_camera = "overhead"
+    # The batched hooks read and write state through stacked(): the worlds of a
+    # process step in one mujoco.batch call.
+    stacked_hooks = True
 
     def __init__(
         self,
@@ -50,9 +54,6 @@ class ReacherEnv(BaseEnv):
         self.reward_control_weight = float(reward_control_weight)
         self._fingertip = self.model.body("fingertip").id
         self._target = self.model.body("target").id
-        # Views of this world's state for the batched hooks (MjData keeps its
-        # buffers for its lifetime; each attribute access would build a new view).
-        self._qpos, self._qvel, self._xpos, self._ctrl = self.data.qpos, self.data.qvel, self.data.xpos, self.data.ctrl
 
     def reset_model(self, options: dict[str, Any] | None) -> tuple[np.ndarray, dict[str, Any]]:
         rng = self.np_random
@@ -83,20 +84,19 @@ class ReacherEnv(BaseEnv):
 
     @classmethod
     def prepare_steps(cls, envs: Sequence[BaseEnv], actions: np.ndarray) -> None:
-        for env, action in zip(envs, actions):
-            env._ctrl[:] = action  # type: ignore[attr-defined]
+        stacked(envs).set("ctrl", actions)
 
     @classmethod
     def post_steps(cls, envs: Sequence[BaseEnv], actions: np.ndarray) -> BatchResult:
         """:meth:`post_step` for all worlds at once, with numpy over their stacked state."""
         reachers: Sequence[ReacherEnv] = envs  # type: ignore[assignment]
         tip, target = reachers[0]._fingertip, reachers[0]._target
-        qpos = np.array([env._qpos for env in reachers])
-        qvel = np.array([env._qvel for env in reachers])
-        xpos = np.array([env._xpos for env in reachers])
+        state = stacked(envs)
+        qpos, qvel, xpos = state.get("qpos"), state.get("qvel"), state.get("xpos")
         vec = xpos[:, tip] - xpos[:, target]
-        dist_w = np.array([env.reward_dist_weight for env in reachers])
-        ctrl_w = np.array([env.reward_control_weight for env in reachers], dtype=np.float32)
+        n = len(reachers)
+        dist_w = np.fromiter((env.reward_dist_weight for env in reachers), np.float64, n)
+        ctrl_w = np.fromiter((env.reward_control_weight for env in reachers), np.float32, n)
         # The same operations as post_step, so the numbers (and types) match
         # exactly: a stacked matmul is the dot product np.linalg.norm takes.
         reward_dist = -np.sqrt(np.matmul(vec[:, None, :], vec[:, :, None])[:, 0, 0]) * dist_w

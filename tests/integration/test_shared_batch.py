@@ -1,5 +1,6 @@
 """Batched steps through the local pipe's shared-memory region (``shared_batch``):
-the same results as the msgpack path, used where offered, refused off the pipe."""
+the same results as the msgpack path (with the fast lane silent or loud), used
+where offered, refused off the pipe."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from remoteenv.agent import shared_lane
 from remoteenv.agent.connection import Connection
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launcher import Launcher
+from remoteenv.wire import doorbell
 
 
 def _trajectory(env_id: str, n: int, steps: int, k: int, autoreset: str) -> list[tuple]:
@@ -74,3 +76,23 @@ def test_only_the_launching_pipe_gets_the_region():
             assert sim.death() is None
         finally:
             conn.close()
+
+
+def test_a_loud_doorbell_gives_the_same_results(monkeypatch):
+    # Off x86-64 every request and reply of the fast lane also goes as its frame: forced here on both ends.
+    monkeypatch.setenv("REMOTEENV_LOUD_DOORBELL", "1")  # the sims read it when they start
+    monkeypatch.setattr(doorbell, "SILENT", False)
+    made: list[bool] = []
+    real_init = doorbell.Doorbell.__init__
+
+    def recording_init(self, header, silent=None):
+        real_init(self, header, silent)
+        made.append(self.silent)
+
+    monkeypatch.setattr(doorbell.Doorbell, "__init__", recording_init)
+    loud = _trajectory("remoteenv/CartPole-v0", 4, 60, 2, "NextStep")
+    assert made == [False, False]  # the agent's ends of both regions' lanes
+    monkeypatch.setattr(shared_lane, "attach", lambda conn: None)
+    plain = _trajectory("remoteenv/CartPole-v0", 4, 60, 2, "NextStep")
+    assert loud[-1] == ("lanes", [True, True]) and plain[-1] == ("lanes", [False, False])
+    assert_same(loud[:-1], plain[:-1], "trajectory")
