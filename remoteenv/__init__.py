@@ -33,8 +33,8 @@ __version__ = "0.1.0"
 _LAZY = {
     "OpenAIRemoteEnv": "remoteenv.remote_env",
     "RemoteVectorEnv": "remoteenv.vector_env",
-    "Launcher": "remoteenv.agent.launcher",
-    "SimGroup": "remoteenv.agent.sim_group",
+    "Launcher": "remoteenv.agent.launch.launcher",
+    "SimGroup": "remoteenv.agent.launch.sim_group",
     "RemoteEnvError": "remoteenv.agent.errors",
     "RemoteEnvTimeout": "remoteenv.agent.errors",
     "LaunchError": "remoteenv.agent.errors",
@@ -80,8 +80,8 @@ if TYPE_CHECKING:
         StateError,
         UnsendableValueError,
     )
-    from remoteenv.agent.launcher import Launcher
-    from remoteenv.agent.sim_group import SimGroup
+    from remoteenv.agent.launch.launcher import Launcher
+    from remoteenv.agent.launch.sim_group import SimGroup
     from remoteenv.remote_env import OpenAIRemoteEnv
     from remoteenv.startup import prestart
     from remoteenv.vector_env import RemoteVectorEnv

@@ -1,12 +1,12 @@
 """Delay specs for latency experiments: ``remoteenv.delays.Uniform(0, 3)`` and friends.
 
-The public path of :mod:`remoteenv.wire.delays` (the specs, in ticks or
-seconds) and :mod:`remoteenv.wire.delay_line` (the lock-step semantics).
+The public path of :mod:`remoteenv.wire.delays.delays` (the specs, in ticks or
+seconds) and :mod:`remoteenv.wire.delays.delay_line` (the lock-step semantics).
 ``docs/delays.md`` states what a delay of ``k`` ticks means.
 """
 
-from remoteenv.wire.delay_line import DelayLine, DelayStream, LockStepDelays, StepDelays, delay_rng
-from remoteenv.wire.delays import (
+from remoteenv.wire.delays.delay_line import DelayLine, DelayStream, LockStepDelays, StepDelays, delay_rng
+from remoteenv.wire.delays.delays import (
     MAX_DELAY_S,
     MAX_DELAY_TICKS,
     SECONDS,

@@ -3,9 +3,9 @@
 Runs in the agent process. ``reset``/``step``/``render`` become requests to
 the sim (see :mod:`remoteenv.protocol`); spaces and metadata come from the
 sim's handshake, so they are declared once, in the scene. Where the sim runs
-is a :class:`~remoteenv.agent.sim_group.SimGroup` (``launcher=``/``attach=``);
+is a :class:`~remoteenv.agent.launch.sim_group.SimGroup` (``launcher=``/``attach=``);
 its lifecycle (start or attach, handshake, restarts, close) is the
-:class:`~remoteenv.agent.session.SimSession` this env shares with
+:class:`~remoteenv.agent.session.session.SimSession` this env shares with
 :class:`remoteenv.RemoteVectorEnv`.
 """
 
@@ -20,16 +20,16 @@ import gymnasium as gym
 import numpy as np
 
 from remoteenv.agent.errors import RemoteEnvError
-from remoteenv.agent.forwarding import SceneReach
-from remoteenv.agent.latency import LatencyStats
-from remoteenv.agent.pausing import Pausable, Pauser
-from remoteenv.agent.pickling import RebuildOnUnpickle, remember_init_args
-from remoteenv.agent.restart import restarted_info
-from remoteenv.agent.session import SimSession, choose_group, scene_label
-from remoteenv.agent.session_attributes import SessionAttributes
-from remoteenv.agent.sim_group import LaunchSpec, SimGroup
+from remoteenv.agent.launch.restart import restarted_info
+from remoteenv.agent.launch.sim_group import LaunchSpec, SimGroup
+from remoteenv.agent.session.forwarding import SceneReach
+from remoteenv.agent.session.latency import LatencyStats
+from remoteenv.agent.session.pausing import Pausable, Pauser
+from remoteenv.agent.session.pickling import RebuildOnUnpickle, remember_init_args
+from remoteenv.agent.session.session import SimSession, choose_group, scene_label
+from remoteenv.agent.session.session_attributes import SessionAttributes
 from remoteenv.wire.actions import check_action
-from remoteenv.wire.delays import DelaySpec
+from remoteenv.wire.delays.delays import DelaySpec
 from remoteenv.wire.scalar_types import restore_scalars
 
 __all__ = ["OpenAIRemoteEnv", "check_action"]
@@ -77,20 +77,20 @@ class OpenAIRemoteEnv(SessionAttributes, Pausable, RebuildOnUnpickle, gym.Env):
         bind_host: have the sim bind tcp on this interface; beyond loopback
             this turns on CURVE (see :class:`remoteenv.Launcher`).
         curve: encrypt and authenticate with ZMQ CURVE even on loopback.
-        launcher: the :class:`~remoteenv.agent.sim_group.SimGroup` that starts
+        launcher: the :class:`~remoteenv.agent.launch.sim_group.SimGroup` that starts
             the sim (default: a local :class:`remoteenv.Launcher` with
             ``transport``, ``bind_host`` and ``curve``, which are ignored when
             this is given). A group whose layout is fixed already (e.g.
-            :class:`~remoteenv.agent.attach.AttachedSims`) is driven as it is;
+            :class:`~remoteenv.agent.launch.attach.AttachedSims`) is driven as it is;
             it must hold one sim. The env closes the group when it closes.
         attach: instead of launching a sim, drive instance 0 of the sims named
-            by this launch-info file (see :mod:`remoteenv.agent.attach`, and
+            by this launch-info file (see :mod:`remoteenv.agent.launch.attach`, and
             :meth:`attach` for other instances). The launch options above are
             then ignored, and ``close`` leaves the sim running.
 
     Real time: :meth:`pause`, :meth:`resume` and ``with env.unwrapped.paused():``
     stop the sim's clock between steps (no-ops in lock-step; see
-    :mod:`remoteenv.agent.pausing`).
+    :mod:`remoteenv.agent.session.pausing`).
 
     The scene's own attributes and methods are reachable too: :meth:`call`,
     :meth:`get_scene_attr`, :meth:`set_scene_attr`, and ``get_wrapper_attr`` /
@@ -98,10 +98,10 @@ class OpenAIRemoteEnv(SessionAttributes, Pausable, RebuildOnUnpickle, gym.Env):
     through to the scene for names this class does not have.
 
     Pickling or ``copy.deepcopy`` builds a new env from the same constructor
-    arguments, with a fresh sim (see :mod:`remoteenv.agent.pickling`).
+    arguments, with a fresh sim (see :mod:`remoteenv.agent.session.pickling`).
 
     Attributes:
-        latency_stats: :class:`remoteenv.agent.latency.LatencyStats` of every step so
+        latency_stats: :class:`remoteenv.agent.session.latency.LatencyStats` of every step so
             far: action latency (mean/p50/p99/max, seconds and ticks), wall
             round trip, late actions, pacing overruns. With ``real_time`` or
             ``action_delay`` each step's info also carries the timing keys
@@ -197,7 +197,7 @@ class OpenAIRemoteEnv(SessionAttributes, Pausable, RebuildOnUnpickle, gym.Env):
         ``timeout``, ``call_timeouts``, ``startup_timeout`` (the handshake's).
         No time limit is applied; wrap in ``gymnasium.wrappers.TimeLimit`` or use
         ``gymnasium.make(env_id, attach=path)``. Closing the env leaves the sim running."""
-        from remoteenv.agent.attach import AttachedSims
+        from remoteenv.agent.launch.attach import AttachedSims
 
         sims = AttachedSims(launch_info, [instance])
         kwargs.setdefault("render_mode", sims.info.render_mode)

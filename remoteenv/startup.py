@@ -1,7 +1,7 @@
 """``remoteenv.prestart()``: get this process ready to launch sims fast, ahead of the first ``gym.make``.
 
 Runs in the agent process. Each sim is forked by a zygote
-(:mod:`remoteenv.agent.zygote`), a process that has imported what sims need;
+(:mod:`remoteenv.agent.launch.zygote`), a process that has imported what sims need;
 the first launch in a process starts that zygote and waits for its imports
 (about as long as starting a sim the plain way). :func:`prestart` starts it
 now, in the background, and imports the env classes here, so that a
@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import importlib
 
-from remoteenv.agent.sim_command import launch_environment
-from remoteenv.agent.zygote import registry
+from remoteenv.agent.launch.sim_command import launch_environment
+from remoteenv.agent.launch.zygote import registry
 
 
 def prestart(env_id: str | None = None, render_mode: str | None = None) -> bool:

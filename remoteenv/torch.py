@@ -52,8 +52,8 @@ import torch.utils.data
 import zmq
 
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout
-from remoteenv.agent.launcher import Launcher
-from remoteenv.agent.processes import pid_alive
+from remoteenv.agent.launch.launcher import Launcher
+from remoteenv.agent.launch.processes import pid_alive
 from remoteenv.wire import protocol
 from remoteenv.wire.errors import short_repr
 from remoteenv.wire.stream import WINDOW, credit_message, is_superseded

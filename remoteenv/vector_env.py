@@ -10,12 +10,12 @@ one world and is driven with plain ``step``/``reset`` requests, so every world
 keeps its own paced clock.
 
 The class keeps Gymnasium's vector semantics; the jobs under it live in
-:mod:`remoteenv.agent`: the sims' lifecycle (:mod:`~remoteenv.agent.session`),
-the requests of a call and their gathering (:mod:`~remoteenv.agent.vector_requests`,
-:mod:`~remoteenv.agent.fan_in`), autoreset planning
-(:mod:`~remoteenv.agent.autoreset`), reset arguments
-(:mod:`~remoteenv.agent.reset_args`), result assembly
-(:mod:`~remoteenv.agent.vector_results`) and restarts (:mod:`~remoteenv.agent.restart`).
+:mod:`remoteenv.agent`: the sims' lifecycle (:mod:`~remoteenv.agent.session.session`),
+the requests of a call and their gathering (:mod:`~remoteenv.agent.vector.vector_requests`,
+:mod:`~remoteenv.agent.connection.fan_in`), autoreset planning
+(:mod:`~remoteenv.agent.vector.autoreset`), reset arguments
+(:mod:`~remoteenv.agent.session.reset_args`), result assembly
+(:mod:`~remoteenv.agent.vector.vector_results`) and restarts (:mod:`~remoteenv.agent.launch.restart`).
 """
 
 from __future__ import annotations
@@ -30,24 +30,24 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, iterate
 
-from remoteenv.agent.autoreset import after_reset, after_step, plan_ops
 from remoteenv.agent.errors import StateError
-from remoteenv.agent.forwarding import SceneReach, VectorAttributes
-from remoteenv.agent.latency import LatencyStats
-from remoteenv.agent.pausing import Pausable, Pauser
-from remoteenv.agent.pickling import RebuildOnUnpickle, remember_init_args
-from remoteenv.agent.reset_args import is_int_seed, split_reset_mask, world_seeds
-from remoteenv.agent.restart import restarted_info
-from remoteenv.agent.session import SimSession, choose_group, scene_label
-from remoteenv.agent.session_attributes import SessionAttributes
-from remoteenv.agent.sim_group import LaunchSpec, SimGroup
-from remoteenv.agent.vector_async import AsyncWorlds, assemble_chunks
-from remoteenv.agent.vector_layout import check_sims, default_envs_per_process
-from remoteenv.agent.vector_requests import VectorRequests
-from remoteenv.agent.vector_results import ObsBatch, assemble
+from remoteenv.agent.launch.restart import restarted_info
+from remoteenv.agent.launch.sim_group import LaunchSpec, SimGroup
+from remoteenv.agent.session.forwarding import SceneReach, VectorAttributes
+from remoteenv.agent.session.latency import LatencyStats
+from remoteenv.agent.session.pausing import Pausable, Pauser
+from remoteenv.agent.session.pickling import RebuildOnUnpickle, remember_init_args
+from remoteenv.agent.session.reset_args import is_int_seed, split_reset_mask, world_seeds
+from remoteenv.agent.session.session import SimSession, choose_group, scene_label
+from remoteenv.agent.session.session_attributes import SessionAttributes
+from remoteenv.agent.vector.autoreset import after_reset, after_step, plan_ops
+from remoteenv.agent.vector.vector_async import AsyncWorlds, assemble_chunks
+from remoteenv.agent.vector.vector_layout import check_sims, default_envs_per_process
+from remoteenv.agent.vector.vector_requests import VectorRequests
+from remoteenv.agent.vector.vector_results import ObsBatch, assemble
 from remoteenv.wire.actions import check_actions
 from remoteenv.wire.batch import merge_infos
-from remoteenv.wire.delays import DelaySpec
+from remoteenv.wire.delays.delays import DelaySpec
 from remoteenv.wire.handshake import Handshake
 
 
@@ -91,13 +91,13 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
             ``info["remoteenv_restarted"] = True`` (with ``SAME_STEP`` the new
             episodes start in that step, the ended ones in ``final_obs``); a
             failed ``reset`` is retried on the new process.
-        launcher: the :class:`~remoteenv.agent.sim_group.SimGroup` that starts
+        launcher: the :class:`~remoteenv.agent.launch.sim_group.SimGroup` that starts
             the sims (default: a local :class:`remoteenv.Launcher` with
             ``transport``, ``bind_host`` and ``curve``). A group whose layout is
             fixed already is driven as it is: ``num_envs`` must match it, and
             its worlds per instance and stepping are taken. The env closes the
             group when it closes.
-        attach: a launch-info path (or :class:`~remoteenv.agent.attach.AttachedSims`):
+        attach: a launch-info path (or :class:`~remoteenv.agent.launch.attach.AttachedSims`):
             drive every world of those sims (see :meth:`attach`).
         batch_size: worlds :meth:`recv` returns (EnvPool's asynchronous API,
             lock-step only); default ``num_envs``.
@@ -107,13 +107,13 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
     the same seeds give the same trajectories, for any K.
 
     ``call``, ``get_attr`` and ``set_attr`` follow Gymnasium's vector API and
-    reach each world's scene (:class:`~remoteenv.agent.forwarding.VectorAttributes`),
+    reach each world's scene (:class:`~remoteenv.agent.session.forwarding.VectorAttributes`),
     e.g. ``set_attr("pole_mass", [0.05, 0.1, 0.2])`` for per-world model
     parameters. Pickling or ``copy.deepcopy`` builds a new env from the same
     constructor arguments, with fresh sims.
 
     Attributes:
-        latency_stats: :class:`remoteenv.agent.latency.LatencyStats` of every
+        latency_stats: :class:`remoteenv.agent.session.latency.LatencyStats` of every
             vector step so far: one wall round trip per call, and with
             ``real_time`` or ``action_delay`` each world's action latency.
     """
@@ -265,7 +265,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         ``max_episode_steps`` (no limit unless given), ``render_mode`` (default:
         the sims'), ``timeout``, ``call_timeouts``, ``startup_timeout``. Closing
         leaves the sims running."""
-        from remoteenv.agent.attach import AttachedSims
+        from remoteenv.agent.launch.attach import AttachedSims
 
         sims = AttachedSims(launch_info)
         kwargs.setdefault("render_mode", sims.info.render_mode)

@@ -11,7 +11,7 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import remoteenv
-from remoteenv.agent.launcher import pid_alive
+from remoteenv.agent.launch.launcher import pid_alive
 
 
 def wait_gone(pid: int, timeout: float = 5.0) -> bool:
@@ -46,7 +46,9 @@ def _sim_children() -> set[int]:
     that run a scene, and the children of its zygotes (which fork sims)."""
     me = os.getpid()
     processes = _processes()
-    zygotes = {pid for pid, (parent, cmd) in processes.items() if parent == me and b"sim/zygote/start.py" in cmd}
+    zygotes = {
+        pid for pid, (parent, cmd) in processes.items() if parent == me and b"sim/process/zygote/start.py" in cmd
+    }
     return {
         pid
         for pid, (parent, cmd) in processes.items()

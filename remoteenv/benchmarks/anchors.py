@@ -21,8 +21,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from remoteenv.sim.batch_physics import PhysicsThreads
-from remoteenv.wire.hot_wait import usable_cpus
+from remoteenv.sim.stepping.batch_physics import PhysicsThreads
+from remoteenv.wire.shared_memory.hot_wait import usable_cpus
 
 
 class PhysicsLimit:

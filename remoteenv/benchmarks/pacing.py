@@ -18,7 +18,7 @@ and prints:
 With ``--rt-hog N`` it runs ``N`` CPU-bound processes beside the benchmark
 (plain busy loops, started before and stopped after), to see pacing on a busy
 host. With ``--rt-levers`` it runs the benchmark once per configuration of
-the sim's pacing levers (:mod:`remoteenv.sim.pacing_levers`: the spin window,
+the sim's pacing levers (:mod:`remoteenv.sim.process.pacing_levers`: the spin window,
 the garbage collector, CPU affinity, ``SCHED_FIFO``; each alone, then all)
 and prints one comparison table, each row next to the baseline. It notes
 the load average before each run.
@@ -39,9 +39,9 @@ from typing import Any
 import numpy as np
 
 from remoteenv import controllers
-from remoteenv.agent.connection import Connection
-from remoteenv.agent.latency import LatencyStats
-from remoteenv.agent.launcher import Launcher
+from remoteenv.agent.connection.connection import Connection
+from remoteenv.agent.launch.launcher import Launcher
+from remoteenv.agent.session.latency import LatencyStats
 from remoteenv.wire import protocol
 
 

@@ -2,7 +2,7 @@
 
 Agent side; it launches agent processes that launch sims. Each repeat starts
 one fresh agent process per way of starting sims, in alternating order:
-forked by a zygote (the default, :mod:`remoteenv.agent.zygote`) and the
+forked by a zygote (the default, :mod:`remoteenv.agent.launch.zygote`) and the
 plain way (``REMOTEENV_ZYGOTE=0``: ``python <scene script>``). Every agent
 imports Gymnasium and remoteenv first (not timed), then times:
 
@@ -47,7 +47,7 @@ AGENT = textwrap.dedent(
     import json, os, signal, sys, time
     import gymnasium as gym
     import remoteenv
-    from remoteenv.agent.sim_process import kill_group
+    from remoteenv.agent.launch.sim_process import kill_group
     from remoteenv.benchmarks.anchors import cpu_seconds
 
     env_id, later, vector = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])

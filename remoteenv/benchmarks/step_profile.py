@@ -20,10 +20,10 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
-from remoteenv.agent.autoreset import after_step, plan_ops
-from remoteenv.agent.vector_results import ObsBatch, assemble
-from remoteenv.sim.batch import BatchCommands, plain_step_reply
-from remoteenv.sim.lock_step import LockStepping
+from remoteenv.agent.vector.autoreset import after_step, plan_ops
+from remoteenv.agent.vector.vector_results import ObsBatch, assemble
+from remoteenv.sim.stepping.batch import BatchCommands, plain_step_reply
+from remoteenv.sim.stepping.lock_step import LockStepping
 from remoteenv.wire import protocol
 from remoteenv.wire.actions import check_actions
 

@@ -6,7 +6,7 @@ import argparse
 import os
 from typing import Any
 
-from remoteenv.wire import keys
+from remoteenv.wire.files import keys
 
 
 def add_parser(sub: Any) -> None:

@@ -240,7 +240,7 @@ class SweepFiles:
 
     def write_json(self, doc: dict[str, Any]) -> None:
         """Replace ``sweep.json`` with ``doc`` (atomically)."""
-        from remoteenv.wire.files import write_atomic
+        from remoteenv.wire.files.files import write_atomic
 
         write_atomic(self.json_path, json.dumps(doc, indent=1))
 

@@ -1,7 +1,7 @@
 """``python -m remoteenv launch <scene>``: start sims for other processes to attach to.
 
 The command starts the sims, writes a launch-info file (see
-:mod:`remoteenv.agent.attach`) and stays in the foreground. The sims live exactly as
+:mod:`remoteenv.agent.launch.attach`) and stays in the foreground. The sims live exactly as
 long as the command: on Ctrl-C or SIGTERM it stops them and removes the
 launch-info file (and the client key file); if the command is killed outright,
 the sims notice their parent is gone and exit by themselves. If a sim dies,
@@ -92,11 +92,11 @@ def _advertised(endpoint: str, args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from remoteenv.agent.attach import AttachedSim, LaunchInfo, write_launch_info
     from remoteenv.agent.errors import RemoteEnvError
-    from remoteenv.agent.launcher import Launcher
+    from remoteenv.agent.launch.attach import AttachedSim, LaunchInfo, write_launch_info
+    from remoteenv.agent.launch.launcher import Launcher
+    from remoteenv.wire.files.keys import write_secret_key
     from remoteenv.wire.handshake import handshake_request, parse_handshake
-    from remoteenv.wire.keys import write_secret_key
 
     env_kwargs = json_map(args.env_kwargs, "--env-kwargs")
     out = os.path.abspath(args.out)

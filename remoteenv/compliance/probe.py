@@ -22,7 +22,7 @@ from remoteenv.compliance.handshake import Handshake, parse_handshake
 from remoteenv.compliance.values import envelope_problem
 from remoteenv.wire import protocol
 from remoteenv.wire.errors import short_repr
-from remoteenv.wire.keys import KeyPair
+from remoteenv.wire.files.keys import KeyPair
 
 #: Frames from the server a probe's socket queues (libzmq stops reading beyond).
 PROBE_RCVHWM = 4
@@ -66,7 +66,7 @@ def targets_from_launch_info(
     Raises :class:`~remoteenv.agent.errors.RemoteEnvError` (kind ``"launch"``)
     if the file cannot be read or has no such instance.
     """
-    from remoteenv.agent.attach import AttachedSims
+    from remoteenv.agent.launch.attach import AttachedSims
 
     sims = AttachedSims(path, None if instance is None else [instance])
     keys = sims.curve_client_keypair

@@ -10,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 
 from remoteenv.latency_twin.trace import ROUNDINGS, twin_latency, twin_values, write_trace_file
-from remoteenv.wire.delays import Trace
+from remoteenv.wire.delays.delays import Trace
 
 
 @dataclass

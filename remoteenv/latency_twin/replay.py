@@ -9,7 +9,7 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 
 from remoteenv.latency_twin.trace import decision_ticks
-from remoteenv.wire.delays import Trace
+from remoteenv.wire.delays.delays import Trace
 
 
 class LockStepTwin(gym.Wrapper):

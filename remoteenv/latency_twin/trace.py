@@ -5,8 +5,8 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 
-from remoteenv.wire.delays import MAX_DELAY_TICKS, MAX_VALUES
-from remoteenv.wire.files import write_atomic
+from remoteenv.wire.delays.delays import MAX_DELAY_TICKS, MAX_VALUES
+from remoteenv.wire.files.files import write_atomic
 
 #: How a real-time latency becomes whole ticks: ``"nearest"`` (the tick boundary
 #: nearest to the substep where the action took effect; halves go up) or

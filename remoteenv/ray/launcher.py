@@ -22,13 +22,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from remoteenv.agent.connection import SimConnection, connect_sim
+from remoteenv.agent.connection.connection import SimConnection, connect_sim
 from remoteenv.agent.errors import RemoteEnvError
-from remoteenv.agent.sim_group import LaunchSpec, SimLayout
+from remoteenv.agent.launch.sim_group import LaunchSpec, SimLayout
 from remoteenv.ray.placement import Placement, cluster_capacity, create_placement_group
 from remoteenv.ray.sim_actor import SimActor, SimSpec, shipped_scenes_dir
 from remoteenv.ray.sim_handle import RaySim, ray_reason
-from remoteenv.wire.keys import KeyPair, generate_keypair
+from remoteenv.wire.files.keys import KeyPair, generate_keypair
 
 #: Threads of each actor: ``wait_exit`` holds one for as long as its sim runs.
 ACTOR_CONCURRENCY = 4
@@ -93,7 +93,7 @@ def _remove_all(state: _State) -> None:
 
 
 class RayLauncher:
-    """Places an env's sims on a Ray cluster (a :class:`~remoteenv.agent.sim_group.SimGroup`).
+    """Places an env's sims on a Ray cluster (a :class:`~remoteenv.agent.launch.sim_group.SimGroup`).
 
     Pass one to an env's ``launcher=``::
 

@@ -6,9 +6,9 @@ address with an OS-chosen port and CURVE on, waits for the child's ready
 file, and reports where it listens. It keeps the child's stderr in a private
 dir on the node for error messages, and writes its delay specs there (they
 arrive as an argument of this actor's construction, so they reach the node
-through Ray; see :mod:`remoteenv.wire.delay_file`). The child watches the actor as its
+through Ray; see :mod:`remoteenv.wire.delays.delay_file`). The child watches the actor as its
 parent (``--parent-pid``): if the actor dies, however it dies, the child
-exits within about a second (see :mod:`remoteenv.sim.orphan`).
+exits within about a second (see :mod:`remoteenv.sim.process.orphan`).
 
 The actor is threaded (``max_concurrency`` > 1): :meth:`SimActor.wait_exit`
 blocks one thread until the child exits, so the agent learns of a sim's death
@@ -32,10 +32,10 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any
 
-from remoteenv.agent.sim_command import scene_command, wait_ready, write_sim_delay_file
-from remoteenv.agent.sim_process import SimProcess
+from remoteenv.agent.launch.sim_command import scene_command, wait_ready, write_sim_delay_file
+from remoteenv.agent.launch.sim_process import SimProcess
 from remoteenv.wire.addresses import is_loopback
-from remoteenv.wire.keys import check_key, write_public_keys, write_secret_key
+from remoteenv.wire.files.keys import check_key, write_public_keys, write_secret_key
 
 #: Seconds a stopping child gets between SIGTERM and SIGKILL.
 STOP_GRACE_S = 2.0
@@ -56,7 +56,7 @@ class SimSpec:
         env_kwargs: JSON-able keyword arguments of the scene's env class.
         render_mode, real_time, real_time_factor: as for :class:`remoteenv.Launcher`.
         delays: the text of the sim's delay file (every delay spec's wire form,
-            :meth:`remoteenv.agent.sim_group.LaunchSpec.delay_file_text`), None
+            :meth:`remoteenv.agent.launch.sim_group.LaunchSpec.delay_file_text`), None
             without delays; the actor writes it next to its sim.
         extra_args: more command-line arguments for the scene script.
         startup_timeout: seconds to wait for the child's ready file.

@@ -22,7 +22,7 @@ def ray_reason(exc: BaseException, limit: int = 300) -> str:
 
 @dataclass
 class RaySim:
-    """One sim process on the cluster (a :class:`remoteenv.agent.sim_group.SimHandle`).
+    """One sim process on the cluster (a :class:`remoteenv.agent.launch.sim_group.SimHandle`).
 
     Attributes:
         instance: the sim's index in its group.

@@ -1,7 +1,25 @@
-"""Code that runs in the sim process: the scene's env, its stepping and the server."""
+"""Code that runs in the sim process, grouped by concept.
 
-from remoteenv.sim.base_env import BaseEnv
+- :mod:`remoteenv.sim.scene`: the contract a scene subclasses (:class:`BaseEnv`,
+  :class:`BatchResult`), its checks and its viewer;
+- :mod:`remoteenv.sim.stepping`: how worlds advance (lock-step, real time,
+  batched physics, :func:`stacked` views for batched hooks);
+- :mod:`remoteenv.sim.transport`: how requests arrive (channels, peers,
+  drivers, limits, the shared region);
+- :mod:`remoteenv.sim.serving`: the server loop and its commands;
+- :mod:`remoteenv.sim.process`: the process's life (logging, orphan watch,
+  pacing, the zygote);
+- :mod:`remoteenv.sim.scene_main` and :mod:`remoteenv.sim.publisher`: the
+  entry points a sim process runs.
+
+A scene imports what it needs from here: ``from remoteenv.sim import BaseEnv,
+BatchResult, run_scene, stacked``.
+"""
+
+from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.scene.batch_result import BatchResult
 from remoteenv.sim.scene_main import run_scene
-from remoteenv.sim.server import RemoteControlledAgent
+from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.stepping.batch_worlds import stacked
 
-__all__ = ["BaseEnv", "RemoteControlledAgent", "run_scene"]
+__all__ = ["BaseEnv", "BatchResult", "RemoteControlledAgent", "run_scene", "stacked"]

@@ -55,10 +55,10 @@ if __name__ == "__main__" and sys.path and os.path.abspath(sys.path[0]) == os.pa
 
 import zmq
 
-from remoteenv.sim.base_env import BaseEnv
-from remoteenv.sim.lifecycle import exit_on_sigterm, remove_ipc_file, write_ready_file
-from remoteenv.sim.log import log_to_stderr
-from remoteenv.sim.orphan import CHECK_INTERVAL_S, parent_alive
+from remoteenv.sim.process.lifecycle import exit_on_sigterm, remove_ipc_file, write_ready_file
+from remoteenv.sim.process.log import log_to_stderr
+from remoteenv.sim.process.orphan import CHECK_INTERVAL_S, parent_alive
+from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.scene_main import scene_argument_parser
 from remoteenv.wire import protocol
 from remoteenv.wire.addresses import is_loopback

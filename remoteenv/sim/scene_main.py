@@ -9,14 +9,14 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from remoteenv.sim.base_env import BaseEnv
-from remoteenv.sim.log import log_to_stderr
-from remoteenv.sim.pacing_levers import GC_MODES, apply_levers
-from remoteenv.sim.server import RemoteControlledAgent
-from remoteenv.wire.delay_file import read_delay_file
-from remoteenv.wire.delays import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
+from remoteenv.sim.process.log import log_to_stderr
+from remoteenv.sim.process.pacing_levers import GC_MODES, apply_levers
+from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.wire.delays.delay_file import read_delay_file
+from remoteenv.wire.delays.delays import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
 from remoteenv.wire.errors import EXIT_SCENE_ARGS, SCENE_ARGS_MARKER, ProtocolError, short_repr
-from remoteenv.wire.keys import read_key, read_keys
+from remoteenv.wire.files.keys import read_key, read_keys
 
 
 def _delay_argument(text: str, unit: str) -> DelaySpec:
@@ -101,10 +101,10 @@ def scene_argument_parser(description: str | None = None) -> argparse.ArgumentPa
         "--delay-file",
         default=None,
         help="a JSON file of delay specs (keys action_delay, obs_delay, link_delay; see "
-        "remoteenv.wire.delay_file): how launchers pass them, since a recorded trace is too long for "
+        "remoteenv.wire.delays.delay_file): how launchers pass them, since a recorded trace is too long for "
         "a command line. A delay given here and as its own flag is refused",
     )
-    levers = p.add_argument_group("real-time pacing levers (see remoteenv.sim.pacing_levers)")
+    levers = p.add_argument_group("real-time pacing levers (see remoteenv.sim.process.pacing_levers)")
     levers.add_argument("--rt-priority", type=int, default=0, help="run under SCHED_FIFO at this priority (1..99)")
     levers.add_argument("--rt-cpus", default=None, help="pin the process to these CPUs, e.g. 1 or 0,1")
     levers.add_argument("--rt-gc", choices=GC_MODES, default="auto", help="garbage collector: auto, freeze or off")

@@ -93,7 +93,7 @@ A frame that cannot be decoded as a request gets an error reply with
 ``seq = -1``; a client takes such a reply as the answer to its request only
 when it has no earlier request outstanding on that connection (otherwise the
 undecodable frame may have been an earlier one) and never waits past it
-for nothing: see :class:`remoteenv.agent.sim_connection.SimConnection`. Error kinds: ``"protocol"`` (malformed request, unknown command,
+for nothing: see :class:`remoteenv.agent.connection.sim_connection.SimConnection`. Error kinds: ``"protocol"`` (malformed request, unknown command,
 version mismatch), ``"invalid_action"``, ``"scene"`` (the env code raised),
 ``"state"`` (e.g. step before reset), ``"attribute"`` and ``"unsendable"``
 (see ``get_attr`` below).
@@ -113,7 +113,7 @@ physics substep) and ``frame_skip``; ``stepping`` holds ``mode``
 ``action_delay`` (ticks; the largest of a random model) and, with delays
 beyond a constant action delay, ``obs_delay`` (the largest, ticks),
 ``action_delay_spec`` and ``obs_delay_spec`` (the models' wire forms, see
-:mod:`remoteenv.wire.delays`); in real time ``real_time_factor`` and, with an
+:mod:`remoteenv.wire.delays.delays`); in real time ``real_time_factor`` and, with an
 emulated link, ``link_delay_spec``.
 
 ``reset`` ``{"world": int, "seed": int | nil, "options": map | nil}`` ->
@@ -134,7 +134,7 @@ only): per world, ``pacing_error_s`` and ``apply_delay_s`` summaries
 ``substeps``, ``period_s`` (and ``link_delay_s``, the emulated link delays
 drawn, when the reference server emulates one); ``clear`` resets them after
 replying. In real time a ``step`` reply is sent when its action has been in
-force for one control tick (see :mod:`remoteenv.sim.real_time`).
+force for one control tick (see :mod:`remoteenv.sim.stepping.real_time`).
 
 ``pause`` ``{}`` -> ``{"sim_time": [float, ...]}`` and ``resume`` ``{}`` ->
 ``{"sim_time": [float, ...], "paused_s": float}`` (real-time sims that list
@@ -173,7 +173,7 @@ the agent that launched it, over the local pipe only; anyone else gets a
 anonymous file the agent maps as ``/proc/<pid>/fd/<fd>``, sealed against
 shrinking and growing (``F_SEAL_SHRINK | F_SEAL_GROW | F_SEAL_SEAL``) before
 it is offered, laid out as
-:mod:`remoteenv.wire.shared_batch` says. Afterwards a ``step_batch`` on the
+:mod:`remoteenv.wire.shared_memory.shared_batch` says. Afterwards a ``step_batch`` on the
 pipe may carry ``"shared": true`` and no ``actions`` (nor ``worlds``): the
 actions of positions ``0 .. n-1`` are rows ``0 .. n-1`` of the region's
 actions block, checked as sent ones are. If every world steps and none
@@ -183,7 +183,7 @@ of the region; any other outcome is answered in the usual form.
 
 The fast lane. A region whose layout has ``"info_columns": M`` (``M > 0``)
 also holds a header of 16 ``<i8`` doorbell words, the request's ``ops`` and
-``worlds`` and ``M`` typed info columns (:mod:`remoteenv.wire.shared_batch`).
+``worlds`` and ``M`` typed info columns (:mod:`remoteenv.wire.shared_memory.shared_batch`).
 The agent may then post a whole ``step_batch`` there: it writes ops, worlds
 (when it names them) and actions, then the words ``REQ_N`` (``n``),
 ``REQ_NAMED`` (1: the worlds block names the worlds) and last ``REQ_SEQ``
@@ -213,7 +213,7 @@ request and reply then goes as its frame. The agent takes a region reply
 only for the request it awaits, in the announced layout, and refuses
 (``protocol``) a region reply to a request that was not posted there, an
 ``info_layout`` off these rules, and a ``REP_SEQ`` or ``REP_INFO`` that does
-not match. The words: :mod:`remoteenv.wire.doorbell`.
+not match. The words: :mod:`remoteenv.wire.shared_memory.doorbell`.
 
 In both, ``obs`` is one array of shape ``(n, *obs_shape)`` when every world's
 obs is an array of one shape and dtype, else a list of ``n`` obs. ``infos`` is

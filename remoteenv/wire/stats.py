@@ -1,7 +1,7 @@
 """Running statistics of timing samples (both processes use it).
 
 The sim process keeps its pacing figures with :class:`RunningStats`; the
-agent's :class:`remoteenv.agent.latency.LatencyStats` is built from them.
+agent's :class:`remoteenv.agent.session.latency.LatencyStats` is built from them.
 Durations are in seconds unless a name says ``ticks``.
 """
 

@@ -1,7 +1,7 @@
 """The control channel between a launcher and its zygote (a pre-imported process that forks sims).
 
-Used on both sides: the agent's :mod:`remoteenv.agent.zygote` sends fork
-requests, the zygote (:mod:`remoteenv.sim.zygote`) answers them. This is not
+Used on both sides: the agent's :mod:`remoteenv.agent.launch.zygote` sends fork
+requests, the zygote (:mod:`remoteenv.sim.process.zygote`) answers them. This is not
 the sim protocol of :mod:`remoteenv.wire.protocol` (a forked sim speaks that
 one, as every sim does); it only starts processes and reports their exits.
 

@@ -67,9 +67,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from remoteenv.sim import BaseEnv, run_scene
-from remoteenv.sim.batch_result import BatchResult
-from remoteenv.sim.batch_worlds import stacked
+from remoteenv.sim import BaseEnv, BatchResult, run_scene, stacked
 
 MODEL_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "hexapod.xml")
 

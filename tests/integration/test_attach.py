@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from remoteenv import OpenAIRemoteEnv, RemoteEnvError, controllers
-from remoteenv.agent.attach import AttachedSim, LaunchInfo, read_launch_info, write_launch_info
+from remoteenv.agent.launch.attach import AttachedSim, LaunchInfo, read_launch_info, write_launch_info
 
 
 def _start_launch(tmp_path, *extra):

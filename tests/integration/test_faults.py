@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from remoteenv import OpenAIRemoteEnv, RemoteEnvError, RemoteEnvTimeout, scene_path
-from remoteenv.agent.launcher import pid_alive
-from remoteenv.agent.restart import INFO_RESTARTED, INFO_RESTARTS
+from remoteenv.agent.launch.launcher import pid_alive
+from remoteenv.agent.launch.restart import INFO_RESTARTED, INFO_RESTARTS
 
 
 def wait_gone(pid: int, timeout: float = 5.0) -> bool:
@@ -67,7 +67,7 @@ def test_crash_during_step_names_instance_code_and_stderr(make_env):
 
 def test_the_dead_instance_is_named_among_several():
     from remoteenv import Launcher, protocol
-    from remoteenv.agent.connection import Connection
+    from remoteenv.agent.connection.connection import Connection
 
     with Launcher(FAULTY, 3, startup_timeout=120.0) as launcher:
         conns = [Connection(s.endpoint, instance=s.instance, timeout=30.0, death_check=s.death) for s in launcher.sims]

@@ -11,8 +11,8 @@ import time
 
 import pytest
 
-from remoteenv.agent.attach import LaunchInfo, read_launch_info, write_launch_info
-from remoteenv.wire import files, keys
+from remoteenv.agent.launch.attach import LaunchInfo, read_launch_info, write_launch_info
+from remoteenv.wire.files import files, keys
 
 
 def test_a_planted_symlink_at_the_launch_info_path_is_replaced_not_followed(tmp_path):

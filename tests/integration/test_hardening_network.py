@@ -22,7 +22,7 @@ import pytest
 import zmq
 
 from remoteenv import OpenAIRemoteEnv, scene_path
-from remoteenv.sim.limits import BACKLOG_BYTES, HANDSHAKE_IVL_S, MAX_PEERS, ROUTER_RCVHWM
+from remoteenv.sim.transport.limits import BACKLOG_BYTES, HANDSHAKE_IVL_S, MAX_PEERS, ROUTER_RCVHWM
 from remoteenv.wire import protocol
 
 # REMOTEENV_FLOOD_S and REMOTEENV_STORM scale both up for a measurement run (docs/security.md).

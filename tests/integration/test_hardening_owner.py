@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from remoteenv import OpenAIRemoteEnv, RemoteVectorEnv, StateError, scene_path
-from remoteenv.agent.launcher import pid_alive
-from remoteenv.agent.zmq_connection import ZmqConnection
+from remoteenv.agent.connection.zmq_connection import ZmqConnection
+from remoteenv.agent.launch.launcher import pid_alive
 
 
 def _gone(pid: int, within_s: float = 30.0) -> bool:

@@ -10,7 +10,7 @@ import pytest
 import zmq
 
 from remoteenv import OpenAIRemoteEnv, StateError, scene_path
-from remoteenv.agent.zmq_connection import ZmqConnection
+from remoteenv.agent.connection.zmq_connection import ZmqConnection
 from remoteenv.wire import protocol
 
 

@@ -12,7 +12,7 @@ from gymnasium.utils.env_checker import check_env
 from gymnasium.utils.passive_env_checker import env_render_passive_checker
 
 from remoteenv import controllers
-from remoteenv.sim import viewer
+from remoteenv.sim.scene import viewer
 
 ENV_ID = "remoteenv/Hexapod-v0"
 

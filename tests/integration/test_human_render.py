@@ -6,7 +6,7 @@ import gymnasium as gym
 import pytest
 
 from remoteenv import RemoteEnvError
-from remoteenv.sim import viewer
+from remoteenv.sim.scene import viewer
 
 
 def test_human_is_a_declared_render_mode():

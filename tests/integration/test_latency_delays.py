@@ -17,7 +17,7 @@ import remoteenv
 from remoteenv import RemoteVectorEnv
 from remoteenv.delays import Categorical, Constant, Trace, Uniform
 from remoteenv.scenes.reacher.reacher_scene import ReacherEnv
-from remoteenv.wire.delay_line import ACTION_STREAM, OBS_STREAM, delay_rng
+from remoteenv.wire.delays.delay_line import ACTION_STREAM, OBS_STREAM, delay_rng
 
 STEPS = 30
 DT = 0.02

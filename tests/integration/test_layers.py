@@ -37,7 +37,7 @@ def _loaded_after(statement: str) -> list[str]:
         "from remoteenv.sim import BaseEnv, RemoteControlledAgent, run_scene",
         "import remoteenv.scenes.cartpole.cartpole_scene",
         "import remoteenv.scenes.reacher.reacher_scene",
-        "import remoteenv.sim.zygote.server",
+        "import remoteenv.sim.process.zygote.server",
     ],
 )
 def test_sim_side_loads_no_agent_module(statement: str) -> None:

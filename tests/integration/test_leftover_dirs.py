@@ -32,7 +32,7 @@ GONE_WITHIN_S = 10.0
 STALL = textwrap.dedent(
     """
     import os, sys, time
-    import remoteenv.agent.sim_process as sim_process
+    import remoteenv.agent.launch.sim_process as sim_process
 
     def stall(marker=None):
         def rmtree(path, *args, **kwargs):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import remoteenv
-from remoteenv.agent.launcher import Launcher
+from remoteenv.agent.launch.launcher import Launcher
 
 ID = "remoteenv/CartPole-v0"
 

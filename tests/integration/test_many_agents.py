@@ -10,7 +10,7 @@ import sys
 import textwrap
 import time
 
-from remoteenv.agent.launcher import pid_alive
+from remoteenv.agent.launch.launcher import pid_alive
 
 AGENTS = 4
 ENVS_PER_AGENT = 8

@@ -18,8 +18,8 @@ import zmq
 
 from remoteenv import Launcher, OpenAIRemoteEnv, protocol, scene_path
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
-from remoteenv.sim.server import RemoteControlledAgent
-from remoteenv.wire import keys
+from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.wire.files import keys
 
 # How long a rejected client waits for an answer that must never come.
 SILENCE_MS = 1500

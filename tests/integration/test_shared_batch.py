@@ -11,11 +11,11 @@ from equality import assert_same
 
 import remoteenv  # noqa: F401  (registers the ids)
 from remoteenv import scene_path
-from remoteenv.agent import shared_lane
-from remoteenv.agent.connection import Connection
+from remoteenv.agent.connection import shared_lane
+from remoteenv.agent.connection.connection import Connection
 from remoteenv.agent.errors import RemoteEnvError
-from remoteenv.agent.launcher import Launcher
-from remoteenv.wire import doorbell
+from remoteenv.agent.launch.launcher import Launcher
+from remoteenv.wire.shared_memory import doorbell
 
 
 def _trajectory(env_id: str, n: int, steps: int, k: int, autoreset: str) -> list[tuple]:

@@ -18,9 +18,9 @@ def _sim_process(code: str) -> subprocess.CompletedProcess:
 def test_by_default_records_go_to_stderr_with_the_instance() -> None:
     out = _sim_process(
         "import logging\n"
-        "from remoteenv.sim.log import log_to_stderr\n"
+        "from remoteenv.sim.process.log import log_to_stderr\n"
         "log_to_stderr(3)\n"
-        "logging.getLogger('remoteenv.sim.server').info('hello')\n"
+        "logging.getLogger('remoteenv.sim.serving.server').info('hello')\n"
     )
     assert out.stderr == "remoteenv sim 3: INFO hello\n"
 
@@ -29,8 +29,8 @@ def test_a_scene_that_configured_logging_keeps_its_own() -> None:
     out = _sim_process(
         "import logging, sys\n"
         "logging.basicConfig(stream=sys.stdout, level=logging.INFO, format='mine %(name)s %(message)s')\n"
-        "from remoteenv.sim.log import log_to_stderr\n"
+        "from remoteenv.sim.process.log import log_to_stderr\n"
         "log_to_stderr(0)\n"
-        "logging.getLogger('remoteenv.sim.server').info('routed')\n"
+        "logging.getLogger('remoteenv.sim.serving.server').info('routed')\n"
     )
-    assert "mine remoteenv.sim.server routed" in out.stdout.splitlines() and out.stderr == ""
+    assert "mine remoteenv.sim.serving.server routed" in out.stdout.splitlines() and out.stderr == ""

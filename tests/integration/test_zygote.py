@@ -18,8 +18,8 @@ import pytest
 
 import remoteenv
 from remoteenv import Launcher, OpenAIRemoteEnv
-from remoteenv.agent.sim_command import launch_environment
-from remoteenv.agent.zygote import registry
+from remoteenv.agent.launch.sim_command import launch_environment
+from remoteenv.agent.launch.zygote import registry
 from remoteenv.cli.new_scene import write_package
 
 SCENES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "scenes")
@@ -32,7 +32,7 @@ def _parent(pid: int) -> int:
         return int(f.read().rsplit(")", 1)[1].split()[1])
 
 
-def _sim(env) -> remoteenv.agent.sim_process.SimProcess:
+def _sim(env) -> remoteenv.agent.launch.sim_process.SimProcess:
     return env.unwrapped.launcher.sims[0]
 
 
@@ -273,7 +273,7 @@ def test_a_zygote_that_names_another_pid_is_not_believed(zygotes_on, monkeypatch
     # The launcher signals a sim's process group by the pid the zygote names:
     # it must be the pid of the pidfd that came with it, or the sim starts the plain way.
     liar = os.path.join(os.path.dirname(os.path.abspath(__file__)), "servers", "lying_zygote.py")
-    monkeypatch.setattr("remoteenv.agent.zygote.process.START_SCRIPT", liar)
+    monkeypatch.setattr("remoteenv.agent.launch.zygote.process.START_SCRIPT", liar)
     monkeypatch.setenv("REMOTEENV_TEST_LYING_ZYGOTE", "1")  # a key of its own: no real zygote is reused
     zygote = registry.zygote_for(launch_environment(None))
     assert zygote is not None

@@ -6,11 +6,11 @@ import os
 
 import pytest
 
-from remoteenv.agent.attach import AttachedSim, AttachedSims, LaunchInfo
-from remoteenv.agent.launcher import Launcher
-from remoteenv.agent.processes import pid_alive
-from remoteenv.agent.session import choose_group
-from remoteenv.agent.sim_group import LaunchSpec, SimLayout
+from remoteenv.agent.launch.attach import AttachedSim, AttachedSims, LaunchInfo
+from remoteenv.agent.launch.launcher import Launcher
+from remoteenv.agent.launch.processes import pid_alive
+from remoteenv.agent.launch.sim_group import LaunchSpec, SimLayout
+from remoteenv.agent.session.session import choose_group
 
 
 def test_launch_spec_checks_its_fields():

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from remoteenv.wire import hot_wait
-from remoteenv.wire.hot_wait import HotWait
+from remoteenv.wire.shared_memory import hot_wait
+from remoteenv.wire.shared_memory.hot_wait import HotWait
 
 
 @pytest.fixture(autouse=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout, SceneError, SimDiedError
-from remoteenv.agent.restart import RestartBudget, gather_restarting, instances_lost, restarted_info
+from remoteenv.agent.launch.restart import RestartBudget, gather_restarting, instances_lost, restarted_info
 
 
 def died(instance: int) -> RemoteEnvError:

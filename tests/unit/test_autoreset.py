@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
 
-from remoteenv.agent.autoreset import after_reset, after_step, plan_ops
 from remoteenv.agent.errors import StateError
-from remoteenv.agent.reset_args import split_reset_mask, world_seeds
+from remoteenv.agent.session.reset_args import split_reset_mask, world_seeds
+from remoteenv.agent.vector.autoreset import after_reset, after_step, plan_ops
 from remoteenv.wire.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET
 
 NEXT, SAME, DISABLED = AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP, AutoresetMode.DISABLED

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import remoteenv
-from remoteenv.sim.batch_physics import THREADS_ENV, PhysicsThreads, default_threads
+from remoteenv.sim.stepping.batch_physics import THREADS_ENV, PhysicsThreads, default_threads
 
 XML = remoteenv.scene_path("reacher").replace("reacher_scene.py", "reacher.xml")
 

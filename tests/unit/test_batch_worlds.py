@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from unit.test_batched_scenes import K, _requests, _scene_class
 
-from remoteenv.sim import batch_worlds
-from remoteenv.sim.batch import BatchCommands
-from remoteenv.sim.batch_worlds import BatchedWorlds, StackedWorlds, batch_state, stacked
-from remoteenv.sim.lock_step import LockStepping
+from remoteenv.sim.stepping import batch_worlds
+from remoteenv.sim.stepping.batch import BatchCommands
+from remoteenv.sim.stepping.batch_worlds import BatchedWorlds, StackedWorlds, batch_state, stacked
+from remoteenv.sim.stepping.lock_step import LockStepping
 from remoteenv.wire import protocol
 
 Reacher = _scene_class("reacher", "ReacherEnv")

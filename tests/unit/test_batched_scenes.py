@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import remoteenv
-from remoteenv.sim.base_env import BaseEnv
-from remoteenv.sim.batch import BatchCommands
-from remoteenv.sim.lock_step import LockStepping
+from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.stepping.batch import BatchCommands
+from remoteenv.sim.stepping.lock_step import LockStepping
 from remoteenv.wire import protocol
 from remoteenv.wire.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET
 
@@ -112,7 +112,7 @@ def test_plain_batch_reply_is_the_scenes_arrays() -> None:
 
 
 def test_step_batch_refuses_repeated_worlds() -> None:
-    from remoteenv.sim.checks import RequestError
+    from remoteenv.sim.transport.checks import RequestError
 
     make, _ = SCENES["cartpole"]
     commands = _commands(make, 1, True)
@@ -141,7 +141,7 @@ def test_worlds_with_delays_step_one_by_one(delays) -> None:
 
 def test_batched_observations_are_checked_against_the_space() -> None:
     """The batched path checks what post_steps returns, as finish_tick does per world."""
-    from remoteenv.sim.obs_check import ObservationError
+    from remoteenv.sim.scene.obs_check import ObservationError
 
     class WrongDtype(Reacher):  # type: ignore[misc,valid-type]
         @classmethod

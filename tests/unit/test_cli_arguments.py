@@ -119,9 +119,9 @@ def test_latency_sweep_keeps_the_rows_of_a_sweep_cut_short(tmp_path, monkeypatch
 
 
 def test_launch_fails_on_an_unwritable_out_before_starting_sims(tmp_path, monkeypatch):
-    import remoteenv.agent.launcher
+    import remoteenv.agent.launch.launcher
 
-    monkeypatch.setattr(remoteenv.agent.launcher, "Launcher", _no_sims)
+    monkeypatch.setattr(remoteenv.agent.launch.launcher, "Launcher", _no_sims)
     with pytest.raises(SystemExit, match="cannot write --out"):
         main(["launch", "cartpole", "--out", str(tmp_path / "no-such-dir" / "launch.json")])
     with pytest.raises(SystemExit, match="is a directory"):
@@ -129,9 +129,9 @@ def test_launch_fails_on_an_unwritable_out_before_starting_sims(tmp_path, monkey
 
 
 def test_launch_refuses_env_kwargs_that_are_not_a_json_map(tmp_path, monkeypatch):
-    import remoteenv.agent.launcher
+    import remoteenv.agent.launch.launcher
 
-    monkeypatch.setattr(remoteenv.agent.launcher, "Launcher", _no_sims)
+    monkeypatch.setattr(remoteenv.agent.launch.launcher, "Launcher", _no_sims)
     for text in ("{not json", "[1, 2]"):
         with pytest.raises(SystemExit, match="--env-kwargs must be a JSON map"):
             main(["launch", "cartpole", "--env-kwargs", text, "--out", str(tmp_path / "l.json")])

@@ -10,12 +10,12 @@ import stat
 import numpy as np
 import pytest
 
-from remoteenv.agent.sim_command import write_sim_delay_file
+from remoteenv.agent.launch.sim_command import write_sim_delay_file
 from remoteenv.delays import MAX_DELAY_TICKS, Categorical, Constant, Trace, Uniform
 from remoteenv.sim.scene_main import apply_delay_file, scene_argument_parser
-from remoteenv.wire import delay_file
-from remoteenv.wire.delay_file import delay_file_text, read_delay_file, write_delay_file
-from remoteenv.wire.delays import MAX_VALUES
+from remoteenv.wire.delays import delay_file
+from remoteenv.wire.delays.delay_file import delay_file_text, read_delay_file, write_delay_file
+from remoteenv.wire.delays.delays import MAX_VALUES
 from remoteenv.wire.errors import ProtocolError
 
 

@@ -26,8 +26,8 @@ from remoteenv.delays import (
     delay_from_wire,
 )
 from remoteenv.wire import protocol
-from remoteenv.wire.delay_line import ACTION_STREAM, OBS_STREAM, DelayStream
-from remoteenv.wire.delays import MAX_VALUES
+from remoteenv.wire.delays.delay_line import ACTION_STREAM, OBS_STREAM, DelayStream
+from remoteenv.wire.delays.delays import MAX_VALUES
 from remoteenv.wire.errors import ProtocolError
 
 SPECS = [

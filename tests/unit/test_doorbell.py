@@ -1,4 +1,4 @@
-"""The fast lane's doorbell (remoteenv.wire.doorbell): a frame is needed exactly
+"""The fast lane's doorbell (remoteenv.wire.shared_memory.doorbell): a frame is needed exactly
 when the peer may be blocked, a side about to block finds what came meanwhile,
 and a loud side (no total store order, or REMOTEENV_LOUD_DOORBELL) always gets
 frames, whatever its peer is."""
@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from remoteenv.wire import doorbell
-from remoteenv.wire.doorbell import AGENT_WATCHING, REQ_N, REQ_NAMED, REQ_SEQ, SIM_WATCHING, Doorbell
+from remoteenv.wire.shared_memory import doorbell
+from remoteenv.wire.shared_memory.doorbell import AGENT_WATCHING, REQ_N, REQ_NAMED, REQ_SEQ, SIM_WATCHING, Doorbell
 
 
 def _pair(agent_silent: bool = True, sim_silent: bool = True) -> tuple[Doorbell, Doorbell, np.ndarray]:

@@ -19,10 +19,10 @@ from equality import assert_same
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from remoteenv import OpenAIRemoteEnv, RemoteVectorEnv
+from remoteenv.agent.connection.sim_connection import SimConnection
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout, SimDiedError, StateError
-from remoteenv.agent.restart import INFO_RESTARTED, INFO_RESTARTS
-from remoteenv.agent.sim_connection import SimConnection
-from remoteenv.agent.sim_group import LaunchSpec, SimGroup, SimHandle, SimLayout
+from remoteenv.agent.launch.restart import INFO_RESTARTED, INFO_RESTARTS
+from remoteenv.agent.launch.sim_group import LaunchSpec, SimGroup, SimHandle, SimLayout
 from remoteenv.wire import protocol
 from remoteenv.wire.batch import columnar_infos, stack
 from remoteenv.wire.spaces import space_to_wire
@@ -246,7 +246,7 @@ def all_commands(group: FakeGroup) -> list[str]:
 def test_the_fakes_and_the_shipped_groups_have_the_declared_shapes():
     from remoteenv import Launcher
     from remoteenv import SimGroup as Exported
-    from remoteenv.agent.attach import AttachedSim
+    from remoteenv.agent.launch.attach import AttachedSim
 
     assert Exported is SimGroup
     assert isinstance(FakeGroup(), SimGroup)

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
+from remoteenv.agent.connection.fan_in import FanIn
+from remoteenv.agent.connection.sim_connection import SimConnection
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout
-from remoteenv.agent.fan_in import FanIn
-from remoteenv.agent.sim_connection import SimConnection
 from remoteenv.wire import protocol
 
 
@@ -95,10 +95,10 @@ def test_a_shared_reply_to_a_request_sent_over_the_wire_is_a_protocol_error():
     import numpy as np
     from gymnasium.spaces import Box
 
-    from remoteenv.agent.reply_checks import ReplyChecks
-    from remoteenv.agent.restart import RestartBudget
-    from remoteenv.agent.vector_requests import VectorRequests
-    from remoteenv.agent.vector_results import ObsBatch
+    from remoteenv.agent.connection.reply_checks import ReplyChecks
+    from remoteenv.agent.launch.restart import RestartBudget
+    from remoteenv.agent.vector.vector_requests import VectorRequests
+    from remoteenv.agent.vector.vector_results import ObsBatch
 
     conns = [LyingSim(0)]
     obs_space = Box(-1.0, 1.0, (1,), np.float32)

@@ -12,10 +12,10 @@ import threading
 
 import pytest
 
-from remoteenv.agent.attach import LaunchInfo, read_launch_info
 from remoteenv.agent.errors import LaunchError
-from remoteenv.wire.delays import Trace
-from remoteenv.wire.keys import load_keypair
+from remoteenv.agent.launch.attach import LaunchInfo, read_launch_info
+from remoteenv.wire.delays.delays import Trace
+from remoteenv.wire.files.keys import load_keypair
 
 
 def _unblock_fifo_later(path: str) -> threading.Thread:

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
+from remoteenv.agent.connection.reply_checks import ReplyChecks
+from remoteenv.agent.connection.sim_connection import SimConnection
+from remoteenv.agent.connection.zmq_connection import ZmqConnection
 from remoteenv.agent.errors import LaunchError, RemoteEnvError, RemoteProtocolError
-from remoteenv.agent.reply_checks import ReplyChecks
-from remoteenv.agent.sim_connection import SimConnection
-from remoteenv.agent.vector_layout import check_sims
-from remoteenv.agent.zmq_connection import ZmqConnection
+from remoteenv.agent.vector.vector_layout import check_sims
 from remoteenv.wire import protocol
 from remoteenv.wire.errors import ProtocolError
-from remoteenv.wire.file_reads import UnreadableFile, parse_json, read_bytes
+from remoteenv.wire.files.file_reads import UnreadableFile, parse_json, read_bytes
 from remoteenv.wire.handshake import parse_handshake
 from remoteenv.wire.scalar_types import restore_scalars
 from remoteenv.wire.spaces import space_from_wire, space_to_wire

@@ -9,12 +9,12 @@ import json
 import pytest
 from gymnasium import spaces
 
-from remoteenv.agent.sim_command import write_sim_delay_file
-from remoteenv.agent.sim_group import LaunchSpec
+from remoteenv.agent.launch.sim_command import write_sim_delay_file
+from remoteenv.agent.launch.sim_group import LaunchSpec
 from remoteenv.delays import Categorical, Constant, Trace, Uniform
-from remoteenv.sim.lock_step import LockStepper
 from remoteenv.sim.scene_main import seconds_delay_argument, tick_delay_argument
-from remoteenv.wire.delay_file import delays_from_map, read_delay_file
+from remoteenv.sim.stepping.lock_step import LockStepper
+from remoteenv.wire.delays.delay_file import delays_from_map, read_delay_file
 from remoteenv.wire.handshake import parse_handshake
 from remoteenv.wire.spaces import space_to_wire
 from tests.unit.test_sim_lock_step import DT, RecordingWorld

@@ -11,8 +11,8 @@ from typing import Any
 import pytest
 
 from remoteenv.delays import Constant, Uniform
-from remoteenv.sim.real_time import RealTimeStepper, RealTimeStepping
-from remoteenv.wire.delay_line import LINK_STREAM, delay_rng
+from remoteenv.sim.stepping.real_time import RealTimeStepper, RealTimeStepping
+from remoteenv.wire.delays.delay_line import LINK_STREAM, delay_rng
 from tests.unit.test_real_time_stepper import T0, TIMESTEP, FakeClock, TickWorld, run_until, start
 
 

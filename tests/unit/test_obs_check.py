@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from remoteenv.sim.obs_check import ObservationError, check_observation
+from remoteenv.sim.scene.obs_check import ObservationError, check_observation
 
 BOX = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
 

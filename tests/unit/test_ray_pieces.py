@@ -9,8 +9,8 @@ import os
 import pytest
 
 import remoteenv
-from remoteenv.agent.sim_command import scene_command
-from remoteenv.agent.sim_group import SimGroup, SimHandle
+from remoteenv.agent.launch.sim_command import scene_command
+from remoteenv.agent.launch.sim_group import SimGroup, SimHandle
 from remoteenv.ray import RayLauncher
 from remoteenv.ray.launcher import scene_on_nodes
 from remoteenv.ray.placement import STRATEGIES, Placement

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
-from remoteenv.sim.checks import RequestError
-from remoteenv.sim.real_time import RealTimeStepper, RealTimeStepping
+from remoteenv.sim.stepping.real_time import RealTimeStepper, RealTimeStepping
+from remoteenv.sim.transport.checks import RequestError
 
 TIMESTEP = 0.01  # simulated seconds per substep
 FRAME_SKIP = 4  # substeps per control tick

@@ -6,7 +6,7 @@ import pytest
 
 import remoteenv
 from remoteenv.agent.errors import LaunchError, SceneArgumentError
-from remoteenv.agent.scene_signature import check_scene_kwargs
+from remoteenv.agent.session.scene_signature import check_scene_kwargs
 
 
 def test_shipped_scene_refuses_an_unknown_keyword_as_python_would() -> None:

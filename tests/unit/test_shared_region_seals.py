@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from remoteenv.agent import shared_lane
-from remoteenv.wire.shared_batch import SharedLayout, create_region
+from remoteenv.agent.connection import shared_lane
+from remoteenv.wire.shared_memory.shared_batch import SharedLayout, create_region
 
 OBS = spaces.Box(-1.0, 1.0, (3,), np.float32)
 linux_only = pytest.mark.skipif(not hasattr(os, "memfd_create"), reason="memfd_create is Linux only")

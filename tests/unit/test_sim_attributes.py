@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from remoteenv.sim.attributes import AttributeCommands
-from remoteenv.sim.checks import RequestError
+from remoteenv.sim.serving.attributes import AttributeCommands
+from remoteenv.sim.transport.checks import RequestError
 
 
 class Scene:

@@ -19,9 +19,9 @@ import pytest
 import zmq
 
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
-from remoteenv.sim import channels, limits
-from remoteenv.sim.channels import ZmqChannel
-from remoteenv.sim.server import RemoteControlledAgent
+from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.transport import channels, limits
+from remoteenv.sim.transport.channels import ZmqChannel
 from remoteenv.wire import protocol
 
 OWNER, OTHER, THIRD = b"\x00owner", b"\x00other", b"\x00third"
@@ -227,7 +227,7 @@ def test_the_gate_admits_at_most_max_peers_and_admits_again_when_one_leaves(serv
 
 
 def test_the_peer_count_follows_the_monitor_events_libzmq_sends():
-    from remoteenv.sim.peer_gate import PeerCount
+    from remoteenv.sim.transport.peer_gate import PeerCount
 
     E = zmq
     count = PeerCount(handshake_s=2.0)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
-from remoteenv.sim.server import RemoteControlledAgent
+from remoteenv.sim.serving.server import RemoteControlledAgent
 from remoteenv.wire import protocol
 from remoteenv.wire.errors import MAX_ECHO_CHARS
 from remoteenv.wire.spaces import space_from_wire

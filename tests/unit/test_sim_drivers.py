@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
-from remoteenv.sim.drivers import Drivers
-from remoteenv.sim.server import RemoteControlledAgent
+from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.transport.drivers import Drivers
 
 
 class FakeClock:

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from remoteenv.sim.lock_step import LockStepper, LockStepping
+from remoteenv.sim.stepping.lock_step import LockStepper, LockStepping
 
 DT = 0.02
 

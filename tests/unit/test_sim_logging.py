@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import logging
 
-from remoteenv.sim import pacing_levers
-from remoteenv.sim.log import LOGGER
+from remoteenv.sim.process import pacing_levers
+from remoteenv.sim.process.log import LOGGER
 
 
 def test_a_refused_priority_is_a_logged_warning(monkeypatch, caplog, capsys) -> None:
@@ -17,6 +17,6 @@ def test_a_refused_priority_is_a_logged_warning(monkeypatch, caplog, capsys) -> 
     with caplog.at_level(logging.WARNING, logger=LOGGER):
         assert pacing_levers.set_realtime_priority(10) is False
     [record] = caplog.records
-    assert record.name == "remoteenv.sim.pacing_levers" and record.levelno == logging.WARNING
+    assert record.name == "remoteenv.sim.process.pacing_levers" and record.levelno == logging.WARNING
     assert "SCHED_FIFO priority 10 refused" in record.getMessage()
     assert capsys.readouterr().err == ""  # nothing printed behind logging's back

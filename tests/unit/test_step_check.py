@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 import remoteenv
-from remoteenv.sim.base_env import BaseEnv
-from remoteenv.sim.batch import BatchCommands
-from remoteenv.sim.batch_result import BatchResult
-from remoteenv.sim.lock_step import LockStepping
-from remoteenv.sim.real_time import RealTimeStepping
-from remoteenv.sim.step_check import StepResultError, check_batch, unpack_step
+from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.scene.batch_result import BatchResult
+from remoteenv.sim.scene.step_check import StepResultError, check_batch, unpack_step
+from remoteenv.sim.stepping.batch import BatchCommands
+from remoteenv.sim.stepping.lock_step import LockStepping
+from remoteenv.sim.stepping.real_time import RealTimeStepping
 
 OBS = np.zeros(4, dtype=np.float32)
 

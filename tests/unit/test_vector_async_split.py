@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from remoteenv.agent.vector_async import split_reply
+from remoteenv.agent.vector.vector_async import split_reply
 
 
 def test_split_reply_keeps_each_world_with_its_values_and_final() -> None:

@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from remoteenv.agent.connection.sim_connection import SimConnection
 from remoteenv.agent.errors import RemoteEnvError
-from remoteenv.agent.sim_connection import SimConnection
-from remoteenv.sim.checks import RequestError, protocol_version, require_driver, seed_value, world_index
+from remoteenv.sim.transport.checks import RequestError, protocol_version, require_driver, seed_value, world_index
 from remoteenv.wire import protocol
 from remoteenv.wire.errors import MAX_ECHO_CHARS, short_repr
 

@@ -11,12 +11,12 @@ import threading
 
 import pytest
 
-from remoteenv.agent.sim_process import kill_group
-from remoteenv.agent.zygote import registry
-from remoteenv.agent.zygote.forked import LOST_STATUS, ForkedProcess
-from remoteenv.agent.zygote.process import pidfd_pid
-from remoteenv.sim.zygote.preload import installed, preload, scene_imports, shadowing
-from remoteenv.sim.zygote.server import ZygoteServer, script_path, thread_count
+from remoteenv.agent.launch.sim_process import kill_group
+from remoteenv.agent.launch.zygote import registry
+from remoteenv.agent.launch.zygote.forked import LOST_STATUS, ForkedProcess
+from remoteenv.agent.launch.zygote.process import pidfd_pid
+from remoteenv.sim.process.zygote.preload import installed, preload, scene_imports, shadowing
+from remoteenv.sim.process.zygote.server import ZygoteServer, script_path, thread_count
 from remoteenv.wire.errors import ProtocolError
 from remoteenv.wire.zygote_channel import (
     MAX_CONTROL_BYTES,
@@ -187,7 +187,7 @@ def test_a_relative_script_is_found_from_the_sims_working_dir_not_the_zygotes(tm
 
 def test_a_fork_that_fails_is_refused_and_the_descriptors_closed(pair, tmp_path, monkeypatch):
     server = _server(pair[0])
-    monkeypatch.setattr("remoteenv.sim.zygote.server.thread_count", lambda: 1)
+    monkeypatch.setattr("remoteenv.sim.process.zygote.server.thread_count", lambda: 1)
 
     def no_fork() -> int:
         raise BlockingIOError(11, "Resource temporarily unavailable")
@@ -288,3 +288,9 @@ def test_no_sim_pid_below_2_is_ever_signalled(pair, monkeypatch, pid):
     assert sent == []
     kill_group(12345, signal.SIGTERM)
     assert sent == [(12345, signal.SIGTERM)]
+
+
+def test_the_zygote_script_the_agent_starts_is_where_it_says():
+    from remoteenv.agent.launch.zygote.process import START_SCRIPT
+
+    assert os.path.isfile(START_SCRIPT) and START_SCRIPT.endswith(os.path.join("sim", "process", "zygote", "start.py"))

@@ -1,0 +1,1 @@
+"""Connections to a sim: the pipe, ZeroMQ, reply checks and the shared region."""

@@ -1,0 +1,256 @@
+"""The agent's end of the local pipe to a sim this process launched (the sim's
+end is its :class:`~remoteenv.sim.transport.channels.PipeChannel`).
+
+Runs in the agent process. A Unix socketpair carrying length-prefixed frames
+(see :mod:`remoteenv.wire.protocol`): no I/O threads sit between the two
+processes, and the sim's death shows at once as end of file. Waits for a
+reply start hot while replies have been quick (:mod:`remoteenv.wire.shared_memory.hot_wait`).
+"""
+
+from __future__ import annotations
+
+import socket
+import struct
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+from remoteenv.agent.connection.sim_connection import LIVENESS_CHECK_S, SimConnection
+from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.wire import protocol
+from remoteenv.wire.shared_memory.doorbell import Doorbell
+from remoteenv.wire.shared_memory.hot_wait import HotWait
+
+#: How long (seconds) to wait for a sim that closed its pipe to be reaped, so
+#: that its exit code or signal can be reported.
+_EXIT_REPORT_S = 2.0
+#: Longest busy-wait (seconds) for a reply on the local pipe (see :mod:`remoteenv.wire.shared_memory.hot_wait`).
+AGENT_SPIN_S = 200e-6
+
+
+class PipeConnection(SimConnection):
+    """Request/reply channel to a sim this process launched, over its local pipe.
+
+    A vector call waits for its pipes' replies in turn (:attr:`waits_in_turn`):
+    one blocking read per reply is cheaper than polling them together.
+
+    Args:
+        pipe: the launcher's end of the socketpair (:attr:`SimProcess.pipe`).
+        endpoint: the sim's ZeroMQ endpoint, named in error messages only.
+        instance, timeout, death_check: as for :class:`SimConnection`.
+        pid: the sim's process id, if known.
+    """
+
+    def __init__(
+        self,
+        pipe: socket.socket,
+        *,
+        endpoint: str = "",
+        instance: int = 0,
+        timeout: float | None = 60.0,
+        death_check: Callable[[], str | None] | None = None,
+        pid: int | None = None,
+    ) -> None:
+        #: The sim's process id (the region of ``shared_batch`` is read through it).
+        self.pid = pid
+        super().__init__(
+            endpoint or f"pipe fd {pipe.fileno()}", instance=instance, timeout=timeout, death_check=death_check
+        )
+        self.pipe = pipe
+        self._decoder = protocol.StreamDecoder()
+        self._frames: deque[bytes] = deque()
+        #: The request posted in the shared region whose reply is awaited there, and its doorbell.
+        self._watch: tuple[int, Doorbell] | None = None
+        #: The request a wait is for (a region reply is taken only for its own request).
+        self._awaiting = 0
+        #: Replies to later requests that came while the awaited one's reply was due in
+        #: the region (at most one per request in flight).
+        self._held: dict[int, dict[str, Any]] = {}
+        self._eof = False
+        self._hot = HotWait(AGENT_SPIN_S)
+        pipe.setblocking(True)
+        # A blocking read returns after at most LIVENESS_CHECK_S (one system
+        # call per wait instead of a poll and a read).
+        whole, frac = divmod(LIVENESS_CHECK_S, 1.0)
+        pipe.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, struct.pack("ll", int(whole), int(frac * 1e6)))
+
+    waits_in_turn = True
+
+    @property
+    def pollable(self) -> Any:
+        # zmq.Poller reports plain sockets by file descriptor.
+        return self.pipe.fileno()
+
+    def _send_frame(self, payload: bytes) -> None:
+        try:
+            self.pipe.sendall(protocol.stream_frame(payload))
+        except OSError:
+            # The sim is gone; as with ZeroMQ, the wait for the reply reports it.
+            self._eof = True
+
+    def _read(self, wait: bool) -> None:
+        """Move whatever has arrived (with ``wait``: waiting up to
+        :data:`LIVENESS_CHECK_S` for something) into the frame queue."""
+        if self._eof:
+            self._check_alive("a reply", closed=True)
+        data = self._decoder.recv_from(self.pipe, wait)
+        if data is None:
+            return
+        if not data:
+            self._eof = True
+            self._check_alive("a reply", closed=True)
+        try:
+            self._frames.extend(self._decoder.feed(data))
+        except protocol.ProtocolError as exc:
+            raise RemoteEnvError(
+                f"sim instance {self.instance} broke the pipe framing: {exc}", kind="protocol", instance=self.instance
+            ) from None
+
+    # ------------------------------------------------------------ the shared region's fast lane
+
+    def post(self, doorbell: Doorbell, n: int, named: bool) -> int:
+        """Post a ``step_batch`` whose ops, worlds and actions are in the shared
+        region (written by the caller; see :mod:`remoteenv.wire.shared_memory.doorbell`);
+        its frame goes on the pipe only when the sim sleeps. Returns its ``seq``:
+        its reply comes as a frame or in the region (a reply map with
+        ``"region": true`` either way)."""
+        if self.closed:
+            raise RemoteEnvError(
+                f"connection to sim instance {self.instance} is closed", kind="state", instance=self.instance
+            )
+        self._seq += 1
+        seq = self._seq
+        self._unanswered[seq] = None
+        self._watch = (seq, doorbell)
+        if doorbell.post(seq, n, named):
+            self._send_frame(protocol.pack({"seq": seq, "cmd": "step_batch", "region": True}))
+        return seq
+
+    def _region_reply(self) -> dict[str, Any] | None:
+        """The awaited reply, if it is the region's and the region holds it
+        (then the watch ends). Frames for requests sent later may be buffered
+        already: they wait for their turn (replies come in request order)."""
+        watch = self._watch
+        if watch is None or watch[0] != self._awaiting or not watch[1].answered(watch[0]):
+            return None
+        self._watch = None
+        return {"seq": watch[0], "ok": True, "region": True}
+
+    def will_block(self) -> bool:
+        """The caller is about to block on :attr:`pollable`: make the sim send a
+        frame when it answers the region's request. False if the region holds
+        the reply already (then do not block); call :meth:`woke` after the block."""
+        watch = self._watch
+        return watch is None or watch[1].agent_sleeps(watch[0])
+
+    def woke(self) -> None:
+        """After a block that :meth:`will_block` prepared: back to watching the region."""
+        if self._watch is not None:
+            self._watch[1].agent_wakes()
+
+    def receive(self, seq: int, timeout: float | None = ..., what: str = "reply") -> dict[str, Any]:  # type: ignore[assignment]
+        self._awaiting = seq
+        return super().receive(seq, timeout, what)
+
+    def try_receive(self, seq: int, what: str = "reply", wait: bool = False) -> dict[str, Any] | None:
+        self._awaiting = seq
+        return super().try_receive(seq, what, wait)
+
+    def _answers(self, reply: dict[str, Any], seq: int) -> bool:
+        got = reply.get("seq")
+        if type(got) is int and got > seq and got in self._unanswered:
+            # A later request's reply read before the awaited one was seen in the region
+            # (the sim answered in order): kept for its own wait.
+            self._held[got] = reply
+            return False
+        return super()._answers(reply, seq)
+
+    def _take_held(self) -> dict[str, Any] | None:
+        held = self._held
+        if not held:
+            return None
+        reply = held.pop(self._awaiting, None)
+        for seq in [s for s in held if s < self._awaiting]:  # their requests were abandoned
+            del held[seq]
+        if reply is not None and self._watch is not None and self._watch[0] == self._awaiting:
+            self._watch = None  # answered on the pipe
+        return reply
+
+    def _decode(self, frame: Any, what: str) -> dict[str, Any]:
+        if isinstance(frame, dict):  # a reply found in the region, or held
+            return frame
+        reply = super()._decode(frame, what)
+        if self._watch is not None and reply.get("seq") == self._watch[0]:
+            self._watch = None
+        return reply
+
+    # ------------------------------------------------------------ frames
+
+    def _recv_frame(self) -> Any:
+        region = self._region_reply() or self._take_held()
+        if region is not None:
+            return region
+        if not self._frames and self._hot.worth_it():
+            start = time.perf_counter()
+            self._read(False)
+            while not self._frames and self._hot.spin():
+                region = self._region_reply()
+                if region is not None:
+                    self._hot.waited(time.perf_counter() - start)
+                    return region
+                self._read(False)
+            if self._frames:
+                self._hot.waited(time.perf_counter() - start)
+                return self._frames.popleft()
+            self._hot.waited(float("inf"))
+        if not self._frames:
+            watch = self._watch if self._watch is not None and self._watch[0] == self._awaiting else None
+            if watch is not None and not watch[1].agent_sleeps(watch[0]):
+                region = self._region_reply()  # the reply came just now
+                if region is not None:
+                    return region
+            else:
+                # Blocks until a frame comes (the sim wakes a sleeping agent with one), at
+                # most LIVENESS_CHECK_S (SO_RCVTIMEO).
+                try:
+                    self._read(True)
+                finally:
+                    if watch is not None:
+                        watch[1].agent_wakes()
+        return self._frames.popleft() if self._frames else None
+
+    def _recv_frame_nowait(self) -> Any:
+        region = self._region_reply() or self._take_held()
+        if region is not None:
+            return region
+        if not self._frames:
+            self._read(False)
+        return self._frames.popleft() if self._frames else None
+
+    # A stream has no stuck state: a late reply arrives later and is dropped by
+    # seq, so neither a timeout nor reconnect() need to do anything. close()
+    # leaves the pipe open: it belongs to the launcher (SimProcess.pipe).
+
+    def _check_alive(self, what: str, closed: bool = False) -> None:
+        if not closed:
+            super()._check_alive(what)
+            return
+        # The sim closed its end: it is exiting. Give it a moment to be reaped
+        # so the error can name its exit code or signal.
+        why = None
+        deadline = time.monotonic() + _EXIT_REPORT_S
+        while self.death_check is not None and time.monotonic() < deadline:
+            why = self.death_check()
+            if why is not None:
+                break
+            time.sleep(0.01)
+        raise RemoteEnvError(
+            f"sim instance {self.instance} died while the agent waited for {what}: "
+            f"{why or 'it closed its end of the local pipe'}",
+            kind="died",
+            instance=self.instance,
+        )
+
+
+__all__ = ["AGENT_SPIN_S", "PipeConnection"]

@@ -1,0 +1,1 @@
+"""Starting, attaching to and restarting sims."""

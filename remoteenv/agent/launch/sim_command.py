@@ -1,0 +1,175 @@
+"""The scene command line and the wait for a sim's ready file.
+
+Runs wherever sims are started for an agent: in the agent process (the local
+:class:`remoteenv.Launcher`) or in a Ray actor on a cluster node
+(:mod:`remoteenv.ray`). Both build the same command line here, so a sim
+started either way gets the same arguments (see
+:func:`remoteenv.sim.scene_main.scene_argument_parser` for their meaning).
+Delay specs are not arguments: the launcher writes them to a delay file in
+its private dir (:mod:`remoteenv.wire.delays.delay_file`) and passes its path.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any, Protocol
+
+from remoteenv.agent.errors import RemoteEnvError, SceneArgumentError
+from remoteenv.wire.delays.delay_file import write_delay_file
+from remoteenv.wire.errors import SCENE_ARGS_MARKER
+
+
+def scene_command(
+    scene: str,
+    address: str,
+    *,
+    instance: int,
+    worlds: int,
+    env_kwargs: dict[str, Any],
+    parent_pid: int,
+    ready_file: str,
+    private_dir: str,
+    seed: int | None = None,
+    render_mode: str | None = None,
+    real_time: bool = False,
+    real_time_factor: float = 1.0,
+    delay_file: str | None = None,
+    curve_files: tuple[str, str] | None = None,
+    allow_remote: bool = False,
+    extra_args: Sequence[str] = (),
+    python: str = sys.executable,
+) -> list[str]:
+    """The argv that starts scene script ``scene`` as sim ``instance``, bound to ``address``.
+
+    ``curve_files`` is ``(server secret key file, allowed client keys file)``
+    to turn CURVE on; ``allow_remote`` permits an address beyond loopback
+    (which needs CURVE). ``delay_file`` is the path of the sim's delay file
+    (see :func:`write_sim_delay_file`), None without delays. ``python`` is the
+    interpreter that runs the scene."""
+    cmd = [
+        python,
+        scene,
+        "--address",
+        address,
+        "--instance",
+        str(instance),
+        "--worlds",
+        str(worlds),
+        "--env-kwargs",
+        json.dumps(env_kwargs),
+        "--parent-pid",
+        str(parent_pid),
+        "--ready-file",
+        ready_file,
+        "--private-dir",
+        private_dir,
+    ]
+    if curve_files is not None:
+        cmd += ["--curve-secret-key-file", curve_files[0], "--curve-client-keys-file", curve_files[1]]
+        if allow_remote:
+            cmd += ["--allow-remote"]
+    if seed is not None:
+        cmd += ["--seed", str(seed)]
+    if render_mode is not None:
+        cmd += ["--render-mode", render_mode]
+    if real_time:
+        cmd += ["--real-time", "--real-time-factor", repr(float(real_time_factor))]
+    if delay_file is not None:
+        cmd += ["--delay-file", delay_file]
+    return cmd + list(extra_args)
+
+
+def launch_environment(render_mode: str | None) -> dict[str, str]:
+    """The environment of a sim process started here: ours, with
+    ``MUJOCO_GL=egl`` unless it says otherwise or the sim opens a window
+    (``render_mode="human"``)."""
+    env = dict(os.environ)
+    if render_mode != "human":
+        env.setdefault("MUJOCO_GL", "egl")
+    return env
+
+
+def write_sim_delay_file(private_dir: str, instance: int, text: str | None) -> str | None:
+    """Write sim ``instance``'s delay file (``text`` from
+    :func:`remoteenv.wire.delays.delay_file.delay_file_text`) into ``private_dir`` as
+    ``sim-<instance>.delays.json``, mode 0600, replacing one a previous launch
+    of the instance left; return its path (None, and no file, when ``text`` is None)."""
+    if text is None:
+        return None
+    path = os.path.join(private_dir, f"sim-{instance}.delays.json")
+    if os.path.lexists(path):
+        os.unlink(path)
+    write_delay_file(path, text)
+    return path
+
+
+class StartingSim(Protocol):
+    """What :func:`wait_ready` needs of a sim that is starting."""
+
+    instance: int
+    ready_file: str
+    endpoint: str | None
+
+    @property
+    def pid(self) -> int: ...
+
+    def death(self) -> str | None: ...
+
+    def stderr_tail(self, lines: int = ...) -> str: ...
+
+
+def startup_failure(sim: StartingSim, what: str, why: str) -> RemoteEnvError:
+    """The error for a sim that exited before reporting ready; ``why`` is its
+    ``death()`` text, ``what`` names the scene. A
+    :class:`~remoteenv.agent.errors.SceneArgumentError` (a ``TypeError``) when
+    the scene refused its keyword arguments (the sim says so on stderr), else
+    a launch error, with a hint when the script exited cleanly without
+    serving (it never called ``run_scene``)."""
+    refused = [line for line in sim.stderr_tail().splitlines() if SCENE_ARGS_MARKER in line]
+    if refused:
+        reason = refused[-1].split(SCENE_ARGS_MARKER, 1)[1].strip()
+        return SceneArgumentError(f"{reason} (sim instance {sim.instance} of {what})", instance=sim.instance)
+    text = f"sim instance {sim.instance} of {what} failed to start: {why}"
+    if "exited with code 0" in why:
+        text += (
+            "\nIt exited without serving: did the script call run_scene(YourEnv) under "
+            '`if __name__ == "__main__":`? (see remoteenv.sim.run_scene)'
+        )
+    return RemoteEnvError(text, kind="launch", instance=sim.instance)
+
+
+def wait_ready(sim: StartingSim, timeout: float, what: str) -> None:
+    """Wait until ``sim`` has written its ready file and set ``sim.endpoint``.
+
+    Polls the file (1 ms, growing to 10 ms: a forked sim is ready within
+    tens of milliseconds, and each look costs microseconds), never a fixed sleep. Raises
+    :class:`RemoteEnvError` (kind ``"launch"``) if the process exits first or
+    ``timeout`` seconds pass; ``what`` names the sim in the message (e.g. the
+    scene's file name)."""
+    deadline = time.monotonic() + timeout
+    delay = 0.001
+    while True:
+        try:
+            with open(sim.ready_file) as f:
+                info = json.load(f)
+            sim.endpoint = str(info["endpoint"]).replace("tcp://0.0.0.0:", "tcp://127.0.0.1:")
+            return
+        except (FileNotFoundError, json.JSONDecodeError, KeyError):
+            pass
+        why = sim.death()
+        if why is not None:
+            raise startup_failure(sim, what, why)
+        if time.monotonic() > deadline:
+            raise RemoteEnvError(
+                f"sim instance {sim.instance} (pid {sim.pid}) of {what} did not report ready within "
+                f"{timeout:g} s; raise startup_timeout= if the machine is busy. Its stderr so far:\n"
+                f"{sim.stderr_tail()}",
+                kind="launch",
+                instance=sim.instance,
+            )
+        time.sleep(delay)
+        delay = min(delay * 1.2, 0.01)

@@ -1,0 +1,1 @@
+"""One env's session with its sims: calls, attributes, pausing, pickling."""

@@ -1,0 +1,1 @@
+"""The vector env's requests, results, layout and autoreset."""

@@ -1,0 +1,1 @@
+"""The sim process's life: logging, lifecycle, orphan watch and pacing levers."""

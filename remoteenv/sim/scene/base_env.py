@@ -1,0 +1,309 @@
+"""BaseEnv: the env code of a scene, running inside the sim process."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import Any, ClassVar, SupportsFloat
+
+import mujoco
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+
+from remoteenv.sim.scene.batch_result import BatchResult
+from remoteenv.sim.scene.obs_check import check_observation
+from remoteenv.sim.scene.step_check import StepResultError, check_finite_obs, unpack_step
+from remoteenv.wire.errors import short_repr
+
+
+class BaseEnv:
+    """One MuJoCo world and the env logic around it.
+
+    A scene subclasses this and implements :meth:`reset_model`,
+    :meth:`prepare_step` and :meth:`post_step`. The base class owns the
+    ``MjModel``/``MjData``, ``frame_skip``, the RNG and the declared spaces, and
+    drives a step as::
+
+        prepare_step(action)                 # e.g. write data.ctrl
+        mj_step(model, data) x frame_skip    # the physics substeps
+        post_step(action) -> obs, reward, terminated, info
+
+    One call of :meth:`step` is one *control tick*: ``dt = frame_skip *
+    model.opt.timestep`` seconds of simulated time. The sim runtime may also
+    drive the pieces itself (real-time mode applies an action at the substep
+    where it arrives), so subclasses must keep all per-step logic in these hooks.
+
+    Truncation (episode time limits) is the agent side's business
+    (``gymnasium.make``'s ``max_episode_steps``); ``post_step`` reports only
+    termination.
+
+    Class attributes a scene sets:
+        env_id: a name for the scene, reported in the handshake.
+        metadata: ``render_modes`` supported; ``render_fps`` is derived from dt.
+        default_camera: camera name used for rendering, or None for the free camera.
+        check_obs_bounds: also check that observations lie inside the
+            observation space's bounds (dtype and shape are always checked,
+            see :mod:`remoteenv.sim.scene.obs_check`).
+        check_finite: also check that observations and rewards hold no NaN
+            or infinity (the kind and count of what the hooks return are
+            always checked, see :mod:`remoteenv.sim.scene.step_check`).
+        stacked_hooks: the scene's batched hooks (:meth:`prepare_steps`,
+            :meth:`post_steps`) read and write the worlds' state only through
+            :func:`remoteenv.sim.stepping.batch_worlds.stacked` (never through a world's
+            ``data``, nor views of it kept from earlier): the worlds of a process
+            may then step in one ``mujoco.batch.Batch`` (see :attr:`data`).
+    """
+
+    env_id: ClassVar[str] = "scene"
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"]}
+    default_camera: ClassVar[str | None] = None
+    check_obs_bounds: ClassVar[bool] = False
+    check_finite: ClassVar[bool] = False
+    stacked_hooks: ClassVar[bool] = False
+
+    #: While the world steps in a batch (:mod:`remoteenv.sim.stepping.batch_worlds`): the
+    #: batch and this world's index in it, through which :attr:`data` is kept current.
+    _batch_link: Any = None
+    _batch_index: int = 0
+
+    observation_space: spaces.Space
+    action_space: spaces.Space
+
+    def __init__(
+        self,
+        model_path: str | os.PathLike[str],
+        frame_skip: int,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 480,
+    ) -> None:
+        if frame_skip < 1:
+            raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"{type(self).__name__} does not support render_mode={render_mode!r}; "
+                f"supported: {self.metadata['render_modes']}"
+            )
+        self.model = mujoco.MjModel.from_xml_path(self._model_file(os.fspath(model_path)))
+        self._data = mujoco.MjData(self.model)
+        self.frame_skip = int(frame_skip)
+        self.observation_space = observation_space
+        self.action_space = action_space
+        self.render_mode = render_mode
+        self.width, self.height = int(width), int(height)
+        self._renderer: mujoco.Renderer | None = None
+        self._viewer: Any = None
+        if render_mode == "human":
+            from remoteenv.sim.scene.viewer import HumanViewer
+
+            self._viewer = HumanViewer(self.model, self.data)
+        self._np_random: np.random.Generator | None = None
+        self._np_random_seed: int | None = None
+
+    # ------------------------------------------------------------ properties
+
+    @property
+    def data(self) -> mujoco.MjData:
+        """This world's ``MjData``. While the world steps in a batch with others
+        (a scene with :attr:`stacked_hooks`), the batch holds its state between
+        batched steps; reading ``data`` first brings it up to date, exactly as
+        ``mj_step`` would have left it, and the batch takes the state back from
+        here before the world's next batched step (so changes made through
+        ``data`` count). Views of ``data`` kept from earlier are not updated."""
+        link = self._batch_link
+        if link is not None:
+            link.pull(self._batch_index)
+        return self._data
+
+    @data.setter
+    def data(self, value: mujoco.MjData) -> None:
+        if self._batch_link is not None:
+            self._batch_link.claim(self._batch_index)
+        self._data = value
+
+    @property
+    def dt(self) -> float:
+        """Simulated seconds per control tick (``frame_skip * timestep``)."""
+        return self.model.opt.timestep * self.frame_skip
+
+    @property
+    def np_random(self) -> np.random.Generator:
+        """The env's RNG, seeded by ``reset(seed=...)`` (random if never seeded)."""
+        if self._np_random is None:
+            self._np_random, self._np_random_seed = seeding.np_random()
+        return self._np_random
+
+    @property
+    def np_random_seed(self) -> int:
+        """The seed of :attr:`np_random`, as Gymnasium's ``Env.np_random_seed``: the
+        last seed a reset or the launch gave, a random one drawn now if never seeded."""
+        if self._np_random is None:
+            self._np_random, self._np_random_seed = seeding.np_random()
+        return int(self._np_random_seed if self._np_random_seed is not None else -1)
+
+    def seed_rng(self, seed: int | None) -> None:
+        """Reseed the RNG (as ``reset(seed=...)`` does) without resetting the world."""
+        self._np_random, self._np_random_seed = seeding.np_random(seed)
+
+    def default_action(self) -> Any:
+        """Action held before the agent's first one after a reset (real-time and
+        ``action_delay`` modes). ``None`` (the default) means "no action": the
+        scene's :meth:`prepare_step` and :meth:`post_step` must then apply and
+        score zero control."""
+        return None
+
+    # ------------------------------------------------------------ hooks
+
+    def reset_model(self, options: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
+        """Put ``self.data`` into a start state drawn from ``self.np_random``.
+
+        Called after ``mj_resetData``. Returns ``(obs, info)``.
+        """
+        raise NotImplementedError
+
+    def prepare_step(self, action: Any) -> None:
+        """Apply ``action`` (validated against ``action_space``, or ``None`` for
+        zero control, see :meth:`default_action`), e.g. to ``data.ctrl``."""
+        raise NotImplementedError
+
+    def post_step(self, action: Any) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
+        """After the substeps of one tick: ``(obs, reward, terminated, info)``."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------ batched hooks
+
+    @classmethod
+    def prepare_steps(cls, envs: Sequence[BaseEnv], actions: Any) -> None:
+        """Optional batched :meth:`prepare_step`: apply ``actions[i]`` to ``envs[i]``.
+
+        A lock-step sim without action or observation delays steps the worlds of one
+        ``step_batch`` request together: ``prepare_steps``, then the physics of
+        every world on threads (:mod:`remoteenv.sim.stepping.batch_physics`), then
+        :meth:`post_steps`. ``envs`` are worlds of this class; ``actions``
+        are checked and stacked: an array ``(n, *shape)`` for a Box space,
+        an int array ``(n,)`` for Discrete, else a list; never None. The
+        default calls :meth:`prepare_step` per world; a scene may override
+        both hooks to work with numpy over all worlds at once, and must then
+        give exactly the per-world hooks' results (a test should say so).
+        """
+        for env, action in zip(envs, _per_world(actions)):
+            env.prepare_step(action)
+
+    @classmethod
+    def post_steps(cls, envs: Sequence[BaseEnv], actions: Any) -> BatchResult:
+        """Optional batched :meth:`post_step` for ``envs`` after their substeps
+        (see :meth:`prepare_steps`). The default calls :meth:`post_step` per world."""
+        obs, rewards, terminated, infos = [], [], [], []
+        for env, action in zip(envs, _per_world(actions)):
+            o, r, t, info = unpack_step(
+                env.post_step(action), scene=cls.__name__, hook="post_step", finite=env.check_finite
+            )
+            obs.append(o)
+            rewards.append(float(r))
+            terminated.append(bool(t))
+            infos.append(info)
+        return BatchResult(obs, np.array(rewards, dtype=np.float64), np.array(terminated, dtype=np.bool_), infos)
+
+    # ------------------------------------------------------------ driving
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        """Start an episode. ``seed`` reseeds the RNG; None continues the current stream."""
+        if seed is not None:
+            self.seed_rng(seed)
+        if self._batch_link is not None:  # mj_resetData rewrites all of it: no need to bring it up to date
+            self._batch_link.claim(self._batch_index)
+        mujoco.mj_resetData(self.model, self._data)
+        result = self.reset_model(options)
+        if not isinstance(result, tuple) or len(result) != 2 or not isinstance(result[1], dict):
+            raise StepResultError(
+                f"{type(self).__name__}.reset_model returned {short_repr(result, 80)} "
+                f"({type(result).__name__}); it returns the tuple (obs, info), info a dict"
+            )
+        obs, info = result
+        self._check_obs(obs, "reset_model")
+        return obs, info
+
+    def finish_tick(self, action: Any) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
+        """:meth:`post_step`, its result checked: four values, a scalar reward,
+        a bool ``terminated``, a dict info (:mod:`remoteenv.sim.scene.step_check`)
+        and the observation against ``observation_space``."""
+        result = unpack_step(
+            self.post_step(action), scene=type(self).__name__, hook="post_step", finite=self.check_finite
+        )
+        self._check_obs(result[0], "post_step")
+        return result
+
+    def _check_obs(self, obs: Any, hook: str) -> None:
+        scene = type(self).__name__
+        check_observation(self.observation_space, obs, scene=scene, hook=hook, bounds=self.check_obs_bounds)
+        if self.check_finite:
+            check_finite_obs(obs, scene=scene, hook=hook)
+
+    def _model_file(self, path: str) -> str:
+        """``path`` if it names a file; else FileNotFoundError naming the scene, with the fix."""
+        if os.path.isfile(path):
+            return path
+        hint = ""
+        if not os.path.isabs(path):
+            hint = (
+                f"; a relative path is looked up from the sim process's working directory ({os.getcwd()}), "
+                "which is the agent's, not the scene script's folder: build it from the script's folder, "
+                'os.path.join(os.path.dirname(os.path.abspath(__file__)), "model.xml")'
+            )
+        raise FileNotFoundError(f"{type(self).__name__}: MJCF model file {path!r} not found{hint}")
+
+    def substep(self) -> None:
+        """Advance the physics by one ``model.opt.timestep``."""
+        mujoco.mj_step(self.model, self.data)
+        if self._viewer is not None:
+            self._viewer.sync(max_fps=60.0)  # real-time mode drives substeps, not step()
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
+        """One control tick: ``(obs, reward, terminated, info)``."""
+        self.prepare_step(action)
+        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        result = self.finish_tick(action)
+        if self._viewer is not None:
+            self._viewer.sync()
+        return result
+
+    def set_state(self, qpos: np.ndarray, qvel: np.ndarray) -> None:
+        """Set generalized positions and velocities and recompute derived quantities."""
+        self.data.qpos[:] = qpos
+        self.data.qvel[:] = qvel
+        if self.model.na == 0:
+            self.data.act[:] = 0
+        mujoco.mj_forward(self.model, self.data)
+
+    def render(self) -> np.ndarray | None:
+        """rgb_array: an RGB frame (uint8, height x width x 3) of the current state, offscreen.
+        human: draw the current state in the sim's viewer window; returns None."""
+        if self._viewer is not None:
+            self._viewer.sync()  # render_mode="human": draw in the sim's viewer window
+            return None
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.model, height=self.height, width=self.width)
+        camera = self.default_camera if self.default_camera is not None else -1
+        self._renderer.update_scene(self.data, camera=camera)
+        return self._renderer.render().copy()
+
+    def close(self) -> None:
+        """Release the renderer. Called once when the sim process stops."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None
+
+
+def _per_world(actions: Any) -> Any:
+    """Batched actions as the per-world hooks get them (python ints for Discrete)."""
+    if isinstance(actions, np.ndarray) and actions.dtype.kind in "iu":
+        return actions.tolist()
+    return actions

@@ -1,0 +1,1 @@
+"""The server loop: commands, attributes and the stepping mode it serves."""

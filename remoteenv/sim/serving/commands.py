@@ -1,0 +1,134 @@
+"""The commands every sim server answers: handshake, reset, step, render, close.
+
+Runs in the sim process. Each handler takes the decoded request, the channel
+it came on and whom to answer there, and returns the reply's fields (the
+server adds ``seq`` and ``ok``), or None when the reply comes later (a
+real-time step). A refused request raises
+:class:`~remoteenv.sim.transport.checks.RequestError` or
+:class:`~remoteenv.wire.errors.InvalidAction`; the server turns either into a
+typed error reply. The wire form of each command is specified in
+:mod:`remoteenv.wire.protocol`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.stepping.stepping import Stepping
+from remoteenv.sim.transport.channels import Channel
+from remoteenv.sim.transport.checks import (
+    options_value,
+    protocol_version,
+    require_reset,
+    seed_value,
+    world_index,
+)
+from remoteenv.sim.transport.drivers import Drivers
+from remoteenv.wire import protocol
+from remoteenv.wire import spaces as spaces_codec
+from remoteenv.wire.actions import check_action
+from remoteenv.wire.scalar_types import describe_scalars
+
+#: A command handler: ``(request, channel, reply_to) -> reply fields``, or None
+#: when the reply will be sent later.
+Handler = Callable[[dict[str, Any], "Channel | None", Any], "dict[str, Any] | None"]
+
+
+class Commands:
+    """The commands common to both stepping modes, for the worlds of one process.
+
+    Args:
+        envs: the worlds, in world order.
+        stepping: how they advance (its ``worlds`` match ``envs``).
+        instance: this sim process's index (reported in the handshake, named in errors).
+        stop: called by ``close`` to end serving once the reply is sent.
+        launcher_channel: the launching agent's local pipe, if any.
+
+    One connection drives each world, in both modes (:mod:`remoteenv.sim.transport.drivers`):
+    the launching agent's pipe if there is one, else the connection that
+    reset the world last. ``step`` (and, while the pipe drives, ``reset``)
+    from any other connection is refused with a ``state`` error, and so is
+    ``close`` from a connection that does not drive every driven world; the
+    other commands here are open to every connection.
+    """
+
+    def __init__(
+        self,
+        envs: Sequence[BaseEnv],
+        stepping: Stepping,
+        instance: int,
+        stop: Callable[[], None],
+        launcher_channel: Channel | None = None,
+    ) -> None:
+        self.envs = envs
+        self.stepping = stepping
+        #: Every command the server answers, sent in the handshake (the server fills it in).
+        self.advertised: list[str] = []
+        self._worlds = stepping.worlds
+        self.instance = instance
+        self._stop = stop
+        #: Who drives each world (and so may step it, and close the sim).
+        self.drivers = Drivers(len(envs), instance, launcher_channel)
+
+    def handlers(self) -> dict[str, Handler]:
+        return {
+            "handshake": self.handshake,
+            "reset": self.reset,
+            "step": self.step,
+            "render": self.render,
+            "close": self.close,
+        }
+
+    def handshake(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        protocol_version(msg.get("protocol"), protocol.PROTOCOL_VERSION, self.instance)
+        env = self.envs[0]
+        return {
+            "protocol": protocol.PROTOCOL_VERSION,
+            "env_id": env.env_id,
+            "instance": self.instance,
+            "pid": os.getpid(),
+            "num_worlds": len(self.envs),
+            "observation_space": spaces_codec.space_to_wire(env.observation_space),
+            "action_space": spaces_codec.space_to_wire(env.action_space),
+            "metadata": {
+                "render_modes": list(env.metadata.get("render_modes", [])),
+                "render_fps": int(round(1.0 / env.dt)),
+                "dt": float(env.dt),
+                "timestep": float(env.model.opt.timestep),
+                "frame_skip": env.frame_skip,
+            },
+            "stepping": self._worlds[0].describe(),
+            "commands": list(self.advertised),
+        }
+
+    def reset(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        world = world_index(msg, len(self.envs))
+        seed = seed_value(msg.get("seed"))
+        options = options_value(msg.get("options"))
+        self.drivers.take((world,), (channel, reply_to), "reset")
+        obs, info = self._worlds[world].reset(seed=seed, options=options)
+        return describe_scalars({"obs": obs, "info": info})
+
+    def step(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
+        world = world_index(msg, len(self.envs))
+        stepper = self._worlds[world]
+        require_reset(stepper.has_reset, world, self.instance)
+        action = check_action(self.envs[world].action_space, msg.get("action"))  # the same answer for anyone
+        self.drivers.require((world,), (channel, reply_to), "step")
+        reply = stepper.submit(msg["seq"], action, channel, reply_to)
+        return None if reply is None else describe_scalars(reply)
+
+    def render(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        world = world_index(msg, len(self.envs))
+        return {"frame": self.envs[world].render()}
+
+    def close(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        self.drivers.require_every((channel, reply_to), "close")
+        self._stop()
+        return {}
+
+
+__all__ = ["Commands", "Handler"]

@@ -1,0 +1,407 @@
+"""RemoteControlledAgent: serves a scene's worlds to one agent over the wire.
+
+Runs in the sim process. It binds a ROUTER socket (and serves the launcher's
+local pipe beside it), answers the commands of :mod:`remoteenv.wire.protocol`
+from one command table and keeps serving after errors in the scene code.
+
+One loop serves both stepping modes. It asks the server's
+:class:`~remoteenv.sim.stepping.stepping.Stepping` for its next deadline: with none
+(always, in lock-step) it blocks on its channels until a request arrives,
+busy-waiting for a short while first when the agent on the local pipe has
+been quick (:data:`SIM_SPIN_S`); with one (real time) it sleeps until just
+before it with ``select`` (microsecond timeouts), spins the rest, runs the
+work due and sends the replies that completes, and reads requests between
+substeps.
+"""
+
+from __future__ import annotations
+
+import logging
+import select
+import time
+import traceback
+from typing import Any
+
+import zmq
+
+from remoteenv.sim.process.lifecycle import exit_on_sigterm, remove_ipc_file, write_ready_file
+from remoteenv.sim.process.orphan import (
+    CHECK_INTERVAL_S,
+    ParentWatch,
+    parent_alive,
+    parent_gone_within,
+    remove_private_files,
+    start_guard,
+)
+from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.serving.attributes import AttributeCommands
+from remoteenv.sim.serving.commands import Commands, Handler
+from remoteenv.sim.serving.stepping_modes import stepping_and_commands
+from remoteenv.sim.stepping.real_time import Clock
+from remoteenv.sim.transport.channels import Channel, Outgoing, PipeChannel, ZmqChannel
+from remoteenv.sim.transport.checks import RequestError
+from remoteenv.sim.transport.limits import EXPENSIVE_COMMANDS, EXPENSIVE_PER_PASS, raise_fd_limit, return_large_frees
+from remoteenv.sim.transport.router import open_router
+from remoteenv.wire import protocol
+from remoteenv.wire.addresses import is_loopback
+from remoteenv.wire.delays.delays import DelaySpec
+from remoteenv.wire.errors import INVALID_ACTION, PROTOCOL, SCENE, InvalidAction, short_repr
+from remoteenv.wire.shared_memory.hot_wait import HotWait
+
+log = logging.getLogger(__name__)
+
+#: Longest busy-wait (seconds) for the agent's next request on the local pipe.
+SIM_SPIN_S = 1e-3
+#: Wall seconds before a deadline at which waiting turns from sleeping to spinning.
+DEADLINE_SPIN_S = 0.0003
+_CHECK_INTERVAL_MS = round(CHECK_INTERVAL_S * 1000)
+
+
+class RemoteControlledAgent:
+    """Serves ``envs`` (one or more worlds of one scene) at ``address``.
+
+    Args:
+        envs: the worlds this process hosts; requests address them by index.
+        address: ZeroMQ endpoint to bind, e.g. ``ipc:///tmp/x/sim-0.sock`` or
+            ``tcp://127.0.0.1:*`` (the OS picks the port; see ``endpoint``).
+        instance: the index of this sim process among those an agent launched.
+        parent_pid: exit when this process is no longer our parent (the agent
+            died). None disables the check.
+        ready_file: once bound, write ``{"endpoint", "pid", "instance"}`` as JSON
+            here (atomically), so the launcher knows where and that we listen.
+        real_time, real_time_factor: run physics paced to the wall clock
+            (:mod:`remoteenv.sim.stepping.real_time`); the factor is simulated seconds
+            per wall-clock second.
+        action_delay, obs_delay: lock-step only: delays (control ticks, an int
+            or a spec) of actions and observations (:mod:`remoteenv.sim.stepping.lock_step`).
+        link_delay: real time only: emulated extra link delay per action (wall
+            seconds, a number or a spec; :mod:`remoteenv.sim.stepping.real_time`).
+        seed: launch seed of world 0 (world ``w``: ``seed + w``), seeding the
+            delay streams until a reset brings a seed.
+        allow_remote: permit binding a non-loopback interface.
+        curve_secret_key: this server's Z85 CURVE secret key; turns on CURVE
+            encryption (required beyond loopback).
+        curve_client_keys: with CURVE, the Z85 public keys of the clients
+            allowed to connect (checked by a ZAP handler); None admits any
+            client that knows the server's public key.
+        private_dir: the launcher's private dir; if the agent dies, this sim
+            removes its ``sim-<instance>.*`` files from it (and the dir, last).
+        pipe_fd: inherited end of the launcher's socketpair, served besides
+            the socket (see "The local pipe" in :mod:`remoteenv.wire.protocol`);
+            its end of file stops the server.
+        clock: the loop's and real-time stepping's clock (seconds, monotonic).
+    """
+
+    def __init__(
+        self,
+        envs: list[BaseEnv],
+        address: str,
+        *,
+        instance: int = 0,
+        parent_pid: int | None = None,
+        ready_file: str | None = None,
+        real_time: bool = False,
+        real_time_factor: float = 1.0,
+        action_delay: DelaySpec | int = 0,
+        obs_delay: DelaySpec | int = 0,
+        link_delay: DelaySpec | float | None = None,
+        seed: int | None = None,
+        allow_remote: bool = False,
+        curve_secret_key: bytes | None = None,
+        curve_client_keys: list[bytes] | None = None,
+        private_dir: str | None = None,
+        pipe_fd: int | None = None,
+        clock: Clock = time.monotonic,
+    ) -> None:
+        if not envs:
+            raise ValueError("RemoteControlledAgent needs at least one env")
+        if not is_loopback(address) and not allow_remote:
+            raise ValueError(
+                f"refusing to bind {address!r}: not ipc:// or loopback. Binding another "
+                "interface needs allow_remote=True and CURVE keys."
+            )
+        self.envs = envs
+        self.instance = instance
+        self.parent_pid = parent_pid
+        self.private_dir = private_dir
+        self.real_time = real_time
+        self.clock = clock
+        self.orphaned = False
+        self._pipe_ended = False
+        self._pipe = PipeChannel(pipe_fd) if pipe_fd is not None else None
+        self.stepping, mode_commands = stepping_and_commands(
+            envs,
+            instance,
+            real_time=real_time,
+            real_time_factor=real_time_factor,
+            action_delay=action_delay,
+            obs_delay=obs_delay,
+            link_delay=link_delay,
+            seed=seed,
+            clock=clock,
+        )
+        common = Commands(envs, self.stepping, instance, self.stop, launcher_channel=self._pipe)
+        self._handlers: dict[str, Handler] = common.handlers()
+        self._handlers.update(AttributeCommands(envs, instance).handlers())
+        self._handlers.update(mode_commands)
+        #: Who drives each world (:mod:`remoteenv.sim.transport.drivers`).
+        self.drivers = drivers = common.drivers
+        for name in ("pause", "resume"):  # they stop or start every world's clock
+            if name in self._handlers:
+                self._handlers[name] = drivers.guard_every(name, self._handlers[name])
+        if "reset_batch" in self._handlers:
+            self._handlers["reset_batch"] = drivers.guard_reset_batch(self._handlers["reset_batch"])
+            self._handlers["step_batch"] = drivers.guard_step_batch(self._handlers["step_batch"])
+        common.advertised = sorted(self._handlers)
+        raise_fd_limit()
+        return_large_frees()
+        # A context of its own: its ZAP handler is this server's gate.
+        self._ctx: zmq.Context[Any] = zmq.Context()
+        try:
+            self.socket, self._gate = open_router(self._ctx, address, curve_secret_key, curve_client_keys)
+        except BaseException:
+            self._ctx.term()
+            raise
+        self.endpoint: str = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
+        #: The ROUTER's channel: the drivers' frames first, the others' within budgets.
+        self.router = ZmqChannel(self.socket, owners=lambda: drivers.routing_ids)
+        self.channels: list[Channel] = [self.router]
+        if self._pipe is not None:
+            self.channels.append(self._pipe)
+        self._expensive_left = EXPENSIVE_PER_PASS
+        self._running = True
+        #: Wall seconds before a deadline at which waiting turns from sleeping to spinning.
+        self.deadline_spin_s = DEADLINE_SPIN_S
+        if ready_file:
+            write_ready_file(ready_file, self.endpoint, instance)
+
+    @property
+    def running(self) -> bool:
+        """True until a ``close`` command, the pipe's end or the parent's death stops serving."""
+        return self._running
+
+    @property
+    def commands(self) -> list[str]:
+        """The commands this server answers, sorted."""
+        return sorted(self._handlers)
+
+    def stop(self) -> None:
+        """Stop serving once the request in hand is answered."""
+        self._running = False
+
+    # ------------------------------------------------------------ serving
+
+    def serve(self) -> None:
+        """Answer requests until a ``close`` command, SIGTERM/SIGINT or parent death."""
+        exit_on_sigterm()
+        watch = guard = None
+        if self.parent_pid is not None:
+            guard = start_guard(self.parent_pid, self.private_dir, self.instance)
+            watch = ParentWatch(self.parent_pid, self.private_dir, self.instance)
+            watch.start()
+        try:
+            self._serve_until_stopped()
+        finally:
+            self.shutdown()
+            # The pipe ends a moment before the kernel reparents us: wait for that
+            # before deciding that the agent is gone (and its files with it).
+            wait_s = 0.5 if self._pipe_ended else 0.0
+            gone = self.orphaned or (self.parent_pid is not None and parent_gone_within(self.parent_pid, wait_s))
+            if self.private_dir and gone:
+                remove_private_files(self.private_dir, self.instance)
+            if watch is not None:
+                watch.finished()
+            if guard is not None:
+                guard.release()
+
+    def _serve_until_stopped(self) -> None:
+        stepping, clock, pipe, router = self.stepping, self.clock, self._pipe, self.router
+        # Busy-waiting for the agent's next request pays in lock-step; in real
+        # time the loop's own waits are paced by the deadlines instead.
+        hot = HotWait(SIM_SPIN_S if pipe is not None and not self.real_time else 0.0)
+        served: list[Channel] = [router] if pipe is None else [pipe, router]  # the launching agent first
+        poller = zmq.Poller()
+        for channel in served:
+            poller.register(channel.pollable, zmq.POLLIN)
+        fds = [channel.fd for channel in served]
+        spin_s = self.deadline_spin_s
+        last_check = clock()
+        while self._running:
+            self._expensive_left = EXPENSIVE_PER_PASS
+            deadline = stepping.next_deadline()
+            if deadline is None:
+                if pipe is not None and hot.worth_it():
+                    # The agent has been sending its next request quickly: wait hot.
+                    frames = pipe.receive_spinning(hot)
+                    if frames:
+                        hot.waited(time.perf_counter() - hot.since)
+                        self._answer(pipe, frames)
+                        hot.since = time.perf_counter()
+                        continue
+                    if pipe.closed:
+                        self.pipe_closed()
+                        continue
+                if pipe is not None and not router.more:
+                    # About to block: a request posted in the pipe's region comes with a frame from now on.
+                    frames = pipe.settle()
+                    if frames:
+                        self._answer(pipe, frames)
+                        continue
+                # Frames left waiting in the router's backlog: look, do not wait.
+                events = dict(poller.poll(0 if router.more else _CHECK_INTERVAL_MS))
+                for channel in served:
+                    if channel.pollable not in events and not channel.more:
+                        continue
+                    frames = channel.receive_nowait()
+                    if channel is pipe and frames:
+                        hot.waited(time.perf_counter() - hot.since)
+                    self._answer(channel, frames)
+                    if channel is pipe:
+                        hot.since = time.perf_counter()
+                    if channel.closed:
+                        self.pipe_closed()
+                idle = not events
+            else:
+                now = clock()
+                if deadline <= now:
+                    for outgoing in stepping.run_due(now):
+                        self._send_later(outgoing)
+                else:
+                    timeout = min(deadline - now, CHECK_INTERVAL_S)
+                    if timeout > spin_s and not any(channel.more for channel in self.channels):
+                        # Wake a little early: the kernel's wake-up latency is then
+                        # absorbed by spinning (looping) instead of making us late.
+                        select.select(fds, [], [], timeout - spin_s)
+                # The ZeroMQ descriptor is edge-triggered: read every channel.
+                for channel in served:
+                    self._answer(channel, channel.receive_nowait())
+                    if channel.closed:
+                        self.pipe_closed()
+                idle = False
+            now = clock()
+            if idle or now - last_check > CHECK_INTERVAL_S:
+                self.check_parent()
+                last_check = now
+
+    def _answer(self, channel: Channel, frames: list[tuple[Any, Any]]) -> None:
+        stepping, router = self.stepping, self.router
+        for i, (reply_to, frame) in enumerate(frames):
+            reply: dict[str, Any] | None
+            try:
+                msg = protocol.decode_request(frame)
+            except protocol.ProtocolError as exc:
+                reply = protocol.error_reply(-1, PROTOCOL, str(exc))
+            else:
+                if msg["cmd"] in EXPENSIVE_COMMANDS and channel is router and router.budgeted(reply_to):
+                    if self._expensive_left <= 0:  # this pass's share is spent: the rest waits
+                        router.defer(frames[i:])
+                        return
+                    self._expensive_left -= 1
+                reply = self.handle(msg, channel, reply_to)
+            if reply is not None:
+                channel.send(reply_to, self.pack_reply(reply))
+                if stepping.clock_waiting:  # a reset was answered: its world's clock starts now
+                    stepping.start_clocks(self.clock())
+
+    def _send_later(self, outgoing: Outgoing) -> None:
+        channel, reply_to, reply = outgoing
+        if channel is not None:
+            channel.send(reply_to, self.pack_reply(reply))
+
+    def pipe_closed(self) -> None:
+        """The local pipe ended: the agent died or closed it. Stop; if the agent is
+        gone (or nobody can tell: no parent pid), leave no files."""
+        self._pipe_ended = True
+        if self.parent_pid is None:
+            self.orphaned = True
+        self._running = False
+
+    def check_parent(self) -> None:
+        """Stop serving if the agent that launched us is gone."""
+        if self.parent_pid is not None and not parent_alive(self.parent_pid):
+            self.orphaned = True
+            self._running = False
+
+    # ------------------------------------------------------------ requests
+
+    def pack_reply(self, reply: dict[str, Any]) -> bytes:
+        """Encode a reply; one that cannot go on the wire becomes a typed error (never raises)."""
+        try:
+            return protocol.pack(reply)
+        except protocol.FrameTooLarge as exc:
+            seq = reply.get("seq", -1)
+            return protocol.pack(
+                protocol.error_reply(
+                    seq if isinstance(seq, int) else -1,
+                    PROTOCOL,
+                    f"the reply to this request is too large to send: {exc}; ask for less "
+                    "(e.g. a smaller render size or fewer worlds per batch)",
+                )
+            )
+        except Exception as exc:
+            seq = reply.get("seq", -1)
+            return protocol.pack(
+                protocol.error_reply(
+                    seq if isinstance(seq, int) else -1,
+                    SCENE,
+                    f"the reply to this request cannot be sent on the wire ({type(exc).__name__}: "
+                    f"{short_repr(str(exc))}); "
+                    "scene code must return numpy arrays, numbers, strings, lists and str-keyed maps",
+                    traceback.format_exc(),
+                )
+            )
+
+    def handle_frame(self, frame: bytes, channel: Channel | None = None, reply_to: Any = None) -> dict[str, Any] | None:
+        """Decode one request frame and compute its reply (never raises); see :meth:`handle`.
+
+        A frame that is not a request gets a ``protocol`` error with ``seq`` -1.
+        """
+        try:
+            msg = protocol.decode_request(frame)
+        except protocol.ProtocolError as exc:
+            return protocol.error_reply(-1, PROTOCOL, str(exc))
+        return self.handle(msg, channel, reply_to)
+
+    def handle(
+        self, msg: dict[str, Any], channel: Channel | None = None, reply_to: Any = None
+    ) -> dict[str, Any] | None:
+        """The reply to a decoded request (never raises), or None if it comes later.
+
+        Only a real-time ``step`` answers later: its reply goes to ``reply_to``
+        on ``channel`` when its tick ends (nowhere if ``channel`` is None).
+        """
+        seq = msg["seq"]
+        handler = self._handlers.get(msg["cmd"])
+        if handler is None:
+            return protocol.error_reply(
+                seq, PROTOCOL, f"unknown command {short_repr(msg['cmd'])}; known: {sorted(self._handlers)}"
+            )
+        try:
+            reply = handler(msg, channel, reply_to)
+        except RequestError as exc:
+            return protocol.error_reply(seq, exc.kind, str(exc))
+        except InvalidAction as exc:
+            return protocol.error_reply(seq, INVALID_ACTION, str(exc))
+        except Exception as exc:
+            return protocol.error_reply(seq, SCENE, f"{type(exc).__name__}: {exc}", traceback.format_exc())
+        if reply is not None:
+            reply["seq"] = seq
+            reply["ok"] = True
+        return reply
+
+    def shutdown(self) -> None:
+        """Close the envs and the socket (libzmq unlinks an ipc socket file it bound)."""
+        for env in self.envs:
+            try:
+                env.close()
+            except Exception:
+                log.exception("closing %s (a world of sim instance %d) raised", type(env).__name__, self.instance)
+        self._gate.stop()
+        self.socket.close(linger=0)
+        self._ctx.term()
+        if self._pipe is not None:
+            self._pipe.close()
+        remove_ipc_file(self.endpoint)
+
+
+__all__ = ["DEADLINE_SPIN_S", "SIM_SPIN_S", "RemoteControlledAgent"]

@@ -1,0 +1,1 @@
+"""How the worlds advance: lock-step, real time, and batched physics."""

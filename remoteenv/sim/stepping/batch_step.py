@@ -1,0 +1,126 @@
+"""One control tick for many worlds of one process: batched hooks, batched physics.
+
+Runs in the sim process (lock-step, no action or observation delay). :class:`WorldsStepper`
+drives a ``step_batch`` request's stepped worlds as
+:meth:`BaseEnv.prepare_steps` -> physics of every world -> :meth:`BaseEnv.post_steps`.
+The physics of a scene with :attr:`~BaseEnv.stacked_hooks` runs in one native
+call over all the worlds (:class:`~remoteenv.sim.stepping.batch_worlds.BatchedWorlds`,
+MuJoCo's ``mujoco.batch``), and its hooks work on stacked arrays of all the
+worlds' state (:func:`~remoteenv.sim.stepping.batch_worlds.stacked`); other scenes'
+physics runs on threads over each world's ``MjData``
+(:class:`~remoteenv.sim.stepping.batch_physics.PhysicsThreads`). Scenes that keep the
+per-world hooks get the same sequence per world (``BaseEnv``'s default
+batched hooks loop over them), so every scene's physics runs off the GIL.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.scene.batch_result import BatchResult
+from remoteenv.sim.scene.step_check import check_batch
+from remoteenv.sim.stepping.batch_physics import PhysicsThreads, default_threads
+from remoteenv.sim.stepping.batch_worlds import BatchedWorlds, StackedWorlds, available, batch_state
+
+
+def steps_together(envs: Sequence[Any]) -> bool:
+    """Whether ``envs`` can be stepped as one batch: ``BaseEnv`` worlds of one
+    class and frame skip, that keep BaseEnv's ``step`` and have no viewer
+    window (which wants a sync after every world's step)."""
+    if not envs or not all(isinstance(env, BaseEnv) for env in envs):
+        return False
+    cls = type(envs[0])
+    return (
+        cls.step is BaseEnv.step
+        and all(type(env) is cls and env.frame_skip == envs[0].frame_skip for env in envs)
+        and all(getattr(env, "_viewer", None) is None for env in envs)
+    )
+
+
+class WorldsStepper:
+    """Steps any subset of ``envs`` (one class, see :func:`steps_together`) by one tick.
+
+    Args:
+        envs: the process's worlds, in world order.
+        threads: physics threads (default :func:`~remoteenv.sim.stepping.batch_physics.default_threads`).
+    """
+
+    def __init__(self, envs: Sequence[BaseEnv], threads: int | None = None) -> None:
+        if not steps_together(envs):
+            raise ValueError("WorldsStepper needs BaseEnv worlds of one class and frame skip, without viewer")
+        self.envs = list(envs)
+        self._cls = type(self.envs[0])
+        self._models = [env.model for env in self.envs]
+        self._datas = [env.data for env in self.envs]
+        self._frame_skip = self.envs[0].frame_skip
+        own = getattr(self._cls.post_steps, "__func__", None) is not getattr(BaseEnv.post_steps, "__func__", None)
+        #: The hook that produced a batch's results, as its errors name it.
+        self._hook = "post_steps" if own else "post_step"
+        self._all = list(range(len(self.envs)))
+        nthreads = threads if threads is not None else default_threads(len(self.envs))
+        #: The worlds' physics in one ``mujoco.batch.Batch`` (scenes with stacked hooks), else None.
+        self.batched = BatchedWorlds(self.envs, nthreads) if self._cls.stacked_hooks and available() else None
+        self.physics = PhysicsThreads(1 if self.batched is not None else nthreads)
+        #: Every world, with the batch's state (the common request: built once).
+        self._every = StackedWorlds(self.envs, batch_state(self.batched, None)) if self.batched is not None else None
+
+    def step(self, worlds: Sequence[int], actions: Any) -> BatchResult:
+        """One tick of worlds ``worlds`` (indices, in order) with ``actions[j]``
+        for ``worlds[j]`` (checked and stacked, see :meth:`BaseEnv.prepare_steps`)."""
+        every = list(worlds) == self._all
+        batched = self.batched
+        if batched is not None:
+            if every and self._every is not None:
+                envs: Sequence[BaseEnv] = self._every
+                self._cls.prepare_steps(envs, actions)
+                batched.step(None, self._frame_skip)
+            else:
+                ids = np.asarray(worlds, dtype=np.intp)
+                envs = StackedWorlds([self.envs[w] for w in worlds], batch_state(batched, ids))
+                self._cls.prepare_steps(envs, actions)
+                batched.step(np.sort(ids).astype(np.int32), self._frame_skip)
+        else:
+            if every:
+                envs, models, datas = self.envs, self._models, self._datas
+            else:
+                envs = [self.envs[w] for w in worlds]
+                models = [self._models[w] for w in worlds]
+                datas = [self._datas[w] for w in worlds]
+            self._cls.prepare_steps(envs, actions)
+            self.physics.step(models, datas, self._frame_skip)
+        env = self.envs[0]
+        result = check_batch(
+            self._cls.post_steps(envs, actions),
+            len(envs),
+            scene=self._cls.__name__,
+            hook=self._hook,
+            finite=env.check_finite,
+        )
+        self._check_obs(result.obs)
+        return result
+
+    def _check_obs(self, obs: Any) -> None:
+        """What :meth:`BaseEnv.finish_tick` checks per world: a stacked batch's
+        dtype and row shape once (every row shares them), each row's bounds
+        when the scene asks for bounds; other batches world by world."""
+        env = self.envs[0]
+        if isinstance(obs, np.ndarray) and obs.ndim >= 1 and not env.check_obs_bounds:
+            rows = obs[:1]
+        else:
+            rows = obs
+        for row in rows:
+            env._check_obs(row, self._hook)
+
+    def close(self) -> None:
+        """Stop the physics threads; give every world its state back (its ``MjData``)."""
+        self.physics.close()
+        if self.batched is not None:
+            self.batched.close()
+            self.batched = None
+
+
+__all__ = ["WorldsStepper", "steps_together"]

@@ -1,0 +1,170 @@
+"""Lock-step: a world advances only when asked, optionally with action and observation delays.
+
+Runs in the sim process. The same seed and the same actions give the same
+trajectory in any process. :class:`LockStepper` steps one world;
+:class:`LockStepping` is the server loop's strategy for all of them (no
+clock: the loop just waits for requests). Both satisfy the interfaces of
+:mod:`remoteenv.sim.stepping.stepping`. The delay rules themselves (counting, the
+newest due action in force, the newest arrived observation returned,
+seeding) are :class:`remoteenv.wire.delays.delay_line.LockStepDelays`'s, written
+down in ``docs/delays.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.transport.channels import Channel, Outgoing
+from remoteenv.wire.delays.delay_line import LockStepDelays
+from remoteenv.wire.delays.delays import TICKS, Constant, DelaySpec, as_delay
+from remoteenv.wire.scalar_types import describe_scalars
+
+
+def _tick_delay(value: DelaySpec | int, name: str) -> DelaySpec:
+    """``value`` as a spec in ticks; a negative int is refused naming ``name``."""
+    if not isinstance(value, DelaySpec) and int(value) < 0:
+        raise ValueError(f"{name} must be >= 0 ticks, got {value}")
+    try:
+        return as_delay(value, TICKS)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
+
+
+class LockStepper:
+    """Advances one world by one control tick per ``step`` request.
+
+    Without delays each action is applied in its own tick and the reply's
+    ``info`` is the scene's. With ``action_delay`` and/or ``obs_delay``
+    (ticks: an int, or a :class:`~remoteenv.wire.delays.delays.DelaySpec`) the
+    action sent with step ``t`` takes effect at tick ``t + d_t`` and the
+    step returns the newest observation that has arrived; during the first
+    ticks the scene's default action is applied (see
+    :meth:`BaseEnv.default_action`). The reply's ``info`` then also carries
+    ``applied_action`` (the action in force, None for the default),
+    ``action_delay_ticks``, ``obs_delay_ticks``, ``obs_sim_time`` and
+    real-time mode's timing keys with their exact values: ``sim_time`` (the
+    world's time after the tick), ``ticks_elapsed`` = 1, ``latency_ticks``,
+    ``latency_s`` = ``latency_ticks * dt`` and ``late`` (the action waits at
+    least one whole tick). With ``action_delay=k`` alone that is the old
+    rule: the default for ``k`` ticks, then each action ``k`` ticks late.
+
+    Args:
+        env: the world.
+        action_delay, obs_delay: the delay models (ticks).
+        seed: the world's launch seed: seeds the delay streams at the first
+            reset when that reset brings no seed (None: OS entropy).
+    """
+
+    def __init__(
+        self,
+        env: BaseEnv,
+        action_delay: DelaySpec | int = 0,
+        obs_delay: DelaySpec | int = 0,
+        seed: int | None = None,
+    ) -> None:
+        action_spec = _tick_delay(action_delay, "action_delay")
+        obs_spec = _tick_delay(obs_delay, "obs_delay")
+        self.env = env
+        self.delays = LockStepDelays(action_spec, obs_spec)
+        #: The largest action delay (ticks); the handshake's ``action_delay``.
+        self.action_delay = int(action_spec.max)
+        self.has_reset = False
+        self._launch_seed = seed
+        self._seeded = False
+
+    def describe(self) -> dict[str, Any]:
+        """``action_delay`` (ticks; the largest one for a random model), and when
+        the models are more than a constant action delay: ``obs_delay`` (the
+        largest, ticks) and both specs' wire forms."""
+        out: dict[str, Any] = {"mode": "lock_step", "action_delay": self.action_delay}
+        action, obs = self.delays.action_delay, self.delays.obs_delay
+        if not (isinstance(action, Constant) and obs.is_zero):
+            out.update(obs_delay=int(obs.max), action_delay_spec=action.to_wire(), obs_delay_spec=obs.to_wire())
+        return out
+
+    def reset(self, *, seed: int | None, options: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        self.has_reset = True
+        if seed is None and not self._seeded:
+            seed = self._launch_seed
+        self._seeded = self._seeded or seed is not None
+        self.delays.reset(obs, float(self.env.data.time), self.env.default_action(), seed=seed)
+        return obs, info
+
+    def submit(self, seq: int, action: Any, channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        """A ``step`` request: answered at once (see :meth:`step`)."""
+        return self.step(action)
+
+    def step(self, action: Any) -> dict[str, Any]:
+        """One control tick with ``action`` (already checked); the reply's fields."""
+        delays = self.delays
+        if delays.is_zero:
+            obs, reward, terminated, info = self.env.step(action)
+        else:
+            in_force, _ = delays.apply(action)
+            tick_obs, reward, terminated, info = self.env.step(in_force)
+            sim_time = float(self.env.data.time)
+            obs, record = delays.observe(tick_obs, sim_time)
+            info = dict(info)
+            info.update(record.info())
+            info["applied_action"] = in_force
+            # The timing keys of real-time mode, exact by construction here.
+            info["sim_time"] = sim_time
+            info["ticks_elapsed"] = 1
+            info["latency_s"] = record.latency_ticks * self.env.dt
+            info["late"] = record.latency_ticks > 0
+        return describe_scalars(
+            {
+                "obs": obs,
+                # A float subclass (np.float64, as Gymnasium's MuJoCo envs return) keeps its type.
+                "reward": reward if isinstance(reward, float) else float(reward),
+                "terminated": bool(terminated),
+                "truncated": False,
+                "info": info,
+            }
+        )
+
+
+class LockStepping:
+    """The loop strategy of a lock-step server: no deadlines, every reply at once.
+
+    Args:
+        envs: the worlds, one :class:`LockStepper` each.
+        action_delay, obs_delay: the delay models of every world (ticks); each
+            world draws from its own streams.
+        seed: launch seed of world 0 (world ``w`` uses ``seed + w``), seeding
+            the delay streams until a reset brings a seed; None: OS entropy.
+    """
+
+    #: Lock-step has no clock to start.
+    clock_waiting = False
+
+    def __init__(
+        self,
+        envs: Sequence[BaseEnv],
+        action_delay: DelaySpec | int = 0,
+        obs_delay: DelaySpec | int = 0,
+        seed: int | None = None,
+    ) -> None:
+        self._worlds = [
+            LockStepper(env, action_delay, obs_delay, seed=None if seed is None else seed + w)
+            for w, env in enumerate(envs)
+        ]
+
+    @property
+    def worlds(self) -> list[LockStepper]:
+        return self._worlds
+
+    def next_deadline(self) -> float | None:
+        return None
+
+    def start_clocks(self, now: float) -> None:
+        pass
+
+    def run_due(self, now: float) -> Iterator[Outgoing]:
+        return iter(())
+
+
+__all__ = ["LockStepper", "LockStepping"]

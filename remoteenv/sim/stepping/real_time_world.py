@@ -1,0 +1,310 @@
+"""One world on the wall clock: :class:`RealTimeStepper` (see :mod:`remoteenv.sim.stepping.real_time`).
+
+Runs in the sim process. The semantics (deadlines, when actions take
+effect and replies go, the emulated link, pause) and the info keys of a
+real-time step are written down in :mod:`remoteenv.sim.stepping.real_time`, whose
+:class:`~remoteenv.sim.stepping.real_time.RealTimeStepping` drives one of these per world.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.transport.channels import Channel, Outgoing
+from remoteenv.sim.transport.checks import RequestError
+from remoteenv.wire.delays.delay_line import LINK_STREAM, DelayStream
+from remoteenv.wire.delays.delays import SECONDS, DelaySpec, as_delay
+from remoteenv.wire.errors import SCENE
+from remoteenv.wire.protocol import error_reply
+from remoteenv.wire.stats import RunningStats
+
+#: A clock: seconds, monotonic (``time.monotonic`` in a sim process).
+Clock = Callable[[], float]
+
+_IDLE, _READY, _RUNNING, _FROZEN, _FAILED = "idle", "ready", "running", "frozen", "failed"
+
+
+@dataclass
+class _PendingStep:
+    channel: Channel | None
+    reply_to: Any
+    seq: int
+    action: Any
+    arrived: float  # clock time when the request was handed over
+    link_delay: float = 0.0  # emulated link: wall seconds it is held back after arriving
+    applied_sim_time: float | None = None
+    apply_delay_s: float | None = None
+
+
+class RealTimeStepper:
+    """One world advanced on the wall clock; driven by :class:`RealTimeStepping`.
+
+    Args:
+        env: the world.
+        real_time_factor: simulated seconds per wall-clock second (> 0).
+        clock: where wall time comes from (seconds, monotonic).
+        link_delay: emulated extra link delay per action (wall seconds, a
+            number or a spec in seconds); None or 0: none.
+        seed: the world's launch seed: seeds the link stream at the first
+            reset when that reset brings no seed (None: OS entropy).
+    """
+
+    def __init__(
+        self,
+        env: BaseEnv,
+        real_time_factor: float = 1.0,
+        clock: Clock = time.monotonic,
+        link_delay: DelaySpec | float | None = None,
+        seed: int | None = None,
+    ) -> None:
+        factor = float(real_time_factor)
+        if not (math.isfinite(factor) and factor > 0):
+            raise ValueError(f"real_time_factor must be a finite number > 0, got {real_time_factor!r}")
+        self.env = env
+        self.factor = factor
+        self.clock = clock
+        #: Wall seconds per physics substep.
+        self.period = float(env.model.opt.timestep) / factor
+        self.state = _IDLE
+        #: Wall-clock lateness (s) of every substep boundary against its deadline;
+        #: percentiles over the last 60 s of substeps (at most 200,000 of them).
+        self.pacing_error = RunningStats(window=min(200_000, max(1000, int(60.0 / self.period))))
+        #: Wall seconds from a step request's arrival to the substep where it took effect.
+        self.apply_delay = RunningStats()
+        #: Substeps run more than one ``period`` late, since the process started.
+        self.overruns = 0
+        self.substeps = 0
+        self._t0 = 0.0
+        self._n = 0
+        self._held: Any = None
+        self._pending: _PendingStep | None = None
+        self._reward = 0.0
+        self._ticks = 0
+        self._obs: Any = None
+        self._obs_time = 0.0
+        self._info: dict[str, Any] = {}
+        self._failure = ""
+        link = as_delay(0.0 if link_delay is None else link_delay, SECONDS)
+        #: The emulated link delay's draws (None: no emulated link).
+        self.link: DelayStream | None = None if link.is_zero else DelayStream(link, LINK_STREAM)
+        #: Emulated link delays drawn (wall seconds).
+        self.link_delay = RunningStats()
+        self._launch_seed = seed
+        self._seeded = False
+        self._paused_at: float | None = None
+
+    # ------------------------------------------------------------ queries
+
+    @property
+    def has_reset(self) -> bool:
+        return self.state != _IDLE
+
+    @property
+    def running(self) -> bool:
+        return self.state == _RUNNING
+
+    @property
+    def awaiting_clock(self) -> bool:
+        """Reset but the clock not yet started (its reply is not sent yet)."""
+        return self.state == _READY
+
+    @property
+    def paused(self) -> bool:
+        return self._paused_at is not None
+
+    def next_deadline(self) -> float | None:
+        """Clock time at which the next substep boundary is due (None: nothing runs)."""
+        if self.state != _RUNNING or self._paused_at is not None:
+            return None
+        return self._t0 + self._n * self.period
+
+    def describe(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"mode": "real_time", "real_time_factor": self.factor, "action_delay": 0}
+        if self.link is not None:
+            out["link_delay_spec"] = self.link.spec.to_wire()
+        return out
+
+    def timing(self) -> dict[str, Any]:
+        """Pacing figures of this world (wall seconds)."""
+        return {
+            "pacing_error_s": self.pacing_error.summary(),
+            "apply_delay_s": self.apply_delay.summary(),
+            "overruns": self.overruns,
+            "substeps": self.substeps,
+            "period_s": self.period,
+            "link_delay_s": self.link_delay.summary(),
+        }
+
+    def clear_timing(self) -> None:
+        self.pacing_error.clear()
+        self.apply_delay.clear()
+        self.link_delay.clear()
+        self.overruns = 0
+        self.substeps = 0
+
+    # ------------------------------------------------------------ episode
+
+    def reset(self, *, seed: int | None, options: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
+        """Synchronous reset; the clock starts with :meth:`start` once the reply is sent."""
+        obs, info = self.env.reset(seed=seed, options=options)
+        if self.link is not None:
+            if seed is None and not self._seeded:
+                seed = self._launch_seed
+            if seed is not None:
+                self.link.seed(seed)
+                self._seeded = True
+        self.state = _READY
+        self._held = self.env.default_action()
+        self._pending = None
+        self._reward = 0.0
+        self._ticks = 0
+        self._obs = obs
+        self._obs_time = float(self.env.data.time)
+        self._info = {}
+        self._n = 0
+        return obs, info
+
+    def start(self, now: float) -> None:
+        """Start the clock: substep boundary 0 is due at ``now``."""
+        if self.state == _READY:
+            self._t0 = now
+            self._n = 0
+            self.state = _RUNNING
+            if self._paused_at is not None:  # starts paused: its clock runs from the resume
+                self._paused_at = now
+
+    def pause(self, now: float) -> None:
+        """Stop this world's clock at ``now`` (idempotent): no substep runs until :meth:`resume`."""
+        if self._paused_at is None:
+            self._paused_at = now
+
+    def resume(self, now: float) -> float:
+        """Restart the clock where it stopped; returns the paused wall seconds.
+
+        Every deadline and a waiting request's arrival shift by the pause, so
+        it counts in no timing figure."""
+        if self._paused_at is None:
+            return 0.0
+        paused = max(0.0, now - self._paused_at)
+        self._paused_at = None
+        self._t0 += paused
+        if self._pending is not None:
+            self._pending.arrived += paused
+        return paused
+
+    def submit(self, seq: int, action: Any, channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
+        """A checked ``step`` request; its arrival time is read from the clock now.
+
+        Returns the reply at once when the world is frozen at a termination;
+        otherwise None: the reply comes from :meth:`advance`. Raises
+        :class:`RequestError` (kind ``scene``) while the world is stopped by
+        a scene failure.
+        """
+        if self.state == _FAILED:
+            raise RequestError(SCENE, self._failure)
+        pending = _PendingStep(channel, reply_to, seq, action, self.clock())
+        if self.state == _FROZEN:
+            return self._reply(pending, terminated=True)
+        if self.link is not None:
+            pending.link_delay = float(self.link.draw())
+            self.link_delay.add(pending.link_delay)
+        # A newer request supersedes one still pending: its sender gave up on it.
+        self._pending = pending
+        return None
+
+    def fail(self, exc: BaseException) -> list[Outgoing]:
+        """The scene raised while advancing: stop this world until the next reset.
+
+        Call it from the ``except`` block (the message carries the traceback).
+        """
+        self.state = _FAILED
+        self._failure = (
+            f"{type(exc).__name__} in the scene while advancing in real time: {exc}; "
+            f"reset the env to continue\n{traceback.format_exc()}"
+        )
+        pending, self._pending = self._pending, None
+        if pending is None:
+            return []
+        return [(pending.channel, pending.reply_to, error_reply(pending.seq, SCENE, self._failure))]
+
+    def advance(self, now: float) -> list[Outgoing]:
+        """Process the substep boundary that was due; ``now`` is the clock time it is processed.
+
+        At a tick end the tick is scored (and may end the episode); then a
+        newly arrived action takes effect, and the next substep is computed.
+        """
+        env = self.env
+        deadline = self._t0 + self._n * self.period
+        lateness = now - deadline
+        self.pacing_error.add(lateness)
+        if lateness > self.period:
+            self.overruns += 1
+        out: list[Outgoing] = []
+        fs = env.frame_skip
+        if self._n and self._n % fs == 0:
+            obs, reward, terminated, info = env.finish_tick(self._held)
+            self._obs, self._info = obs, info
+            self._reward += float(reward)
+            self._ticks += 1
+            pending = self._pending
+            if pending is not None and (pending.applied_sim_time is not None or terminated):
+                self._pending = None
+                reply = self._reply(pending, terminated=bool(terminated))
+                out.append((pending.channel, pending.reply_to, reply))
+            if terminated:
+                self.state = _FROZEN
+                return out
+        pending = self._pending
+        if pending is not None and pending.applied_sim_time is None and now >= pending.arrived + pending.link_delay:
+            env.prepare_step(pending.action)
+            self._held = pending.action
+            pending.applied_sim_time = float(env.data.time)
+            pending.apply_delay_s = self.clock() - pending.arrived
+            self.apply_delay.add(pending.apply_delay_s)
+        elif self._n % fs == 0:
+            env.prepare_step(self._held)
+        env.substep()
+        self._n += 1
+        self.substeps += 1
+        return out
+
+    def _reply(self, pending: _PendingStep, *, terminated: bool) -> dict[str, Any]:
+        """The reply to ``pending``: the current observation and what accumulated since the last reply."""
+        dt = self.env.dt
+        sim_time = float(self.env.data.time)
+        applied = pending.applied_sim_time
+        latency = None if applied is None else applied - self._obs_time
+        info = dict(self._info)
+        info.update(
+            sim_time=sim_time,
+            action_sim_time=applied,
+            ticks_elapsed=self._ticks,
+            latency_s=latency,
+            latency_ticks=None if latency is None else latency / dt,
+            late=applied is None or self._ticks > 1,
+            apply_delay_s=pending.apply_delay_s,
+            link_delay_s=pending.link_delay,
+            pacing_overruns=self.overruns,
+        )
+        reply = {
+            "seq": pending.seq,
+            "ok": True,
+            "obs": self._obs,
+            "reward": self._reward,
+            "terminated": terminated,
+            "truncated": False,
+            "info": info,
+        }
+        self._reward = 0.0
+        self._ticks = 0
+        self._obs_time = sim_time
+        return reply
+
+
+__all__ = ["Clock", "RealTimeStepper"]

@@ -1,0 +1,1 @@
+"""How requests reach the sim: channels, peers, drivers, limits, the shared region."""

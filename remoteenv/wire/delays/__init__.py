@@ -1,0 +1,1 @@
+"""Delay specs, their file form, and the delay line that applies them."""

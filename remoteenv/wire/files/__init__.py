@@ -1,0 +1,1 @@
+"""Files both sides read: launch-info files, CURVE keys, bounded reads."""

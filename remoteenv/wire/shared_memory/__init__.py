@@ -1,0 +1,1 @@
+"""The shared region both processes map, its doorbell and the hot wait."""

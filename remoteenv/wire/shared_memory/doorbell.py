@@ -1,0 +1,188 @@
+"""The fast lane's doorbell: requests and replies through a shared region,
+with no system call while the other side is awake (both processes use it).
+
+Part of the spec (:mod:`remoteenv.wire.protocol`, ``shared_batch``). A region
+laid out with info columns (:mod:`remoteenv.wire.shared_memory.shared_batch`) starts its
+lane blocks with 16 ``<i8`` header words, in two 64-byte lines so that each
+side writes only its own:
+
+====  ==================  ======  =============================================
+word  name                writer  meaning
+====  ==================  ======  =============================================
+0     ``REQ_SEQ``         agent   ``seq`` of the last request posted (0: none)
+1     ``REQ_N``           agent   positions of that request (``1 .. K``)
+2     ``REQ_NAMED``       agent   1: the ``worlds`` block names its worlds
+3     ``AGENT_WATCHING``  agent   1: the agent will look at ``REP_SEQ`` before
+                                  it blocks (no wake-up frame needed)
+8     ``REP_SEQ``         sim     ``seq`` of the last request answered in the
+                                  region
+9     ``REP_INFO``        sim     the info layout version of that answer
+10    ``SIM_WATCHING``    sim     1: the sim will look at ``REQ_SEQ`` before
+                                  it blocks (no request frame needed)
+====  ==================  ======  =============================================
+
+A request: the agent writes ops, worlds and actions, then ``REQ_N`` and
+``REQ_NAMED``, then ``REQ_SEQ``; if ``SIM_WATCHING`` is 0 it also sends
+``{"seq": s, "cmd": "step_batch", "region": true}`` on the pipe. A reply in the region: the sim
+writes the arrays and info columns, then ``REP_INFO``, then ``REP_SEQ``; if
+``AGENT_WATCHING`` is 0 it also sends ``{"seq": s, "ok": true, "region":
+true}``. Any other reply (an error, a reset, infos that are not the announced
+columns) goes on the pipe as usual and leaves ``REP_SEQ`` alone. Before a
+side blocks it clears its ``*_WATCHING`` word and looks once more: the
+store, a full fence, then the load, on both sides (Dekker's pattern), so at
+least one of "the peer sees the flag cleared" and "we see its sequence word"
+holds and no request or reply is left unseen. A request's frame for a request
+already served is dropped, and so is a wake-up frame for a reply already read.
+
+Ordering. The data are written before the sequence word and read after it,
+with a fence between (:func:`fence`: a lock taken and released, an atomic
+read-modify-write). Reading the sequence words without the pipe's help
+relies on the processor keeping stores in order and loads in order (total
+store order: x86-64). Elsewhere :data:`SILENT` is False: every request and
+reply then also goes as its frame, and the reader waits for the frame (the
+kernel's socket locks order the region's accesses, as for the plain region).
+A loud side never sets its ``*_WATCHING`` word, so a silent peer always
+sends it frames too: the two ends need not agree on :data:`SILENT`.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import threading
+
+import numpy as np
+
+REQ_SEQ, REQ_N, REQ_NAMED, AGENT_WATCHING = 0, 1, 2, 3
+REP_SEQ, REP_INFO, SIM_WATCHING = 8, 9, 10
+
+#: Whether this processor keeps stores and loads in order (total store order),
+#: so that a sequence word read from shared memory can vouch for the data
+#: written before it; elsewhere, or with ``REMOTEENV_LOUD_DOORBELL`` set, every
+#: message also goes as a frame on the pipe.
+SILENT = platform.machine().lower() in ("x86_64", "amd64", "i386", "i686") and not os.environ.get(
+    "REMOTEENV_LOUD_DOORBELL"
+)
+
+_fence_lock = threading.Lock()
+
+
+def fence() -> None:
+    """A full memory fence: a lock taken and released (an atomic read-modify-write each)."""
+    _fence_lock.acquire()
+    _fence_lock.release()
+
+
+class Doorbell:
+    """One side's view of a region's header words (``header``: 16 ``<i8``).
+
+    ``silent`` (default :data:`SILENT`, read when the doorbell is made): whether
+    the sequence words may be read without waiting for frames."""
+
+    def __init__(self, header: np.ndarray, silent: bool | None = None) -> None:
+        self._words = memoryview(header).cast("B").cast("q")  # type: ignore[arg-type]
+        #: Whether the sequence words may be read without waiting for frames.
+        self.silent = SILENT if silent is None else bool(silent)
+        #: The value this side's ``*_WATCHING`` word takes while it is awake (0 when loud).
+        self._watching = 1 if self.silent else 0
+
+    def word(self, index: int) -> int:
+        return int(self._words[index])
+
+    # ------------------------------------------------------------ agent side
+
+    def post(self, seq: int, n: int, named: bool) -> bool:
+        """Publish request ``seq`` (its blocks written); True if the sim must be
+        rung (it sleeps, or the doorbell is not silent)."""
+        words = self._words
+        words[REQ_N] = n
+        words[REQ_NAMED] = 1 if named else 0
+        words[AGENT_WATCHING] = self._watching
+        fence()
+        words[REQ_SEQ] = seq
+        if not self.silent:
+            return True
+        fence()
+        return not words[SIM_WATCHING]
+
+    def answered(self, seq: int) -> bool:
+        """Whether the region holds the reply to ``seq`` (then its blocks may be read)."""
+        if self.silent and self._words[REP_SEQ] == seq:
+            fence()
+            return True
+        return False
+
+    def agent_sleeps(self, seq: int) -> bool:
+        """The agent is about to block waiting for ``seq``: False (and still
+        watching) if the reply is there after all."""
+        words = self._words
+        words[AGENT_WATCHING] = 0
+        fence()
+        if self.answered(seq):
+            words[AGENT_WATCHING] = self._watching
+            return False
+        return True
+
+    def agent_wakes(self) -> None:
+        self._words[AGENT_WATCHING] = self._watching
+
+    # ------------------------------------------------------------ sim side
+
+    def posted(self, served: int) -> int:
+        """``seq`` of a request posted since ``served`` (0: none), its blocks readable."""
+        if not self.silent:
+            return 0
+        seq = self._words[REQ_SEQ]
+        if seq > served:  # seq numbers increase: an older one is not a request
+            fence()
+            return int(seq)
+        return 0
+
+    def request(self) -> tuple[int, int, int]:
+        """``(REQ_SEQ, REQ_N, REQ_NAMED)`` as they are now (after the request's frame)."""
+        words = self._words
+        seq = int(words[REQ_SEQ])
+        fence()
+        return seq, int(words[REQ_N]), int(words[REQ_NAMED])
+
+    def sim_sleeps(self, served: int) -> int:
+        """The sim is about to block: clear ``SIM_WATCHING``, then look once
+        more; returns a request's ``seq`` that came meanwhile (and watches again), or 0."""
+        words = self._words
+        words[SIM_WATCHING] = 0
+        fence()
+        seq = self.posted(served)
+        if seq:
+            words[SIM_WATCHING] = self._watching
+        return seq
+
+    def sim_watches(self) -> None:
+        """The sim is awake and will look before it blocks."""
+        self._words[SIM_WATCHING] = self._watching
+
+    def reply(self, seq: int, info_version: int) -> bool:
+        """Publish the region's reply to ``seq`` (its blocks written); True if the
+        agent must be woken (it sleeps, or the doorbell is not silent)."""
+        words = self._words
+        words[SIM_WATCHING] = self._watching
+        words[REP_INFO] = info_version
+        fence()
+        words[REP_SEQ] = seq
+        if not self.silent:
+            return True
+        fence()
+        return not words[AGENT_WATCHING]
+
+
+__all__ = [
+    "AGENT_WATCHING",
+    "REP_INFO",
+    "REP_SEQ",
+    "REQ_N",
+    "REQ_NAMED",
+    "REQ_SEQ",
+    "SILENT",
+    "SIM_WATCHING",
+    "Doorbell",
+    "fence",
+]
