@@ -116,20 +116,25 @@ class VectorAttributes:
     value), ``get_attr`` is ``call`` without arguments, and ``set_attr`` takes
     one value for all worlds or a list/tuple with one per world.
     ``call("render")`` returns each world's frame, as ``SyncVectorEnv``'s
-    calls each env's ``render()``. :meth:`call_at` and :meth:`set_attr_at`
-    address some worlds only.
+    calls each env's ``render()`` (:meth:`render_world`). :meth:`call_at` and
+    :meth:`set_attr_at` address some worlds only.
 
-    Needs ``num_envs``, ``slices`` (``(first, end)`` world indices of each
-    sim), ``_reach`` (a :class:`SceneReach` over the env's session) and
-    ``render_world(i)`` (world ``i``'s frame, or None).
+    Needs ``num_envs``, ``render_mode``, ``slices`` (``(first, end)`` world
+    indices of each sim) and ``_reach`` (a :class:`SceneReach` over the env's
+    session).
     """
 
     num_envs: int
+    render_mode: str | None
     slices: list[tuple[int, int]]
     _reach: SceneReach
 
     def render_world(self, i: int) -> Any:
-        raise NotImplementedError
+        """World ``i``'s frame (None unless ``render_mode="rgb_array"``); ``call("render")`` gives every world's."""
+        if self.render_mode != "rgb_array":
+            return None
+        p, w = self._locate(i)
+        return self._reach.session.request(p, "render", world=w)["frame"]
 
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         """``name`` called (or read) on every world; one result per world."""
