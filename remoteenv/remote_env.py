@@ -21,12 +21,12 @@ import numpy as np
 
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launch.restart import restarted_info
-from remoteenv.agent.launch.sim_group import LaunchSpec, SimGroup
-from remoteenv.agent.session.forwarding import SceneReach
+from remoteenv.agent.launch.sim_group import SimGroup
+from remoteenv.agent.session.forwarding import SceneAttributes, SceneReach
 from remoteenv.agent.session.latency import LatencyStats
 from remoteenv.agent.session.pausing import Pausable, Pauser
 from remoteenv.agent.session.pickling import RebuildOnUnpickle, remember_init_args
-from remoteenv.agent.session.session import SimSession, choose_group, scene_label
+from remoteenv.agent.session.session import choose_group, open_session, scene_label
 from remoteenv.agent.session.session_attributes import SessionAttributes
 from remoteenv.wire.actions import check_action
 from remoteenv.wire.delays.delays import DelaySpec
@@ -35,7 +35,7 @@ from remoteenv.wire.scalar_types import restore_scalars
 __all__ = ["OpenAIRemoteEnv", "check_action"]
 
 
-class OpenAIRemoteEnv(SessionAttributes, Pausable, RebuildOnUnpickle, gym.Env):
+class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnpickle, gym.Env):
     """A Gymnasium env served by a sim process that this env launches.
 
     Usually created with ``gymnasium.make("remoteenv/CartPole-v0", ...)``;
@@ -95,7 +95,8 @@ class OpenAIRemoteEnv(SessionAttributes, Pausable, RebuildOnUnpickle, gym.Env):
     The scene's own attributes and methods are reachable too: :meth:`call`,
     :meth:`get_scene_attr`, :meth:`set_scene_attr`, and ``get_wrapper_attr`` /
     ``set_wrapper_attr`` (what Gymnasium's ``SyncVectorEnv.call`` uses) fall
-    through to the scene for names this class does not have.
+    through to the scene for names this class does not have
+    (:class:`~remoteenv.agent.session.forwarding.SceneAttributes`).
 
     Pickling or ``copy.deepcopy`` builds a new env from the same constructor
     arguments, with a fresh sim (see :mod:`remoteenv.agent.session.pickling`).
@@ -150,35 +151,26 @@ class OpenAIRemoteEnv(SessionAttributes, Pausable, RebuildOnUnpickle, gym.Env):
                 f"an OpenAIRemoteEnv drives one sim; {layout.source} has {layout.num_instances}: "
                 "pick one (e.g. OpenAIRemoteEnv.attach(path, instance=i))"
             )
-        spec = (
-            None
-            if layout is not None
-            else LaunchSpec(
-                self.scene,
-                1,
-                1,
-                seed=seed,
-                env_kwargs=scene_kwargs,
-                render_mode=render_mode,
-                real_time=real_time,
-                real_time_factor=real_time_factor,
-                action_delay=action_delay,
-                obs_delay=obs_delay,
-                link_delay=link_delay,
-                startup_timeout=startup_timeout,
-            )
-        )
-        self._session = SimSession(
+        self._session = open_session(
             group,
-            spec,
+            scene_label(type(self).__name__, self.scene),
+            self.scene,
+            1,
+            1,
             timeout=timeout,
             call_timeouts=call_timeouts,
             startup_timeout=startup_timeout,
             restart_on_failure=restart_on_failure,
             max_restarts=max_restarts,
-            label=scene_label(type(self).__name__, self.scene),
+            seed=seed,
+            env_kwargs=scene_kwargs,
+            render_mode=render_mode,
+            real_time=real_time,
+            real_time_factor=real_time_factor,
+            action_delay=action_delay,
+            obs_delay=obs_delay,
+            link_delay=link_delay,
         )
-        self._session.open()
         hs = self._session.handshake
         self.observation_space = hs.observation_space
         self.action_space = hs.action_space
@@ -269,44 +261,6 @@ class OpenAIRemoteEnv(SessionAttributes, Pausable, RebuildOnUnpickle, gym.Env):
         if self.render_mode != "rgb_array":
             return None
         return self._request("render")["frame"]
-
-    # ------------------------------------------------------------ the scene's attributes
-
-    def call(self, name: str, *args: Any, **kwargs: Any) -> Any:
-        """Call the scene env's public method ``name`` in the sim and return its
-        result (for a plain attribute and no arguments: its value), as
-        Gymnasium's vector ``call`` does for one env. Arguments and result must
-        cross the wire (numbers, strings, numpy arrays, lists, str-keyed maps)."""
-        return self._reach.call(0, 0, name, args, kwargs)
-
-    def get_scene_attr(self, name: str) -> Any:
-        """The scene env's public attribute ``name`` (a method comes back as a
-        callable that calls it in the sim)."""
-        return self._reach.get(0, 0, name)
-
-    def set_scene_attr(self, name: str, value: Any) -> None:
-        """Set the scene env's public attribute ``name`` (one it has) in the sim."""
-        self._reach.set(0, 0, name, value)
-
-    def get_wrapper_attr(self, name: str) -> Any:
-        """This env's attribute ``name``, else the scene's (see :meth:`get_scene_attr`)."""
-        if hasattr(self, name):
-            return getattr(self, name)
-        return self.get_scene_attr(name)
-
-    def set_wrapper_attr(self, name: str, value: Any, *, force: bool = True) -> bool:
-        """Set ``name`` here if this env has it, else on the scene if it has it;
-        otherwise create it here when ``force`` (Gymnasium's rule)."""
-        if hasattr(self, name):
-            setattr(self, name, value)
-            return True
-        try:
-            self.set_scene_attr(name, value)
-            return True
-        except AttributeError:  # the scene lacks it (SceneAttributeError), or a private name
-            if force:
-                setattr(self, name, value)
-            return force
 
     def close(self) -> None:
         """Ask the sim to exit, then make sure it has (no process or socket file

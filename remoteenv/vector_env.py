@@ -11,7 +11,8 @@ keeps its own paced clock.
 
 The class keeps Gymnasium's vector semantics; the jobs under it live in
 :mod:`remoteenv.agent`: the sims' lifecycle (:mod:`~remoteenv.agent.session.session`),
-the requests of a call and their gathering (:mod:`~remoteenv.agent.vector.vector_requests`,
+the requests of a call and their gathering (:mod:`~remoteenv.agent.vector.vector_episodes`,
+:mod:`~remoteenv.agent.vector.vector_requests`,
 :mod:`~remoteenv.agent.connection.fan_in`), autoreset planning
 (:mod:`~remoteenv.agent.vector.autoreset`), reset arguments
 (:mod:`~remoteenv.agent.session.reset_args`), result assembly
@@ -21,34 +22,27 @@ the requests of a call and their gathering (:mod:`~remoteenv.agent.vector.vector
 from __future__ import annotations
 
 import os
-import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space, iterate
+from gymnasium.vector.utils import batch_space
 
-from remoteenv.agent.errors import StateError
-from remoteenv.agent.launch.restart import restarted_info
-from remoteenv.agent.launch.sim_group import LaunchSpec, SimGroup
+from remoteenv.agent.launch.sim_group import SimGroup
 from remoteenv.agent.session.forwarding import SceneReach, VectorAttributes
 from remoteenv.agent.session.latency import LatencyStats
 from remoteenv.agent.session.pausing import Pausable, Pauser
 from remoteenv.agent.session.pickling import RebuildOnUnpickle, remember_init_args
-from remoteenv.agent.session.reset_args import is_int_seed, split_reset_mask, world_seeds
-from remoteenv.agent.session.session import SimSession, choose_group, scene_label
+from remoteenv.agent.session.reset_args import is_int_seed
+from remoteenv.agent.session.session import choose_group, open_session, scene_label
 from remoteenv.agent.session.session_attributes import SessionAttributes
-from remoteenv.agent.vector.autoreset import after_reset, after_step, plan_ops
-from remoteenv.agent.vector.vector_async import AsyncWorlds, assemble_chunks
-from remoteenv.agent.vector.vector_layout import check_sims, default_envs_per_process
-from remoteenv.agent.vector.vector_requests import VectorRequests
-from remoteenv.agent.vector.vector_results import ObsBatch, assemble
-from remoteenv.wire.actions import check_actions
-from remoteenv.wire.batch import merge_infos
+from remoteenv.agent.vector.vector_episodes import VectorEpisodes
+from remoteenv.agent.vector.vector_layout import default_envs_per_process, plan_layout, world_slices
 from remoteenv.wire.delays.delays import DelaySpec
 from remoteenv.wire.handshake import Handshake
+
+__all__ = ["RemoteVectorEnv", "default_envs_per_process"]
 
 
 class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
@@ -152,26 +146,9 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         group = choose_group(launcher, attach, transport=transport, bind_host=bind_host, curve=curve)
         layout = group.layout
-        if layout is not None:  # e.g. attached sims: drive them as they are
-            envs_per_process, real_time = layout.worlds_per_instance, layout.real_time
-            if num_envs != layout.num_worlds:
-                raise ValueError(
-                    f"{layout.source} serves {layout.num_worlds} worlds; "
-                    f"pass num_envs={layout.num_worlds} (got {num_envs})"
-                )
-        if envs_per_process is None:
-            envs_per_process = 1 if real_time else default_envs_per_process(num_envs)
-        if envs_per_process < 1:
-            raise ValueError(f"envs_per_process must be >= 1, got {envs_per_process}")
-        if real_time and envs_per_process != 1:
-            raise ValueError(
-                f"real_time=True needs envs_per_process=1 (got {envs_per_process}): each sim "
-                "process runs one paced clock, so it can host only one world"
-            )
-        if max_episode_steps is not None and max_episode_steps < 1:
-            raise ValueError(f"max_episode_steps must be >= 1 or None, got {max_episode_steps}")
-        if batch_size is not None and not 1 <= batch_size <= num_envs:
-            raise ValueError(f"batch_size must be in [1, num_envs={num_envs}], got {batch_size}")
+        envs_per_process, real_time = plan_layout(
+            num_envs, envs_per_process, real_time, layout, max_episode_steps=max_episode_steps, batch_size=batch_size
+        )
         #: Worlds :meth:`recv` returns.
         self.batch_size = int(batch_size or num_envs)
         self.num_envs = int(num_envs)
@@ -184,60 +161,40 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         self.scene = os.fspath(scene)
         self.closed = False
         k = self.envs_per_process
-        num_procs = -(-self.num_envs // k)
         #: ``(first, end)`` world indices of each process.
-        self.slices: list[tuple[int, int]] = [(p * k, min((p + 1) * k, self.num_envs)) for p in range(num_procs)]
-        spec = (
-            None
-            if layout is not None
-            else LaunchSpec(
-                self.scene,
-                num_procs,
-                k,
-                seed=seed,
-                env_kwargs=scene_kwargs,
-                render_mode=render_mode,
-                real_time=real_time,
-                real_time_factor=real_time_factor,
-                action_delay=action_delay,
-                obs_delay=obs_delay,
-                link_delay=link_delay,
-                startup_timeout=startup_timeout,
-            )
-        )
-        self._session = SimSession(
+        self.slices: list[tuple[int, int]] = world_slices(self.num_envs, k)
+        self._session = open_session(
             group,
-            spec,
+            scene_label(type(self).__name__, self.scene),
+            self.scene,
+            len(self.slices),
+            k,
             timeout=timeout,
             call_timeouts=call_timeouts,
             startup_timeout=startup_timeout,
             restart_on_failure=restart_on_failure,
             max_restarts=max_restarts,
-            label=scene_label(type(self).__name__, self.scene),
+            seed=seed,
+            env_kwargs=scene_kwargs,
+            render_mode=render_mode,
+            real_time=real_time,
+            real_time_factor=real_time_factor,
+            action_delay=action_delay,
+            obs_delay=obs_delay,
+            link_delay=link_delay,
         )
-        self._session.open()
         try:
             self._set_spaces(self._session.handshake)
-            self._check_sims(self._session.handshakes)
+            self._episodes = VectorEpisodes(
+                self._session, self.slices, self.autoreset_mode, self.max_episode_steps, self.real_time, self.batch_size
+            )
         except BaseException:
             self._session.close()
             raise
-        self._requests = VectorRequests(
-            self._session,
-            self.slices,
-            real_time=self.real_time,
-            same_step=self.autoreset_mode == AutoresetMode.SAME_STEP,
-        )
-        self._async = AsyncWorlds(self._session, self.slices, self.num_envs, self._requests.lanes)
-        self._pending_step: tuple[np.ndarray, Any, dict[int, int], float] | None = None
+        self._requests = self._episodes.requests
         self.latency_stats = LatencyStats()
         self._pauser = Pauser(self._session)
         self._reach = SceneReach(self._session)
-        n = self.num_envs
-        self._elapsed = np.zeros(n, dtype=np.int64)
-        self._autoreset = np.zeros(n, dtype=np.bool_)
-        self._has_reset = False
-        self._obs: Any = None
 
     def _set_spaces(self, hs: Handshake) -> None:
         self.single_observation_space = hs.observation_space
@@ -251,11 +208,6 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         }
         #: Simulated seconds per step.
         self.dt: float = hs.dt
-        self._obs_batch = ObsBatch(self.single_observation_space, self.num_envs)
-        self._box_act = isinstance(self.single_action_space, gym.spaces.Box)
-
-    def _check_sims(self, handshakes: Sequence[Handshake]) -> None:
-        check_sims(handshakes, self.slices, batches=not (self.real_time or self.envs_per_process == 1))
 
     @classmethod
     def attach(cls, launch_info: str | os.PathLike[str], **kwargs: Any) -> RemoteVectorEnv:
@@ -290,31 +242,10 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         N) only the masked ones; the others keep their current obs. ``seed``: an
         int seeds world ``i`` with ``seed + i``; a list gives one seed (or None)
         per world. Other options go to every reset world's scene."""
-        if self._pending_step is not None or self._async.busy:
-            raise StateError("reset() while steps are in flight: step_wait() or recv() them first")
+        self._episodes.check_idle()
         if is_int_seed(seed):
             super().reset(seed=int(seed))  # type: ignore[arg-type]
-        seeds = world_seeds(seed, self.num_envs)
-        options, mask = split_reset_mask(options, self.num_envs, first_reset=not self._has_reset)
-        worlds_of = {}
-        for p, (lo, hi) in enumerate(self.slices):
-            worlds = [i - lo for i in range(lo, hi) if mask[i]]
-            if worlds:
-                worlds_of[p] = worlds
-        replies, restarted = self._requests.reset(worlds_of, seeds, options)
-        obs = self._obs_batch.fresh(self._obs, full=bool(mask.all()))
-        infos: dict[str, Any] = {}
-        for p, worlds in worlds_of.items():
-            idx = np.asarray(worlds, dtype=np.intp) + self.slices[p][0]
-            self._obs_batch.put(obs, idx, replies[p]["obs"])
-            self._merge_info(infos, replies[p]["info"], idx)
-            if p in restarted:
-                for i in idx:
-                    self._add_info(infos, restarted_info(restarted[p], self.restarts.count), int(i))
-        after_reset(mask, self._elapsed, self._autoreset)
-        self._has_reset = True
-        self._obs = obs
-        return self._obs_batch.for_gym(obs), infos
+        return self._episodes.reset(seed, options, self._add_info)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every world once (or autoreset it, see ``autoreset_mode``)."""
@@ -324,29 +255,13 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
     def step_async(self, actions: Any) -> None:
         """Send the actions of every world and return at once; :meth:`step_wait`
         gathers the results (together the same as :meth:`step`)."""
-        if not self._has_reset or self._session.closed:
-            raise StateError("step() before reset() or after close(): reset() an open RemoteVectorEnv first")
-        if self._pending_step is not None or self._async.busy:
-            raise StateError("a step is in flight: call step_wait() (or recv() what send() sent) first")
-        acts = self._check_actions(actions, self.num_envs)
-        ops = plan_ops(self.autoreset_mode, self._autoreset, self._elapsed, self.max_episode_steps)
-        started = time.perf_counter()
-        self._pending_step = (ops, acts, self._requests.start_step(ops, acts), started)
+        self._episodes.start_step(actions)
 
     def step_wait(self) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """The results of the step :meth:`step_async` sent, as :meth:`step` returns them."""
-        if self._pending_step is None:
-            raise StateError("step_wait() without step_async(): nothing is in flight")
-        ops, acts, pending, started = self._pending_step
-        self._pending_step = None
-        results = self._requests.finish_step(pending, ops, acts, self._obs, self._obs_batch)
-        round_trip = time.perf_counter() - started
-        obs, rewards, terminated, truncated, infos = assemble(results, self.slices, self._obs_batch, self._add_info)
-        mode, limit = self.autoreset_mode, self.max_episode_steps
-        truncated, self._elapsed, self._autoreset = after_step(mode, ops, terminated, truncated, self._elapsed, limit)
-        self._obs = obs
-        self.latency_stats.record_vector(infos, round_trip)
-        return self._obs_batch.for_gym(obs), rewards, terminated, truncated, infos
+        result, round_trip = self._episodes.finish_step(self._add_info)
+        self.latency_stats.record_vector(result[4], round_trip)
+        return result
 
     def send(self, actions: Any, env_ids: Any = None) -> None:
         """EnvPool's asynchronous step: send ``actions[j]`` to world ``env_ids[j]``
@@ -356,34 +271,13 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         only. A failing sim raises from :meth:`recv`, which then forgets what
         was in flight: call :meth:`reset` before stepping again (restarts
         cover :meth:`step` only)."""
-        if not self._has_reset or self._session.closed:
-            raise StateError("send() before reset() or after close(): reset() an open RemoteVectorEnv first")
-        if self.real_time or not all(hs.offers("step_batch") for hs in self._session.handshakes):
-            raise StateError("send()/recv() need lock-step sims that answer step_batch; step with step()")
-        if self._pending_step is not None:
-            raise StateError("a step is in flight: call step_wait() first")
-        ids = np.arange(self.num_envs) if env_ids is None else np.asarray(env_ids, dtype=np.intp).reshape(-1)
-        if len(ids) == 0 or ids.min() < 0 or ids.max() >= self.num_envs or len(np.unique(ids)) != len(ids):
-            raise ValueError(f"env_ids must be distinct world indices in [0, {self.num_envs}), got {ids[:8]!r}")
-        acts = self._check_actions(actions, len(ids))
-        ops = plan_ops(self.autoreset_mode, self._autoreset[ids], self._elapsed[ids], self.max_episode_steps)
-        self._async.send(ids, ops, acts)
+        self._episodes.send(actions, env_ids)
 
     def recv(self) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """The first ``batch_size`` worlds to finish after :meth:`send`:
         ``(obs, rewards, terminated, truncated, infos)`` with ``batch_size`` rows,
         world ``infos["env_id"][j]`` in row ``j``, autoreset as in :meth:`step`."""
-        chunks = self._async.recv(self.batch_size)
-        ids, ops, obs, rewards, terminated, truncated, infos = assemble_chunks(
-            chunks, ObsBatch(self.single_observation_space, self.batch_size), self._add_info
-        )
-        truncated, elapsed, needs_reset = after_step(
-            self.autoreset_mode, ops, terminated, truncated, self._elapsed[ids], self.max_episode_steps
-        )
-        self._elapsed[ids], self._autoreset[ids] = elapsed, needs_reset
-        self._obs_batch.put(self._obs, ids, obs)
-        out_obs = ObsBatch(self.single_observation_space, self.batch_size).for_gym(obs)
-        return out_obs, rewards, terminated, truncated, infos
+        return self._episodes.recv(self._add_info)
 
     @property
     def np_random_seed(self) -> tuple[int, ...]:  # type: ignore[override]
@@ -395,13 +289,6 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         if self.render_mode != "rgb_array":
             return None
         return tuple(self.render_world(i) for i in range(self.num_envs))
-
-    def render_world(self, i: int) -> Any:
-        """World ``i``'s frame (None unless ``render_mode="rgb_array"``); ``call("render")`` gives every world's."""
-        if self.render_mode != "rgb_array":
-            return None
-        p, w = self._locate(i)
-        return self._session.request(p, "render", world=w)["frame"]
 
     def close_extras(self, **kwargs: Any) -> None:
         """Ask every sim to exit, then make sure they have (no process or socket
@@ -419,21 +306,3 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
                 self.close()
             except Exception:
                 pass
-
-    # ------------------------------------------------------------ helpers
-
-    def _check_actions(self, actions: Any, n: int) -> Any:
-        """``n`` actions in wire form, indexable by world; ValueError names the world."""
-        space = self.single_action_space
-        if self._box_act:
-            return check_actions(space, np.asarray(actions), n)
-        if isinstance(space, gym.spaces.Discrete) and isinstance(actions, np.ndarray) and actions.dtype.kind in "iu":
-            return check_actions(space, actions, n)  # one vectorised range check
-        batched = self.action_space if n == self.num_envs else batch_space(space, n)
-        checked = check_actions(space, list(iterate(batched, actions)), n)
-        if isinstance(space, gym.spaces.Discrete):
-            return np.asarray(checked, dtype=np.int64)
-        return checked
-
-    def _merge_info(self, infos: dict[str, Any], packed: dict[str, Any], idx: np.ndarray) -> None:
-        merge_infos(infos, packed, idx, self.num_envs, self._add_info)

@@ -25,9 +25,10 @@ from typing import Any
 from remoteenv.agent.connection.connection import SimConnection, connect_sim
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launch.sim_group import LaunchSpec, SimLayout
-from remoteenv.ray.placement import Placement, cluster_capacity, create_placement_group
+from remoteenv.ray.placement import Placement, create_placement_group
 from remoteenv.ray.sim_actor import SimActor, SimSpec, shipped_scenes_dir
-from remoteenv.ray.sim_handle import RaySim, ray_reason
+from remoteenv.ray.sim_handle import RaySim
+from remoteenv.ray.sims_start import start_sims
 from remoteenv.wire.files.keys import KeyPair, generate_keypair
 
 #: Threads of each actor: ``wait_exit`` holds one for as long as its sim runs.
@@ -317,61 +318,6 @@ class RayLauncher:
         self, instances: list[int], actors: list[Any], lost: RaySim | None = None, deadline: float | None = None
     ) -> list[RaySim]:
         """Start the sims of ``instances`` on ``actors`` in parallel and wait until
-        all are ready (until ``deadline``, default ``startup_timeout`` from now)."""
-        import ray
-
+        all are ready (:func:`~remoteenv.ray.sims_start.start_sims`)."""
         spec = self._spec()
-        scene = os.path.basename(spec.scene)
-        servers = [generate_keypair() for _ in instances]
-        client = self.curve_client_keypair.public
-        refs = [a.start.remote(k.secret, client) for a, k in zip(actors, servers)]
-        if deadline is None:
-            deadline = time.monotonic() + spec.startup_timeout
-        infos: list[dict[str, Any]] = []
-        for instance, ref in zip(instances, refs):
-            try:
-                infos.append(ray.get(ref, timeout=max(0.0, deadline - time.monotonic())))
-            except ray.exceptions.GetTimeoutError:
-                raise RemoteEnvError(self._no_start_message(instance, lost), kind="launch", instance=instance) from None
-            except ray.exceptions.RayActorError as exc:
-                raise RemoteEnvError(
-                    f"the Ray actor of sim instance {instance} of {scene} died while starting it: {ray_reason(exc)}",
-                    kind="launch",
-                    instance=instance,
-                ) from exc
-            except ray.exceptions.RayTaskError as exc:
-                inner = exc.cause if isinstance(getattr(exc, "cause", None), BaseException) else exc
-                text = str(inner) if isinstance(inner, RemoteEnvError) else f"{type(inner).__name__}: {inner}"
-                raise RemoteEnvError(
-                    f"sim instance {instance} of {scene} could not start on the cluster: {text}",
-                    kind="launch",
-                    instance=instance,
-                ) from None
-        sims = []
-        for instance, actor, keys, info in zip(instances, actors, servers, infos):
-            sim = RaySim(
-                instance=instance,
-                actor=actor,
-                endpoint=info["endpoint"],
-                pid=info["pid"],
-                node_id=info["node_id"],
-                node_ip=info["node_ip"],
-                host=info["host"],
-                curve_server_key=keys.public,
-                generation=info["generation"],
-            )
-            sim.exit_ref = actor.wait_exit.remote(sim.generation)
-            sims.append(sim)
-        return sims
-
-    def _no_start_message(self, instance: int, lost: RaySim | None) -> str:
-        spec = self._spec()
-        text = (
-            f"sim instance {instance} of {os.path.basename(spec.scene)} did not start within {spec.startup_timeout:g} s"
-        )
-        if lost is not None and lost.actor_lost:
-            text += (
-                f" after its node {lost.node} was lost: no surviving node could take its bundle "
-                f"({self.placement.describe(1)})"
-            )
-        return f"{text}. {cluster_capacity()}"
+        return start_sims(spec, instances, actors, self.curve_client_keypair, self.placement, lost, deadline)

@@ -4,7 +4,7 @@ Runs in the agent process; the local :class:`~remoteenv.agent.launch.sim_group.S
 Each sim is ``python <scene script> --address ...`` in a session (process group) of its own, bound to a collision-free address:
 an ipc socket in a private temp dir, or tcp on 127.0.0.1 with a port the OS
 assigns; it is forked by a zygote that has imported what sims need where one
-can be used (:mod:`remoteenv.agent.launch.sim_start`), so that it serves in
+can be used (:mod:`remoteenv.agent.launch.sim_spawn`, :mod:`~remoteenv.agent.launch.sim_start`), so that it serves in
 milliseconds. The launcher waits until each sim reports its bound endpoint (never a
 fixed sleep), and stops them on :meth:`close`, on interpreter exit or when it
 is garbage collected: SIGTERM to the process group, then SIGKILL, then the
@@ -24,12 +24,12 @@ from typing import Any
 
 from remoteenv.agent.connection.connection import SimConnection, connect_sim
 from remoteenv.agent.launch.processes import pid_alive
-from remoteenv.agent.launch.sim_command import launch_environment, scene_command, wait_ready, write_sim_delay_file
+from remoteenv.agent.launch.sim_command import wait_ready
 from remoteenv.agent.launch.sim_group import LaunchSpec, SimLayout
 from remoteenv.agent.launch.sim_process import LaunchState, SimProcess, kill_group, stop_all
-from remoteenv.agent.launch.sim_start import start_sim
-from remoteenv.wire.addresses import ipc_address, ipc_path, is_loopback, tcp_loopback_address, zmq_transport
-from remoteenv.wire.files.keys import KeyPair, generate_keypair, write_public_keys, write_secret_key
+from remoteenv.agent.launch.sim_spawn import sim_address, spawn_sim
+from remoteenv.wire.addresses import is_loopback, zmq_transport
+from remoteenv.wire.files.keys import KeyPair, generate_keypair
 
 #: The launch arguments of :class:`Launcher` and their defaults (a Launcher
 #: made without a scene must leave them alone: :meth:`Launcher.start` gets them).
@@ -276,67 +276,16 @@ class Launcher:
     def _spawn(self, instance: int) -> SimProcess:
         spec = self._spec()
         workdir = self._started().workdir
-        if self.bind_address is not None:
-            address = self.bind_address
-        elif self.transport == "ipc":
-            address = ipc_address(workdir, instance)
-        else:
-            address = tcp_loopback_address()
-        ready_file = os.path.join(workdir, f"sim-{instance}.ready.json")
-        log_path = os.path.join(workdir, f"sim-{instance}.log")
-        for path in (ready_file, ipc_path(address)):
-            if path and os.path.exists(path):
-                os.unlink(path)
-        curve_files = None
-        server_key = None
-        if self.curve_client_keypair is not None:
-            server = generate_keypair()
-            server_key = server.public
-            curve_files = (
-                os.path.join(workdir, f"sim-{instance}.curve_secret"),
-                os.path.join(workdir, f"sim-{instance}.curve_clients"),
-            )
-            for path in curve_files:
-                if os.path.exists(path):
-                    os.unlink(path)
-            write_secret_key(curve_files[0], server.secret)
-            write_public_keys(curve_files[1], [self.curve_client_keypair.public])
-        cmd = scene_command(
-            spec.scene,
-            address,
-            instance=instance,
-            worlds=spec.worlds_per_instance,
-            env_kwargs=dict(spec.env_kwargs),
-            parent_pid=os.getpid(),
-            ready_file=ready_file,
-            private_dir=workdir,
-            seed=spec.instance_seed(instance),
-            render_mode=spec.render_mode,
-            real_time=spec.real_time,
-            real_time_factor=spec.real_time_factor,
-            delay_file=write_sim_delay_file(workdir, instance, spec.delay_file_text()),
-            curve_files=curve_files,
+        return spawn_sim(
+            spec,
+            instance,
+            workdir,
+            sim_address(workdir, instance, self.transport, self.bind_address),
+            curve_client_keypair=self.curve_client_keypair,
             allow_remote=self.remote,
             extra_args=self.extra_args,
-        )
-        started = start_sim(
-            cmd,
-            env=launch_environment(spec.render_mode),
-            log_path=log_path,
             local_pipe=self.local_pipe,
             use_zygote=self.zygote and spec.render_mode != "human",
-            scene=spec.scene,
-            timeout=spec.startup_timeout,
-        )
-        return SimProcess(
-            instance=instance,
-            proc=started.proc,
-            log_path=log_path,
-            ready_file=ready_file,
-            curve_server_key=server_key,
-            log_offset=started.log_offset,
-            pipe=started.pipe,
-            zygote_pid=started.zygote_pid,
         )
 
     def _wait_ready(self, sim: SimProcess) -> None:

@@ -91,6 +91,52 @@ class SceneReach:
         return session.request(index, cmd, **args)
 
 
+class SceneAttributes:
+    """The scene's attributes and methods on a single env (mixed into
+    :class:`remoteenv.OpenAIRemoteEnv`): :meth:`call`, :meth:`get_scene_attr`,
+    :meth:`set_scene_attr`, and ``get_wrapper_attr``/``set_wrapper_attr``
+    falling through to the scene for names the env does not have. Needs
+    ``_reach``, a :class:`SceneReach` over the env's session of one sim."""
+
+    _reach: SceneReach
+
+    def call(self, name: str, *args: Any, **kwargs: Any) -> Any:
+        """Call the scene env's public method ``name`` in the sim and return its
+        result (for a plain attribute and no arguments: its value), as
+        Gymnasium's vector ``call`` does for one env. Arguments and result must
+        cross the wire (numbers, strings, numpy arrays, lists, str-keyed maps)."""
+        return self._reach.call(0, 0, name, args, kwargs)
+
+    def get_scene_attr(self, name: str) -> Any:
+        """The scene env's public attribute ``name`` (a method comes back as a
+        callable that calls it in the sim)."""
+        return self._reach.get(0, 0, name)
+
+    def set_scene_attr(self, name: str, value: Any) -> None:
+        """Set the scene env's public attribute ``name`` (one it has) in the sim."""
+        self._reach.set(0, 0, name, value)
+
+    def get_wrapper_attr(self, name: str) -> Any:
+        """This env's attribute ``name``, else the scene's (see :meth:`get_scene_attr`)."""
+        if hasattr(self, name):
+            return getattr(self, name)
+        return self.get_scene_attr(name)
+
+    def set_wrapper_attr(self, name: str, value: Any, *, force: bool = True) -> bool:
+        """Set ``name`` here if this env has it, else on the scene if it has it;
+        otherwise create it here when ``force`` (Gymnasium's rule)."""
+        if hasattr(self, name):
+            setattr(self, name, value)
+            return True
+        try:
+            self.set_scene_attr(name, value)
+            return True
+        except AttributeError:  # the scene lacks it (SceneAttributeError), or a private name
+            if force:
+                setattr(self, name, value)
+            return force
+
+
 #: Names a vector env answers itself, as each of its worlds' single env would
 #: (value: the vector env's attribute holding it; None: built by the mixin).
 _VECTOR_LOCAL = {
@@ -116,20 +162,25 @@ class VectorAttributes:
     value), ``get_attr`` is ``call`` without arguments, and ``set_attr`` takes
     one value for all worlds or a list/tuple with one per world.
     ``call("render")`` returns each world's frame, as ``SyncVectorEnv``'s
-    calls each env's ``render()``. :meth:`call_at` and :meth:`set_attr_at`
-    address some worlds only.
+    calls each env's ``render()`` (:meth:`render_world`). :meth:`call_at` and
+    :meth:`set_attr_at` address some worlds only.
 
-    Needs ``num_envs``, ``slices`` (``(first, end)`` world indices of each
-    sim), ``_reach`` (a :class:`SceneReach` over the env's session) and
-    ``render_world(i)`` (world ``i``'s frame, or None).
+    Needs ``num_envs``, ``render_mode``, ``slices`` (``(first, end)`` world
+    indices of each sim) and ``_reach`` (a :class:`SceneReach` over the env's
+    session).
     """
 
     num_envs: int
+    render_mode: str | None
     slices: list[tuple[int, int]]
     _reach: SceneReach
 
     def render_world(self, i: int) -> Any:
-        raise NotImplementedError
+        """World ``i``'s frame (None unless ``render_mode="rgb_array"``); ``call("render")`` gives every world's."""
+        if self.render_mode != "rgb_array":
+            return None
+        p, w = self._locate(i)
+        return self._reach.session.request(p, "render", world=w)["frame"]
 
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         """``name`` called (or read) on every world; one result per world."""
@@ -190,4 +241,4 @@ class VectorAttributes:
 
 _MISSING = object()
 
-__all__ = ["COMMANDS", "SceneMethod", "SceneReach", "VectorAttributes", "check_public"]
+__all__ = ["COMMANDS", "SceneAttributes", "SceneMethod", "SceneReach", "VectorAttributes", "check_public"]

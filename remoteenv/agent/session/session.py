@@ -10,7 +10,8 @@ reply that comes through :meth:`SimSession.request` is checked against the
 handshake first (:mod:`~remoteenv.agent.connection.reply_checks`); the vector env's own
 fan-out checks its replies with the same :attr:`SimSession.checks`.
 :func:`choose_group` turns an env's ``launcher=``/``attach=`` arguments into
-the group.
+the group, and :func:`open_session` opens a session over it from the env's
+constructor arguments.
 """
 
 from __future__ import annotations
@@ -246,9 +247,52 @@ class SimSession:
             ) from None
 
 
+def open_session(
+    group: SimGroup,
+    label: str,
+    scene: str,
+    num_instances: int,
+    worlds_per_instance: int,
+    *,
+    timeout: float | None,
+    call_timeouts: Mapping[str, float | None] | None,
+    startup_timeout: float,
+    restart_on_failure: bool,
+    max_restarts: int,
+    **launch: Any,
+) -> SimSession:
+    """An open session over ``group``, as an env's constructor makes it.
+
+    A group whose layout is fixed already is driven as it is; any other is
+    started with a :class:`~remoteenv.agent.launch.sim_group.LaunchSpec` of
+    ``scene`` in ``num_instances`` processes of ``worlds_per_instance`` worlds
+    each, with ``startup_timeout`` and the ``launch`` options (the spec's other
+    fields: ``seed``, ``env_kwargs``, ``render_mode``, ``real_time``,
+    ``real_time_factor``, ``action_delay``, ``obs_delay``, ``link_delay``).
+    ``label`` and the other arguments are :class:`SimSession`'s.
+    """
+    spec = (
+        None
+        if group.layout is not None
+        else LaunchSpec(scene, num_instances, worlds_per_instance, startup_timeout=startup_timeout, **launch)
+    )
+    session = SimSession(
+        group,
+        spec,
+        timeout=timeout,
+        call_timeouts=call_timeouts,
+        startup_timeout=startup_timeout,
+        restart_on_failure=restart_on_failure,
+        max_restarts=max_restarts,
+        label=label,
+    )
+    session.open()
+    return session
+
+
 def scene_label(cls_name: str, scene: str | os.PathLike[str]) -> str:
     """How messages name an env: ``"OpenAIRemoteEnv (cartpole_scene.py)"``."""
     return f"{cls_name} ({os.path.basename(os.fspath(scene))})"
 
 
-__all__ = ["CLOSE_REPLY_S", "SimSession", "choose_group", "scene_label"]
+__all__ = ["CLOSE_REPLY_S", "SimSession", "choose_group", "open_session", "scene_label"]

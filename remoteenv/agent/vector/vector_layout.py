@@ -10,6 +10,7 @@ import os
 from collections.abc import Sequence
 
 from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.agent.launch.sim_group import SimLayout
 from remoteenv.wire.handshake import Handshake
 
 
@@ -28,6 +29,49 @@ def default_envs_per_process(num_envs: int) -> int:
     """
     per_cpu = -(-num_envs // max(1, os.cpu_count() or 1))
     return min(num_envs, max(8, per_cpu))
+
+
+def plan_layout(
+    num_envs: int,
+    envs_per_process: int | None,
+    real_time: bool,
+    layout: SimLayout | None,
+    *,
+    max_episode_steps: int | None = None,
+    batch_size: int | None = None,
+) -> tuple[int, bool]:
+    """``(K, real_time)`` of a vector env of ``num_envs`` worlds: a group whose
+    ``layout`` is fixed already (e.g. attached sims) is driven as it is (its
+    world count must be ``num_envs``); else K is ``envs_per_process`` or
+    :func:`default_envs_per_process` (1 in real time). K is not capped at N
+    here. The env's other counts, ``max_episode_steps`` and ``batch_size``, are
+    checked too. A ValueError says which argument to change."""
+    if layout is not None:  # e.g. attached sims: drive them as they are
+        envs_per_process, real_time = layout.worlds_per_instance, layout.real_time
+        if num_envs != layout.num_worlds:
+            raise ValueError(
+                f"{layout.source} serves {layout.num_worlds} worlds; pass num_envs={layout.num_worlds} (got {num_envs})"
+            )
+    if envs_per_process is None:
+        envs_per_process = 1 if real_time else default_envs_per_process(num_envs)
+    if envs_per_process < 1:
+        raise ValueError(f"envs_per_process must be >= 1, got {envs_per_process}")
+    if real_time and envs_per_process != 1:
+        raise ValueError(
+            f"real_time=True needs envs_per_process=1 (got {envs_per_process}): each sim "
+            "process runs one paced clock, so it can host only one world"
+        )
+    if max_episode_steps is not None and max_episode_steps < 1:
+        raise ValueError(f"max_episode_steps must be >= 1 or None, got {max_episode_steps}")
+    if batch_size is not None and not 1 <= batch_size <= num_envs:
+        raise ValueError(f"batch_size must be in [1, num_envs={num_envs}], got {batch_size}")
+    return envs_per_process, real_time
+
+
+def world_slices(num_envs: int, per_process: int) -> list[tuple[int, int]]:
+    """``(first, end)`` world indices of each process, ``per_process`` worlds each (the last may have fewer)."""
+    num_procs = -(-num_envs // per_process)
+    return [(p * per_process, min((p + 1) * per_process, num_envs)) for p in range(num_procs)]
 
 
 def check_sims(handshakes: Sequence[Handshake], slices: Sequence[tuple[int, int]], batches: bool) -> None:
@@ -60,4 +104,4 @@ def check_sims(handshakes: Sequence[Handshake], slices: Sequence[tuple[int, int]
         )
 
 
-__all__ = ["check_sims", "default_envs_per_process"]
+__all__ = ["check_sims", "default_envs_per_process", "plan_layout", "world_slices"]

@@ -12,9 +12,10 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 
 from remoteenv.sim.scene.batch_result import BatchResult
+from remoteenv.sim.scene.model_file import model_file
 from remoteenv.sim.scene.obs_check import check_observation
-from remoteenv.sim.scene.step_check import StepResultError, check_finite_obs, unpack_step
-from remoteenv.wire.errors import short_repr
+from remoteenv.sim.scene.per_world_hooks import post_each, prepare_each
+from remoteenv.sim.scene.step_check import check_finite_obs, unpack_reset, unpack_step
 
 
 class BaseEnv:
@@ -87,7 +88,7 @@ class BaseEnv:
                 f"{type(self).__name__} does not support render_mode={render_mode!r}; "
                 f"supported: {self.metadata['render_modes']}"
             )
-        self.model = mujoco.MjModel.from_xml_path(self._model_file(os.fspath(model_path)))
+        self.model = mujoco.MjModel.from_xml_path(model_file(os.fspath(model_path), type(self).__name__))
         self._data = mujoco.MjData(self.model)
         self.frame_skip = int(frame_skip)
         self.observation_space = observation_space
@@ -189,23 +190,13 @@ class BaseEnv:
         both hooks to work with numpy over all worlds at once, and must then
         give exactly the per-world hooks' results (a test should say so).
         """
-        for env, action in zip(envs, _per_world(actions)):
-            env.prepare_step(action)
+        prepare_each(envs, actions)
 
     @classmethod
     def post_steps(cls, envs: Sequence[BaseEnv], actions: Any) -> BatchResult:
         """Optional batched :meth:`post_step` for ``envs`` after their substeps
         (see :meth:`prepare_steps`). The default calls :meth:`post_step` per world."""
-        obs, rewards, terminated, infos = [], [], [], []
-        for env, action in zip(envs, _per_world(actions)):
-            o, r, t, info = unpack_step(
-                env.post_step(action), scene=cls.__name__, hook="post_step", finite=env.check_finite
-            )
-            obs.append(o)
-            rewards.append(float(r))
-            terminated.append(bool(t))
-            infos.append(info)
-        return BatchResult(obs, np.array(rewards, dtype=np.float64), np.array(terminated, dtype=np.bool_), infos)
+        return post_each(envs, actions, cls.__name__)
 
     # ------------------------------------------------------------ driving
 
@@ -216,13 +207,7 @@ class BaseEnv:
         if self._batch_link is not None:  # mj_resetData rewrites all of it: no need to bring it up to date
             self._batch_link.claim(self._batch_index)
         mujoco.mj_resetData(self.model, self._data)
-        result = self.reset_model(options)
-        if not isinstance(result, tuple) or len(result) != 2 or not isinstance(result[1], dict):
-            raise StepResultError(
-                f"{type(self).__name__}.reset_model returned {short_repr(result, 80)} "
-                f"({type(result).__name__}); it returns the tuple (obs, info), info a dict"
-            )
-        obs, info = result
+        obs, info = unpack_reset(self.reset_model(options), scene=type(self).__name__)
         self._check_obs(obs, "reset_model")
         return obs, info
 
@@ -241,19 +226,6 @@ class BaseEnv:
         check_observation(self.observation_space, obs, scene=scene, hook=hook, bounds=self.check_obs_bounds)
         if self.check_finite:
             check_finite_obs(obs, scene=scene, hook=hook)
-
-    def _model_file(self, path: str) -> str:
-        """``path`` if it names a file; else FileNotFoundError naming the scene, with the fix."""
-        if os.path.isfile(path):
-            return path
-        hint = ""
-        if not os.path.isabs(path):
-            hint = (
-                f"; a relative path is looked up from the sim process's working directory ({os.getcwd()}), "
-                "which is the agent's, not the scene script's folder: build it from the script's folder, "
-                'os.path.join(os.path.dirname(os.path.abspath(__file__)), "model.xml")'
-            )
-        raise FileNotFoundError(f"{type(self).__name__}: MJCF model file {path!r} not found{hint}")
 
     def substep(self) -> None:
         """Advance the physics by one ``model.opt.timestep``."""
@@ -300,10 +272,3 @@ class BaseEnv:
         if self._viewer is not None:
             self._viewer.close()
             self._viewer = None
-
-
-def _per_world(actions: Any) -> Any:
-    """Batched actions as the per-world hooks get them (python ints for Discrete)."""
-    if isinstance(actions, np.ndarray) and actions.dtype.kind in "iu":
-        return actions.tolist()
-    return actions

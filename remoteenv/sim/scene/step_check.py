@@ -7,6 +7,7 @@ so a scene mistake fails at once with a :class:`StepResultError` naming the
 scene, the hook and the value, instead of a numpy error deep in the server or
 a silently wrong value (``terminated=None`` read as False):
 
+- ``reset_model`` returns two values ``(obs, info)``, ``info`` a dict;
 - ``post_step`` returns four values ``(obs, reward, terminated, info)``;
 - the reward is one real number (python or numpy int or float; a 0-d array
   counts), not a bool, an array of several values or None;
@@ -83,6 +84,17 @@ def unpack_step(result: Any, *, scene: str, hook: str, finite: bool = False) -> 
     if finite and not math.isfinite(float(reward)):
         raise _fail(scene, hook, f"reward {float(reward)!r}", "rewards must be finite (check_finite = True)")
     return obs, reward, terminated, info  # type: ignore[return-value]
+
+
+def unpack_reset(result: Any, *, scene: str) -> tuple[Any, dict[str, Any]]:
+    """``(obs, info)`` of one ``reset_model`` result, checked: a tuple of two, info
+    a dict. The observation is checked by the caller."""
+    if not isinstance(result, tuple) or len(result) != 2 or not isinstance(result[1], dict):
+        raise StepResultError(
+            f"{scene}.reset_model returned {short_repr(result, 80)} "
+            f"({type(result).__name__}); it returns the tuple (obs, info), info a dict"
+        )
+    return result[0], result[1]
 
 
 def check_finite_obs(obs: Any, *, scene: str, hook: str, what: str = "an observation") -> None:
@@ -162,4 +174,4 @@ def check_batch(result: Any, n: int, *, scene: str, hook: str, finite: bool = Fa
     return result
 
 
-__all__ = ["StepResultError", "check_batch", "check_finite_obs", "unpack_step"]
+__all__ = ["StepResultError", "check_batch", "check_finite_obs", "unpack_reset", "unpack_step"]

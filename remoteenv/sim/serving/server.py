@@ -4,7 +4,8 @@ Runs in the sim process. It binds a ROUTER socket (and serves the launcher's
 local pipe beside it), answers the commands of :mod:`remoteenv.wire.protocol`
 from one command table and keeps serving after errors in the scene code.
 
-One loop serves both stepping modes. It asks the server's
+One loop serves both stepping modes (its waits: :mod:`~remoteenv.sim.serving.waits`;
+its command table: :mod:`~remoteenv.sim.serving.command_table`). It asks the server's
 :class:`~remoteenv.sim.stepping.stepping.Stepping` for its next deadline: with none
 (always, in lock-step) it blocks on its channels until a request arrives,
 busy-waiting for a short while first when the agent on the local pipe has
@@ -17,9 +18,7 @@ substeps.
 from __future__ import annotations
 
 import logging
-import select
 import time
-import traceback
 from typing import Any
 
 import zmq
@@ -34,19 +33,16 @@ from remoteenv.sim.process.orphan import (
     start_guard,
 )
 from remoteenv.sim.scene.base_env import BaseEnv
-from remoteenv.sim.serving.attributes import AttributeCommands
-from remoteenv.sim.serving.commands import Commands, Handler
-from remoteenv.sim.serving.stepping_modes import stepping_and_commands
+from remoteenv.sim.serving.command_table import build_table, pack_reply
+from remoteenv.sim.serving.waits import ServingWaits
 from remoteenv.sim.stepping.real_time import Clock
 from remoteenv.sim.transport.channels import Channel, Outgoing, PipeChannel, ZmqChannel
-from remoteenv.sim.transport.checks import RequestError
 from remoteenv.sim.transport.limits import EXPENSIVE_COMMANDS, EXPENSIVE_PER_PASS, raise_fd_limit, return_large_frees
 from remoteenv.sim.transport.router import open_router
 from remoteenv.wire import protocol
 from remoteenv.wire.addresses import is_loopback
 from remoteenv.wire.delays.delays import DelaySpec
-from remoteenv.wire.errors import INVALID_ACTION, PROTOCOL, SCENE, InvalidAction, short_repr
-from remoteenv.wire.shared_memory.hot_wait import HotWait
+from remoteenv.wire.errors import PROTOCOL
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +50,6 @@ log = logging.getLogger(__name__)
 SIM_SPIN_S = 1e-3
 #: Wall seconds before a deadline at which waiting turns from sleeping to spinning.
 DEADLINE_SPIN_S = 0.0003
-_CHECK_INTERVAL_MS = round(CHECK_INTERVAL_S * 1000)
 
 
 class RemoteControlledAgent:
@@ -129,9 +124,11 @@ class RemoteControlledAgent:
         self.orphaned = False
         self._pipe_ended = False
         self._pipe = PipeChannel(pipe_fd) if pipe_fd is not None else None
-        self.stepping, mode_commands = stepping_and_commands(
+        self.stepping, self._table, drivers = build_table(
             envs,
             instance,
+            self.stop,
+            self._pipe,
             real_time=real_time,
             real_time_factor=real_time_factor,
             action_delay=action_delay,
@@ -140,19 +137,8 @@ class RemoteControlledAgent:
             seed=seed,
             clock=clock,
         )
-        common = Commands(envs, self.stepping, instance, self.stop, launcher_channel=self._pipe)
-        self._handlers: dict[str, Handler] = common.handlers()
-        self._handlers.update(AttributeCommands(envs, instance).handlers())
-        self._handlers.update(mode_commands)
         #: Who drives each world (:mod:`remoteenv.sim.transport.drivers`).
-        self.drivers = drivers = common.drivers
-        for name in ("pause", "resume"):  # they stop or start every world's clock
-            if name in self._handlers:
-                self._handlers[name] = drivers.guard_every(name, self._handlers[name])
-        if "reset_batch" in self._handlers:
-            self._handlers["reset_batch"] = drivers.guard_reset_batch(self._handlers["reset_batch"])
-            self._handlers["step_batch"] = drivers.guard_step_batch(self._handlers["step_batch"])
-        common.advertised = sorted(self._handlers)
+        self.drivers = drivers
         raise_fd_limit()
         return_large_frees()
         # A context of its own: its ZAP handler is this server's gate.
@@ -183,7 +169,7 @@ class RemoteControlledAgent:
     @property
     def commands(self) -> list[str]:
         """The commands this server answers, sorted."""
-        return sorted(self._handlers)
+        return self._table.commands
 
     def stop(self) -> None:
         """Stop serving once the request in hand is answered."""
@@ -215,68 +201,28 @@ class RemoteControlledAgent:
                 guard.release()
 
     def _serve_until_stopped(self) -> None:
-        stepping, clock, pipe, router = self.stepping, self.clock, self._pipe, self.router
+        stepping, clock, pipe = self.stepping, self.clock, self._pipe
         # Busy-waiting for the agent's next request pays in lock-step; in real
         # time the loop's own waits are paced by the deadlines instead.
-        hot = HotWait(SIM_SPIN_S if pipe is not None and not self.real_time else 0.0)
-        served: list[Channel] = [router] if pipe is None else [pipe, router]  # the launching agent first
-        poller = zmq.Poller()
-        for channel in served:
-            poller.register(channel.pollable, zmq.POLLIN)
-        fds = [channel.fd for channel in served]
-        spin_s = self.deadline_spin_s
+        waits = ServingWaits(
+            self.router,
+            pipe,
+            hot_window_s=SIM_SPIN_S if pipe is not None and not self.real_time else 0.0,
+            spin_s=self.deadline_spin_s,
+            answer=self._answer,
+            send=self._send_later,
+            pipe_closed=self.pipe_closed,
+        )
         last_check = clock()
         while self._running:
             self._expensive_left = EXPENSIVE_PER_PASS
             deadline = stepping.next_deadline()
             if deadline is None:
-                if pipe is not None and hot.worth_it():
-                    # The agent has been sending its next request quickly: wait hot.
-                    frames = pipe.receive_spinning(hot)
-                    if frames:
-                        hot.waited(time.perf_counter() - hot.since)
-                        self._answer(pipe, frames)
-                        hot.since = time.perf_counter()
-                        continue
-                    if pipe.closed:
-                        self.pipe_closed()
-                        continue
-                if pipe is not None and not router.more:
-                    # About to block: a request posted in the pipe's region comes with a frame from now on.
-                    frames = pipe.settle()
-                    if frames:
-                        self._answer(pipe, frames)
-                        continue
-                # Frames left waiting in the router's backlog: look, do not wait.
-                events = dict(poller.poll(0 if router.more else _CHECK_INTERVAL_MS))
-                for channel in served:
-                    if channel.pollable not in events and not channel.more:
-                        continue
-                    frames = channel.receive_nowait()
-                    if channel is pipe and frames:
-                        hot.waited(time.perf_counter() - hot.since)
-                    self._answer(channel, frames)
-                    if channel is pipe:
-                        hot.since = time.perf_counter()
-                    if channel.closed:
-                        self.pipe_closed()
-                idle = not events
+                idle = waits.for_requests()
+                if idle is None:  # answered at once from the pipe
+                    continue
             else:
-                now = clock()
-                if deadline <= now:
-                    for outgoing in stepping.run_due(now):
-                        self._send_later(outgoing)
-                else:
-                    timeout = min(deadline - now, CHECK_INTERVAL_S)
-                    if timeout > spin_s and not any(channel.more for channel in self.channels):
-                        # Wake a little early: the kernel's wake-up latency is then
-                        # absorbed by spinning (looping) instead of making us late.
-                        select.select(fds, [], [], timeout - spin_s)
-                # The ZeroMQ descriptor is edge-triggered: read every channel.
-                for channel in served:
-                    self._answer(channel, channel.receive_nowait())
-                    if channel.closed:
-                        self.pipe_closed()
+                waits.until(deadline, clock(), stepping, self.channels)
                 idle = False
             now = clock()
             if idle or now - last_check > CHECK_INTERVAL_S:
@@ -299,14 +245,14 @@ class RemoteControlledAgent:
                     self._expensive_left -= 1
                 reply = self.handle(msg, channel, reply_to)
             if reply is not None:
-                channel.send(reply_to, self.pack_reply(reply))
+                channel.send(reply_to, pack_reply(reply))
                 if stepping.clock_waiting:  # a reset was answered: its world's clock starts now
                     stepping.start_clocks(self.clock())
 
     def _send_later(self, outgoing: Outgoing) -> None:
         channel, reply_to, reply = outgoing
         if channel is not None:
-            channel.send(reply_to, self.pack_reply(reply))
+            channel.send(reply_to, pack_reply(reply))
 
     def pipe_closed(self) -> None:
         """The local pipe ended: the agent died or closed it. Stop; if the agent is
@@ -326,30 +272,7 @@ class RemoteControlledAgent:
 
     def pack_reply(self, reply: dict[str, Any]) -> bytes:
         """Encode a reply; one that cannot go on the wire becomes a typed error (never raises)."""
-        try:
-            return protocol.pack(reply)
-        except protocol.FrameTooLarge as exc:
-            seq = reply.get("seq", -1)
-            return protocol.pack(
-                protocol.error_reply(
-                    seq if isinstance(seq, int) else -1,
-                    PROTOCOL,
-                    f"the reply to this request is too large to send: {exc}; ask for less "
-                    "(e.g. a smaller render size or fewer worlds per batch)",
-                )
-            )
-        except Exception as exc:
-            seq = reply.get("seq", -1)
-            return protocol.pack(
-                protocol.error_reply(
-                    seq if isinstance(seq, int) else -1,
-                    SCENE,
-                    f"the reply to this request cannot be sent on the wire ({type(exc).__name__}: "
-                    f"{short_repr(str(exc))}); "
-                    "scene code must return numpy arrays, numbers, strings, lists and str-keyed maps",
-                    traceback.format_exc(),
-                )
-            )
+        return pack_reply(reply)
 
     def handle_frame(self, frame: bytes, channel: Channel | None = None, reply_to: Any = None) -> dict[str, Any] | None:
         """Decode one request frame and compute its reply (never raises); see :meth:`handle`.
@@ -370,24 +293,7 @@ class RemoteControlledAgent:
         Only a real-time ``step`` answers later: its reply goes to ``reply_to``
         on ``channel`` when its tick ends (nowhere if ``channel`` is None).
         """
-        seq = msg["seq"]
-        handler = self._handlers.get(msg["cmd"])
-        if handler is None:
-            return protocol.error_reply(
-                seq, PROTOCOL, f"unknown command {short_repr(msg['cmd'])}; known: {sorted(self._handlers)}"
-            )
-        try:
-            reply = handler(msg, channel, reply_to)
-        except RequestError as exc:
-            return protocol.error_reply(seq, exc.kind, str(exc))
-        except InvalidAction as exc:
-            return protocol.error_reply(seq, INVALID_ACTION, str(exc))
-        except Exception as exc:
-            return protocol.error_reply(seq, SCENE, f"{type(exc).__name__}: {exc}", traceback.format_exc())
-        if reply is not None:
-            reply["seq"] = seq
-            reply["ok"] = True
-        return reply
+        return self._table.handle(msg, channel, reply_to)
 
     def shutdown(self) -> None:
         """Close the envs and the socket (libzmq unlinks an ipc socket file it bound)."""

@@ -16,10 +16,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.stepping.emulated_link import EmulatedLink
 from remoteenv.sim.transport.channels import Channel, Outgoing
 from remoteenv.sim.transport.checks import RequestError
-from remoteenv.wire.delays.delay_line import LINK_STREAM, DelayStream
-from remoteenv.wire.delays.delays import SECONDS, DelaySpec, as_delay
+from remoteenv.wire.delays.delays import DelaySpec
 from remoteenv.wire.errors import SCENE
 from remoteenv.wire.protocol import error_reply
 from remoteenv.wire.stats import RunningStats
@@ -90,13 +90,11 @@ class RealTimeStepper:
         self._obs_time = 0.0
         self._info: dict[str, Any] = {}
         self._failure = ""
-        link = as_delay(0.0 if link_delay is None else link_delay, SECONDS)
+        self._link = EmulatedLink(link_delay, seed)
         #: The emulated link delay's draws (None: no emulated link).
-        self.link: DelayStream | None = None if link.is_zero else DelayStream(link, LINK_STREAM)
+        self.link = self._link.stream
         #: Emulated link delays drawn (wall seconds).
-        self.link_delay = RunningStats()
-        self._launch_seed = seed
-        self._seeded = False
+        self.link_delay = self._link.delays
         self._paused_at: float | None = None
 
     # ------------------------------------------------------------ queries
@@ -126,8 +124,7 @@ class RealTimeStepper:
 
     def describe(self) -> dict[str, Any]:
         out: dict[str, Any] = {"mode": "real_time", "real_time_factor": self.factor, "action_delay": 0}
-        if self.link is not None:
-            out["link_delay_spec"] = self.link.spec.to_wire()
+        self._link.describe(out)
         return out
 
     def timing(self) -> dict[str, Any]:
@@ -153,12 +150,7 @@ class RealTimeStepper:
     def reset(self, *, seed: int | None, options: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
         """Synchronous reset; the clock starts with :meth:`start` once the reply is sent."""
         obs, info = self.env.reset(seed=seed, options=options)
-        if self.link is not None:
-            if seed is None and not self._seeded:
-                seed = self._launch_seed
-            if seed is not None:
-                self.link.seed(seed)
-                self._seeded = True
+        self._link.reset(seed)
         self.state = _READY
         self._held = self.env.default_action()
         self._pending = None
@@ -211,9 +203,7 @@ class RealTimeStepper:
         pending = _PendingStep(channel, reply_to, seq, action, self.clock())
         if self.state == _FROZEN:
             return self._reply(pending, terminated=True)
-        if self.link is not None:
-            pending.link_delay = float(self.link.draw())
-            self.link_delay.add(pending.link_delay)
+        pending.link_delay = self._link.draw()
         # A newer request supersedes one still pending: its sender gave up on it.
         self._pending = pending
         return None
