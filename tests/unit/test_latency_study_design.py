@@ -89,3 +89,21 @@ def test_resume_keeps_records_of_the_same_configuration_only(tmp_path):
     with pytest.raises(ValueError, match="another configuration"):
         load_records(path, other)
     assert [p.name for p in tmp_path.iterdir()] == ["delay_effect.json"]  # no temporary file left
+
+
+def test_the_study_files_are_written_whole_and_readable_as_any_file_the_user_makes(tmp_path):
+    import json
+    import os
+    import stat
+
+    from remoteenv.latency_study.results import write_json
+
+    path = tmp_path / "delay_effect.json"
+    old = os.umask(0o022)
+    try:
+        write_json(str(path), {"records": [1, 2]})
+    finally:
+        os.umask(old)
+    assert json.loads(path.read_text()) == {"records": [1, 2]}
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644
+    assert [p.name for p in tmp_path.iterdir()] == ["delay_effect.json"]
