@@ -4,7 +4,7 @@ Benchmarks only (``python -m remoteenv bench --batched --profile``). Runs a
 ``step_batch`` of N Reacher worlds through the same code a sim and an agent
 run, without the processes in between, and times each stage: the sim
 decoding the request and checking the actions, the scene's batched hooks,
-the physics on threads, building and packing the reply; the agent decoding
+the physics (one mujoco.batch call where the scene has stacked hooks, else on threads), building and packing the reply; the agent decoding
 it and assembling Gymnasium's batch. No episode ends (no time limit; Reacher
 never terminates), so no world resets: with Reacher's 50-step limit one
 step in 50 also resets every world. What the benchmark's end-to-end figure
@@ -31,7 +31,7 @@ STAGES = [
     "agent: plan ops, pack request",
     "sim: decode request, check actions",
     "sim: scene prepare_steps",
-    "sim: physics (mj_step on threads)",
+    "sim: physics (one mujoco.batch call, or mj_step on threads)",
     "sim: scene post_steps",
     "sim: build and pack reply",
     "agent: decode reply, assemble batch",
@@ -58,6 +58,9 @@ def profile(n: int, steps: int = 500) -> tuple[dict[str, float], dict[str, float
     commands = BatchCommands(lock.worlds, envs[0].action_space, 0)
     stepper = commands.stepper
     assert stepper is not None
+    # The path a sim takes: the stacked hooks over one mujoco.batch where it has one.
+    batched = stepper.batched
+    hook_envs: Any = stepper._every if batched is not None else envs
     obs_batch = ObsBatch(envs[0].observation_space, n)
     commands.reset_batch({"worlds": list(range(n)), "seeds": list(range(n))}, None, None)
     rng = np.random.default_rng(0)
@@ -82,13 +85,16 @@ def profile(n: int, steps: int = 500) -> tuple[dict[str, float], dict[str, float
             acts = check_actions(envs[0].action_space, msg["actions"], n)
             stamps.append(time.perf_counter())
             cpu.append(time.process_time())
-            type(envs[0]).prepare_steps(envs, acts)
+            type(envs[0]).prepare_steps(hook_envs, acts)
             stamps.append(time.perf_counter())
             cpu.append(time.process_time())
-            stepper.physics.step(stepper._models, stepper._datas, envs[0].frame_skip)
+            if batched is not None:
+                batched.step(None, envs[0].frame_skip)
+            else:
+                stepper.physics.step(stepper._models, stepper._datas, envs[0].frame_skip)
             stamps.append(time.perf_counter())
             cpu.append(time.process_time())
-            batch = type(envs[0]).post_steps(envs, acts)
+            batch = type(envs[0]).post_steps(hook_envs, acts)
             stamps.append(time.perf_counter())
             cpu.append(time.process_time())
             packed = protocol.pack({"seq": t, "ok": True, **plain_step_reply(batch)})
