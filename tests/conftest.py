@@ -3,7 +3,10 @@ autouse check below fails any test that leaves one behind."""
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import tempfile
 import time
 
 import pytest
@@ -12,6 +15,12 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import remoteenv
 from remoteenv.agent.launch.launcher import pid_alive
+
+# SB3 makes an empty /tmp/SB3-<time> folder on every learn() that has no logger
+# set; the tests' (and their subprocesses') go into one folder removed at exit.
+_SB3_LOGDIR = tempfile.mkdtemp(prefix="sb3-test-logs-")
+os.environ["SB3_LOGDIR"] = _SB3_LOGDIR
+atexit.register(shutil.rmtree, _SB3_LOGDIR, True)
 
 
 def wait_gone(pid: int, timeout: float = 5.0) -> bool:

@@ -114,6 +114,7 @@ def run_once(name: str, steps: int, seed: int) -> dict[str, Any]:
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import VecEnvWrapper
 
     class StepTimer(VecEnvWrapper):
@@ -169,6 +170,7 @@ def run_once(name: str, steps: int, seed: int) -> dict[str, Any]:
         timer = RolloutTimer()
         cpu0 = cpu_seconds()
         t0 = time.perf_counter()
+        model.set_logger(Logger(None, []))  # SB3's default logger makes a /tmp/SB3-<time> folder
         model.learn(steps, callback=timer)
         total = time.perf_counter() - t0
         cpu = cpu_seconds() - cpu0  # before close: the workers still count

@@ -133,6 +133,7 @@ def train(
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.logger import Logger
 
     settings = config.ppo_settings
     curve: list[list[float]] = []
@@ -165,6 +166,7 @@ def train(
             device="cpu",
             verbose=0,
         )
+        model.set_logger(Logger(None, []))  # SB3's default logger makes a /tmp/SB3-<time> folder
         model.learn(config.steps, callback=Curve())
         recent = [float(e["r"]) for e in list(model.ep_info_buffer or ())[-CURVE_WINDOW:]]
         stats = None
