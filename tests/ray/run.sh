@@ -47,4 +47,9 @@ cd "$ROOT"
 export PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}"
 export MUJOCO_GL=${MUJOCO_GL:-egl}
 export RAY_USAGE_STATS_ENABLED=0
-exec unshare -n bash -c 'ip link set lo up && exec "$0" -m pytest tests/ray "$@"' "$VENV/bin/python" "$@"
+# Ray's cluster utility leaves a multiprocessing listener socket in the temp
+# dir when its nodes stop; the tests get a temp dir of their own, removed at the end.
+TEST_TMP=$(mktemp -d "${TMPDIR:-/tmp}/rt-XXXXXX")
+trap 'rm -rf "$TEST_TMP"' EXIT
+export TMPDIR=$TEST_TMP
+unshare -n bash -c 'ip link set lo up && exec "$0" -m pytest tests/ray "$@"' "$VENV/bin/python" "$@"
