@@ -31,7 +31,6 @@ torch==2.13.0 tqdm``).
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import sys
 import time
@@ -45,16 +44,9 @@ from torch import nn
 from tqdm import tqdm
 
 import remoteenv  # noqa: F401  (registers the shipped scenes' ids)
+from remoteenv.registration import find_spec  # "module:id" imports module first, as gym.make does
 
 DEFAULT_ENV = "remoteenv/CartPole-v0"
-
-
-def env_spec(env_id: str) -> gym.envs.registration.EnvSpec:
-    """The registered spec of ``env_id``; ``module:id`` imports ``module`` first."""
-    module, _, name = env_id.rpartition(":")
-    if module:
-        importlib.import_module(module)
-    return gym.spec(name)
 
 
 # ---------------------------------------------------------------- the model
@@ -372,10 +364,10 @@ def main() -> int:
         if args.save is None:
             p.error("--eval-only needs --save (the saved policy)")
         model, saved_env = load(args.save)
-        args.env = env_spec(args.env or saved_env).id  # imports the env's module, if named
+        args.env = find_spec(args.env or saved_env).id  # imports the env's module, if named
     else:
         given = args.env or DEFAULT_ENV
-        spec = env_spec(given)
+        spec = find_spec(given)
         args.env = spec.id  # the module (if any) is imported now
         if args.target is None:
             args.target = spec.reward_threshold

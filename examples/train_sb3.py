@@ -18,7 +18,6 @@ back as a fresh model, and evaluated on a single remote env with SB3's
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import sys
 import time
@@ -31,17 +30,10 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 import remoteenv  # noqa: F401  (registers the shipped scenes' ids)
+from remoteenv.registration import find_spec  # "module:id" imports module first, as gym.make does
 from remoteenv.sb3 import make_sb3_vec_env
 
 DEFAULT_ENV = "remoteenv/CartPole-v0"
-
-
-def env_spec(env_id: str) -> gym.envs.registration.EnvSpec:
-    """The registered spec of ``env_id``; ``module:id`` imports ``module`` first."""
-    module, _, name = env_id.rpartition(":")
-    if module:
-        importlib.import_module(module)
-    return gym.spec(name)
 
 
 def main() -> int:
@@ -56,7 +48,7 @@ def main() -> int:
     p.add_argument("--eval-episodes", type=int, default=10)
     args = p.parse_args()
     torch.set_num_threads(1)  # small nets: threads only add overhead next to the sims
-    spec = env_spec(args.env)
+    spec = find_spec(args.env)
     save = args.save or f"{spec.name.lower()}_sb3_ppo.zip"
 
     if not args.eval_only:
