@@ -91,6 +91,7 @@ def test_an_oversized_file_is_refused_before_it_is_parsed(tmp_path, monkeypatch)
         (b'{"link_delay": {"kind": "constant", "unit": "ticks", "value": 2}}', "link_delay: expected a delay in s"),
         (b'{"obs_delay": {"kind": "trace", "unit": "ticks", "values": [10001]}}', "obs_delay: invalid trace"),
         (b'{"obs_delay": 3}', "obs_delay: a delay spec must be a map"),
+        (b"[" * 100_000 + b"]" * 100_000, "not UTF-8 JSON.*deeper than"),
     ],
 )
 def test_a_bad_file_is_refused_saying_what_is_wrong(tmp_path, text, match):

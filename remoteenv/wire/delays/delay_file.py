@@ -34,6 +34,7 @@ from typing import Any
 
 from remoteenv.wire.delays.delays import MAX_VALUES, SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
 from remoteenv.wire.errors import ProtocolError, short_repr
+from remoteenv.wire.files.file_reads import UnreadableFile, parse_json
 from remoteenv.wire.files.files import create_new
 
 #: The keys of a delay file and each one's unit.
@@ -95,8 +96,8 @@ def read_delay_file(path: str | os.PathLike[str]) -> dict[str, DelaySpec]:
     if len(data) > MAX_DELAY_FILE_BYTES:
         raise ProtocolError(f"{what} grew beyond {MAX_DELAY_FILE_BYTES} bytes while being read")
     try:
-        desc = json.loads(data.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        desc = parse_json(data.decode("utf-8"), what=what)  # nesting bounded before parsing
+    except (UnicodeDecodeError, UnreadableFile) as exc:
         raise ProtocolError(f"{what} is not UTF-8 JSON: {short_repr(str(exc))}") from None
     return delays_from_map(desc, what)
 
