@@ -41,6 +41,27 @@ def _rss(pid: int) -> int:
     raise AssertionError("no VmRSS")
 
 
+def _step_while_flooded(env, pid, before, threads, stop):
+    """Step ``env`` for FLOOD_S seconds while ``threads`` flood its sim:
+    ``(peak RSS of pid, steps made, slowest step in s)``; the flood is stopped after."""
+    for t in threads:
+        t.start()
+    peak, steps, slowest = before, 0, 0.0
+    end = time.monotonic() + FLOOD_S
+    while time.monotonic() < end:
+        start = time.perf_counter()
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        slowest = max(slowest, time.perf_counter() - start)
+        steps += 1
+        if terminated or truncated:
+            env.reset()
+        peak = max(peak, _rss(pid))
+    stop.set()
+    for t in threads:
+        t.join(10)
+    return peak, steps, slowest
+
+
 def _flood(
     endpoint: str, stop: threading.Event, sent: list[int], answered: list[int] | None = None, size: int = FRAME
 ) -> None:
@@ -81,21 +102,7 @@ def test_a_flood_keeps_memory_bounded_and_the_owners_steps_served(peers):
         before = _rss(pid)
         endpoint = env.launcher.sims[0].endpoint
         threads = [threading.Thread(target=_flood, args=(endpoint, stop, sent), daemon=True) for _ in range(peers)]
-        for t in threads:
-            t.start()
-        peak, steps, slowest = before, 0, 0.0
-        end = time.monotonic() + FLOOD_S
-        while time.monotonic() < end:
-            start = time.perf_counter()
-            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-            slowest = max(slowest, time.perf_counter() - start)
-            steps += 1
-            if terminated or truncated:
-                env.reset()
-            peak = max(peak, _rss(pid))
-        stop.set()
-        for t in threads:
-            t.join(10)
+        peak, steps, slowest = _step_while_flooded(env, pid, before, threads, stop)
         bound = 3 * peers * (ROUTER_RCVHWM + 1) * FRAME + SLACK
         print(
             f"{peers} peer(s) sent {sum(sent)} x 1 MiB in {FLOOD_S:g} s; owner made {steps} steps "
@@ -137,21 +144,7 @@ def test_a_flood_from_more_peers_than_admitted_stays_within_the_total_bound():
             threading.Thread(target=_flood, args=(endpoint, stop, sent, answered, FLOOD_FRAME), daemon=True)
             for _ in range(peers)
         ]
-        for t in threads:
-            t.start()
-        peak, steps, slowest = before, 0, 0.0
-        end = time.monotonic() + FLOOD_S
-        while time.monotonic() < end:
-            start = time.perf_counter()
-            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-            slowest = max(slowest, time.perf_counter() - start)
-            steps += 1
-            if terminated or truncated:
-                env.reset()
-            peak = max(peak, _rss(pid))
-        stop.set()
-        for t in threads:
-            t.join(10)
+        peak, steps, slowest = _step_while_flooded(env, pid, before, threads, stop)
         # Requests held: MAX_PEERS x (RCVHWM + 2) frames and the backlog; 150 MB of slack.
         bound = MAX_PEERS * (ROUTER_RCVHWM + 2) * FLOOD_FRAME + BACKLOG_BYTES + SLACK
         served = sum(1 for n in answered if n)
