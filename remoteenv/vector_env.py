@@ -253,6 +253,21 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
             super().reset(seed=int(seed))  # type: ignore[arg-type]
         return self._episodes.reset(seed, options, self._add_info)
 
+    def _add_info(self, vector_infos: dict[str, Any], env_info: dict[str, Any], env_num: int) -> dict[str, Any]:
+        """Gymnasium's merge of one world's info, with one more rule: a world's
+        None for a key other worlds gave a number or an array (a delayed
+        lock-step world's ``latency_ticks`` while its default action acts, its
+        ``applied_action`` for a scene whose default is "no action") turns that
+        key's array into an object array holding each world's value as it came."""
+        for key, value in env_info.items():
+            arr = vector_infos.get(key)
+            if value is None and isinstance(arr, np.ndarray) and arr.dtype != object:
+                held = np.empty(self.num_envs, dtype=object)
+                for w in range(self.num_envs):
+                    held[w] = arr[w] if arr.ndim > 1 else arr[w].item()
+                vector_infos[key] = held
+        return super()._add_info(vector_infos, env_info, env_num)
+
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every world once (or autoreset it, see ``autoreset_mode``)."""
         self.step_async(actions)
