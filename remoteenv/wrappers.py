@@ -204,9 +204,7 @@ class ActionHistory(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._keys = _feature_keys(include_alpha, include_obs_delay, include_latency)
         _check_length(env, self.k, include_alpha, "ActionHistory")
         self._encoder = _ActionEncoder(env.action_space, dtype, "ActionHistory")
-        self.observation_space = _augmented_space(
-            env.observation_space, self._encoder, self.k, len(self._keys), dtype
-        )
+        self.observation_space = _augmented_space(env.observation_space, self._encoder, self.k, len(self._keys), dtype)
         self._history = np.zeros((self.k, self._encoder.size), dtype=dtype)
         self._features = np.zeros(len(self._keys), dtype=dtype)
 
@@ -332,7 +330,11 @@ class ActionHistoryVector(VectorWrapper, gym.utils.RecordConstructorArgs):
 
     def _augment(self, obs: Any) -> np.ndarray:
         n = self.num_envs
-        parts = [np.asarray(obs, dtype=self._history.dtype).reshape(n, -1), self._history.reshape(n, -1), self._features]
+        parts = [
+            np.asarray(obs, dtype=self._history.dtype).reshape(n, -1),
+            self._history.reshape(n, -1),
+            self._features,
+        ]
         return np.concatenate(parts, axis=1)
 
     def _augment_final(self, infos: dict[str, Any], ended: np.ndarray) -> dict[str, Any]:
@@ -348,5 +350,7 @@ class ActionHistoryVector(VectorWrapper, gym.utils.RecordConstructorArgs):
             if final[w] is None:
                 continue
             extra = np.array([_latency(column[w]) for column in columns], dtype=dtype)
-            final[w] = np.concatenate([np.asarray(final[w], dtype=dtype).reshape(-1), self._history[w].reshape(-1), extra])
+            final[w] = np.concatenate(
+                [np.asarray(final[w], dtype=dtype).reshape(-1), self._history[w].reshape(-1), extra]
+            )
         return {**infos, "final_obs": final}

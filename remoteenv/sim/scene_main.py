@@ -56,7 +56,12 @@ def apply_delay_file(parser: argparse.ArgumentParser, args: argparse.Namespace) 
     defaults = {"action_delay": 0, "obs_delay": 0, "link_delay": None, "channel": None}
     for key, spec in specs.items():
         if getattr(args, key, None) != defaults[key]:
-            parser.error(f"--{key.replace('_', '-')} is given twice: as a flag and in --delay-file")
+            flag = (
+                "--action-delivery/--obs-delivery/--delayed-rewards"
+                if key == "channel"
+                else "--" + key.replace("_", "-")
+            )
+            parser.error(f"{flag} is given twice: as a flag and in --delay-file")
         setattr(args, key, spec)
 
 

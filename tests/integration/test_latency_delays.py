@@ -121,7 +121,12 @@ def test_in_order_delivery_matches_the_in_process_replay_exactly(model):
     seed = 23
     actions = actions_for(seed, 45)
     remote = run_single(
-        seed, actions, action_delay=action_delay, obs_delay=obs_delay, action_delivery="in_order", obs_delivery="in_order"
+        seed,
+        actions,
+        action_delay=action_delay,
+        obs_delay=obs_delay,
+        action_delivery="in_order",
+        obs_delivery="in_order",
     )
     assert_matches(remote, replay(seed, actions, action_delay, obs_delay, in_order=True))
 

@@ -117,3 +117,28 @@ def test_the_scene_command_line_takes_delays_from_the_file_and_refuses_them_twic
     with pytest.raises(SystemExit):
         apply_delay_file(parser, parser.parse_args(["--address", "ipc:///x", "--delay-file", str(bad)]))
     assert "unknown delay kind" in capsys.readouterr().err
+
+
+def test_channel_rules_travel_in_the_file_only_with_a_lock_step_delay_and_are_checked(tmp_path, capsys):
+    from remoteenv.wire.delays.channel_rules import ChannelRules
+
+    rules = ChannelRules("in_order", "in_order", True)
+    assert delay_file_text(0, 0, None, rules) is None  # no delay: nothing for the rules to act on
+    assert "channel" not in (delay_file_text(2, 0, None, ChannelRules()) or "")  # the default is not written
+    path = write_sim_delay_file(str(tmp_path), 0, delay_file_text(Uniform(0, 3), 1, None, rules))
+    assert path is not None
+    assert read_delay_file(path) == {"action_delay": Uniform(0, 3), "obs_delay": Constant(1), "channel": rules}
+    parser = scene_argument_parser()
+    args = parser.parse_args(["--address", "ipc:///x", "--delay-file", path])
+    args.channel = None
+    apply_delay_file(parser, args)
+    assert args.channel == rules
+    twice = parser.parse_args(["--address", "ipc:///x", "--delay-file", path, "--delayed-rewards"])
+    twice.channel = ChannelRules(delayed_rewards=True)
+    with pytest.raises(SystemExit):
+        apply_delay_file(parser, twice)
+    assert "--delayed-rewards is given twice" in capsys.readouterr().err
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"obs_delay": Constant(1).to_wire(), "channel": {"obs_delivery": "lifo"}}))
+    with pytest.raises(ProtocolError, match="channel rules"):
+        read_delay_file(bad)

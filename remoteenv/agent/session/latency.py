@@ -105,10 +105,12 @@ class LatencyStats:
         ages = infos.get("action_delay_ticks")
         lock_step = ages is not None
         if lock_step:
-            took = infos.get("action_took_effect")
-            took_mask = infos.get("_action_took_effect")
+            took: Any = infos.get("action_took_effect")
+            took_mask: Any = infos.get("_action_took_effect")
             for i in np.flatnonzero(infos["_action_delay_ticks"]):
-                self._record_lock_step(ages[i], took[i] if took is not None and took_mask[i] else None)
+                self._record_lock_step(
+                    ages[i], took[i] if took is not None and took_mask is not None and took_mask[i] else None
+                )
         latency = infos.get("latency_s")
         if latency is not None:
             ticks = infos.get("latency_ticks")

@@ -41,7 +41,9 @@ def stepping_and_commands(
                     "(an emulated link in real time is link_delay)"
                 )
         if channel is not None and not channel.is_default:
-            raise ValueError("delivery rules and delayed_rewards are lock-step's (action_delay/obs_delay), not real time's")
+            raise ValueError(
+                "delivery rules and delayed_rewards are lock-step's (action_delay/obs_delay), not real time's"
+            )
         real = RealTimeStepping(envs, real_time_factor=real_time_factor, clock=clock, link_delay=link_delay, seed=seed)
         return real, {"timing": real.timing, "pause": real.pause, "resume": real.resume}
     if link_delay:

@@ -117,6 +117,8 @@ class LockStepper:
             obs, reward, terminated, info = self.env.step(action)
         else:
             in_force, _ = delays.apply(action)
+            tick_reward: Any
+            tick_info: dict[str, Any]
             if delays.frozen:
                 _, record = delays.observe_frozen()
                 tick_reward, tick_terminated, tick_info = 0.0, True, {}

@@ -393,9 +393,7 @@ class LockStepDelays:
         if self.frozen:
             raise RuntimeError(f"LockStepDelays.observe at step {self.step}: the physics froze, use observe_frozen")
         sent = self._applied[0]
-        tick = _Tick(
-            obs, float(sim_time), self.step - sent, self._applied[2], reward, terminated, scene_info
-        )
+        tick = _Tick(obs, float(sim_time), self.step - sent, self._applied[2], reward, terminated, scene_info)
         self._undelivered.append((self.step, float(reward)))
         if terminated and self.rules.delayed_rewards:
             self._terminal_tick = self.step
