@@ -102,7 +102,7 @@ class LatencyStats:
         self.steps += 1
         if round_trip_s is not None:
             self.round_trip_s.add(round_trip_s)
-        ages = infos.get("action_delay_ticks")
+        ages: Any = infos.get("action_delay_ticks")
         lock_step = ages is not None
         if lock_step:
             took: Any = infos.get("action_took_effect")
