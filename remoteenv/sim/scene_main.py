@@ -46,6 +46,13 @@ def seconds_delay_argument(text: str) -> DelaySpec:
     return _delay_argument(text, SECONDS)
 
 
+def apply_channel_flags(args: argparse.Namespace) -> None:
+    """Set ``args.channel`` from ``--action-delivery``, ``--obs-delivery`` and
+    ``--delayed-rewards`` (None for the default rules)."""
+    rules = ChannelRules(args.action_delivery, args.obs_delivery, args.delayed_rewards)
+    args.channel = None if rules.is_default else rules
+
+
 def apply_delay_file(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Set ``args.action_delay``/``obs_delay``/``link_delay`` from ``--delay-file``;
     exits through ``parser.error`` if the file is bad or repeats a delay flag."""
@@ -166,8 +173,7 @@ def run_scene(
     parser = scene_argument_parser(description)
     args = parser.parse_args(argv)
     log_to_stderr(args.instance)
-    rules = ChannelRules(args.action_delivery, args.obs_delivery, args.delayed_rewards)
-    args.channel = None if rules.is_default else rules
+    apply_channel_flags(args)
     if args.delay_file is not None:
         apply_delay_file(parser, args)
     env_kwargs: dict[str, Any] = json.loads(args.env_kwargs)

@@ -12,7 +12,7 @@ import pytest
 
 from remoteenv.agent.launch.sim_command import write_sim_delay_file
 from remoteenv.delays import MAX_DELAY_TICKS, Categorical, Constant, Trace, Uniform
-from remoteenv.sim.scene_main import apply_delay_file, scene_argument_parser
+from remoteenv.sim.scene_main import apply_channel_flags, apply_delay_file, scene_argument_parser
 from remoteenv.wire.delays import delay_file
 from remoteenv.wire.delays.delay_file import delay_file_text, read_delay_file, write_delay_file
 from remoteenv.wire.delays.delays import MAX_VALUES
@@ -130,11 +130,15 @@ def test_channel_rules_travel_in_the_file_only_with_a_lock_step_delay_and_are_ch
     assert read_delay_file(path) == {"action_delay": Uniform(0, 3), "obs_delay": Constant(1), "channel": rules}
     parser = scene_argument_parser()
     args = parser.parse_args(["--address", "ipc:///x", "--delay-file", path])
-    args.channel = None
+    apply_channel_flags(args)
+    assert args.channel is None
     apply_delay_file(parser, args)
     assert args.channel == rules
+    flags = parser.parse_args(["--address", "ipc:///x", "--action-delivery", "in_order", "--delayed-rewards"])
+    apply_channel_flags(flags)
+    assert flags.channel == ChannelRules(action_delivery="in_order", delayed_rewards=True)
     twice = parser.parse_args(["--address", "ipc:///x", "--delay-file", path, "--delayed-rewards"])
-    twice.channel = ChannelRules(delayed_rewards=True)
+    apply_channel_flags(twice)
     with pytest.raises(SystemExit):
         apply_delay_file(parser, twice)
     assert "--delayed-rewards is given twice" in capsys.readouterr().err
