@@ -1,10 +1,12 @@
 """Delay specs for latency experiments: ``remoteenv.delays.Uniform(0, 3)`` and friends.
 
 The public path of :mod:`remoteenv.wire.delays.delays` (the specs, in ticks or
-seconds) and :mod:`remoteenv.wire.delays.delay_line` (the lock-step semantics).
+seconds), :mod:`remoteenv.wire.delays.delay_line` (the lock-step semantics) and
+:mod:`remoteenv.wire.delays.channel_rules` (delivery rules, delayed rewards).
 ``docs/delays.md`` states what a delay of ``k`` ticks means.
 """
 
+from remoteenv.wire.delays.channel_rules import IN_ORDER, NEWEST, ChannelRules
 from remoteenv.wire.delays.delay_line import DelayLine, DelayStream, LockStepDelays, StepDelays, delay_rng
 from remoteenv.wire.delays.delays import (
     MAX_DELAY_S,
@@ -21,7 +23,10 @@ from remoteenv.wire.delays.delays import (
 )
 
 __all__ = [
+    "IN_ORDER",
+    "NEWEST",
     "Categorical",
+    "ChannelRules",
     "Constant",
     "DelayLine",
     "DelaySpec",

@@ -29,6 +29,7 @@ from remoteenv.agent.session.pickling import RebuildOnUnpickle, remember_init_ar
 from remoteenv.agent.session.session import choose_group, open_session, scene_label
 from remoteenv.agent.session.session_attributes import SessionAttributes
 from remoteenv.wire.actions import check_action
+from remoteenv.wire.delays.channel_rules import NEWEST, ChannelRules
 from remoteenv.wire.delays.delays import DelaySpec
 from remoteenv.wire.scalar_types import restore_scalars
 
@@ -55,6 +56,13 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
             arrived, observations arriving this many ticks late (int or spec).
         link_delay: real time; an emulated network's extra delay per action,
             in wall seconds (a number, or a spec with ``unit="s"`` for jitter).
+        action_delivery: lock-step, with a delay: ``"newest"`` (default: the
+            newest arrived action acts) or ``"in_order"`` (an action also waits
+            for every older one, TCP-like); see ``docs/delays.md``.
+        obs_delivery: the same choice for observations.
+        delayed_rewards: lock-step, with a delay: reward, ``terminated`` and the
+            scene's info travel with the delayed observation (the physics
+            freezes at termination until its observation arrives).
         seed: seed of the sim's RNG until the first ``reset(seed=...)``.
         transport: how this env talks to its sim: ``"pipe"`` (default: a Unix
             socketpair the launcher hands the sim; the fastest), or ZeroMQ over
@@ -123,6 +131,9 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
         action_delay: int | DelaySpec = 0,
         obs_delay: int | DelaySpec = 0,
         link_delay: float | DelaySpec | None = None,
+        action_delivery: str = NEWEST,
+        obs_delivery: str = NEWEST,
+        delayed_rewards: bool = False,
         seed: int | None = None,
         transport: str = "pipe",
         timeout: float | None = 60.0,
@@ -170,6 +181,7 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
             action_delay=action_delay,
             obs_delay=obs_delay,
             link_delay=link_delay,
+            channel=ChannelRules(action_delivery, obs_delivery, delayed_rewards),
         )
         hs = self._session.handshake
         self.observation_space = hs.observation_space

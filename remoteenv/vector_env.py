@@ -39,6 +39,7 @@ from remoteenv.agent.session.session import choose_group, open_session, scene_la
 from remoteenv.agent.session.session_attributes import SessionAttributes
 from remoteenv.agent.vector.vector_episodes import VectorEpisodes
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, plan_layout, world_slices
+from remoteenv.wire.delays.channel_rules import NEWEST, ChannelRules
 from remoteenv.wire.delays.delays import DelaySpec
 from remoteenv.wire.handshake import Handshake
 
@@ -71,7 +72,8 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         max_episode_steps: truncate an episode after this many steps (what
             ``TimeLimit`` does for single envs; ``make_vec`` passes the spec's).
         render_mode: ``"rgb_array"``: :meth:`render` returns one frame per world.
-        real_time, real_time_factor, action_delay, obs_delay, link_delay, transport, timeout,
+        real_time, real_time_factor, action_delay, obs_delay, link_delay, action_delivery,
+        obs_delivery, delayed_rewards, transport, timeout,
         startup_timeout, call_timeouts, bind_host, curve: as for
             :class:`remoteenv.OpenAIRemoteEnv`; ``timeout`` (or the call's entry
             in ``call_timeouts``) bounds the wait for all replies of one vector call;
@@ -127,6 +129,9 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         action_delay: int | DelaySpec = 0,
         obs_delay: int | DelaySpec = 0,
         link_delay: float | DelaySpec | None = None,
+        action_delivery: str = NEWEST,
+        obs_delivery: str = NEWEST,
+        delayed_rewards: bool = False,
         seed: int | None = None,
         transport: str = "pipe",
         timeout: float | None = 60.0,
@@ -182,6 +187,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
             action_delay=action_delay,
             obs_delay=obs_delay,
             link_delay=link_delay,
+            channel=ChannelRules(action_delivery, obs_delivery, delayed_rewards),
         )
         try:
             self._set_spaces(self._session.handshake)
@@ -246,6 +252,21 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         if is_int_seed(seed):
             super().reset(seed=int(seed))  # type: ignore[arg-type]
         return self._episodes.reset(seed, options, self._add_info)
+
+    def _add_info(self, vector_infos: dict[str, Any], env_info: dict[str, Any], env_num: int) -> dict[str, Any]:
+        """Gymnasium's merge of one world's info, with one more rule: a world's
+        None for a key other worlds gave a number or an array (a delayed
+        lock-step world's ``latency_ticks`` while its default action acts, its
+        ``applied_action`` for a scene whose default is "no action") turns that
+        key's array into an object array holding each world's value as it came."""
+        for key, value in env_info.items():
+            arr = vector_infos.get(key)
+            if value is None and isinstance(arr, np.ndarray) and arr.dtype != object:
+                held = np.empty(self.num_envs, dtype=object)
+                for w in range(self.num_envs):
+                    held[w] = arr[w] if arr.ndim > 1 else arr[w].item()
+                vector_infos[key] = held
+        return super()._add_info(vector_infos, env_info, env_num)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every world once (or autoreset it, see ``autoreset_mode``)."""

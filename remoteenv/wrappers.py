@@ -8,7 +8,25 @@ Ramstedt & Pal 2019 and the action buffer of Bouteiller et al. 2021; rtgym's
 
 Layout of the new observation (one flat :class:`~gymnasium.spaces.Box`)::
 
-    [ env obs (flattened) | a_{t-k+1} ... a_t (oldest first) | latency ]
+    [ env obs (flattened) | a_{t-k+1} ... a_t (oldest first) | alpha | omega | latency ]
+
+(``alpha``, ``omega`` and ``latency`` each only when asked for). With random
+delays this is the state of Bouteiller et al.'s RDMDP: the delayed
+observation, the action buffer, the observation's age ``omega`` and
+``alpha``, the age of the action that was in force during the tick that
+produced the observation: that action is the buffer's entry
+``k - 1 - omega - alpha`` (counting from 0, oldest first).
+
+How long a buffer: ``k = max alpha + max omega + 1`` = the largest action
+delay plus the largest observation delay plus one
+(:func:`required_history`) holds, at every step, the action in force during
+the returned observation's tick and every action sent since; one less
+misses the in-force action whenever its age and the observation's are both
+at their largest. (For a constant action delay ``K`` without observation
+delay, ``k = K`` is enough to predict: the in-force action of the returned
+tick is replaced at the next one for sure.) With ``include_alpha=True`` a
+buffer shorter than that, on an env that reports its delays
+(``env.unwrapped.handshake``), warns.
 
 - Observation spaces: a :class:`~gymnasium.spaces.Box` of any shape
   (flattened in C order). Anything else raises ``TypeError``; flatten it
@@ -19,15 +37,22 @@ Layout of the new observation (one flat :class:`~gymnasium.spaces.Box`)::
   length ``n``). Anything else raises ``TypeError``.
 - After a reset the history is all zeros (for Discrete: no action yet); the
   space's bounds for an action slot are the action bounds widened to include 0.
+- ``include_alpha=True`` adds ``info["obs_action_delay_ticks"]`` (alpha of the
+  returned observation), ``include_obs_delay=True`` ``info["obs_delay_ticks"]``
+  (omega): both known when the step returns, 0 when absent (the reset).
 - ``include_latency=True`` adds one feature: the ``info["latency_ticks"]``
   of the step (or reset) that returned this observation, 0 when it is absent
-  or None (remoteenv reports it in real time and in delayed lock-step).
+  or None. In delayed lock-step that is the latency of the action in force
+  during the step's tick, known once that action arrived (0 while the
+  default acts); in real time the latency of the step's own action, known
+  when it took effect. Neither tells a delay that has not elapsed.
 - dtype: the observation's dtype promoted with float32 (float32 for float32 observations).
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -36,7 +61,42 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from gymnasium.vector.utils import batch_space
 
-__all__ = ["ActionHistory", "ActionHistoryVector"]
+__all__ = ["ActionHistory", "ActionHistoryVector", "required_history"]
+
+#: The info keys of the optional features, in the order they are appended.
+_FEATURE_KEYS = ("obs_action_delay_ticks", "obs_delay_ticks", "latency_ticks")
+
+
+def required_history(action_delay: Any, obs_delay: Any = 0) -> int:
+    """The buffer length ``k`` that holds the action in force during the
+    returned observation's tick at any delays of these models (ints or
+    :mod:`remoteenv.delays` specs in ticks): the largest action delay plus
+    the largest observation delay plus one."""
+    from remoteenv.wire.delays.delays import TICKS, as_delay
+
+    return int(as_delay(action_delay, TICKS).max) + int(as_delay(obs_delay, TICKS).max) + 1
+
+
+def _feature_keys(include_alpha: bool, include_obs_delay: bool, include_latency: bool) -> tuple[str, ...]:
+    return tuple(key for key, on in zip(_FEATURE_KEYS, (include_alpha, include_obs_delay, include_latency)) if on)
+
+
+def _check_length(env: Any, k: int, include_alpha: bool, owner: str) -> None:
+    """Warn when ``include_alpha`` is asked of a buffer too short for the delays ``env`` reports."""
+    hs = getattr(getattr(env, "unwrapped", env), "handshake", None)
+    if not include_alpha or hs is None:
+        return
+    try:
+        need = int(hs.action_delay) + int(hs.obs_delay) + 1
+    except (AttributeError, TypeError, ValueError):
+        return
+    if k < need:
+        warnings.warn(
+            f"{owner}(k={k}, include_alpha=True): the env's delays reach {hs.action_delay} ticks (actions) "
+            f"and {hs.obs_delay} (observations), so the action in force at the observation's tick can be "
+            f"{need - 1} steps old: keep k >= {need} (remoteenv.wrappers.required_history)",
+            stacklevel=3,
+        )
 
 
 class _ActionEncoder:
@@ -78,14 +138,13 @@ class _ActionEncoder:
 
 
 def _augmented_space(
-    obs_space: spaces.Space, encoder: _ActionEncoder, k: int, include_latency: bool, dtype: np.dtype
+    obs_space: spaces.Space, encoder: _ActionEncoder, k: int, features: int, dtype: np.dtype
 ) -> spaces.Box:
     assert isinstance(obs_space, spaces.Box)
     low = [obs_space.low.reshape(-1).astype(dtype), np.tile(encoder.low, k)]
     high = [obs_space.high.reshape(-1).astype(dtype), np.tile(encoder.high, k)]
-    if include_latency:
-        low.append(np.zeros(1, dtype=dtype))
-        high.append(np.full(1, np.inf, dtype=dtype))
+    low.append(np.zeros(features, dtype=dtype))
+    high.append(np.full(features, np.inf, dtype=dtype))
     return spaces.Box(np.concatenate(low), np.concatenate(high), dtype=dtype)
 
 
@@ -101,7 +160,7 @@ def _check_spaces(obs_space: spaces.Space, k: int, owner: str) -> np.dtype:
 
 
 def _latency(value: Any) -> float:
-    """A latency feature from an info value: 0 when absent, None or not finite."""
+    """A feature from an info value (ticks): 0 when absent, None or not finite."""
     if value is None:
         return 0.0
     try:
@@ -116,27 +175,45 @@ class ActionHistory(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     Args:
         env: an env with a Box observation space and a Box or Discrete action space.
-        k: how many past actions to append (0 appends none).
-        include_latency: append ``info["latency_ticks"]`` as one more feature.
+        k: how many past actions to append (0 appends none); see
+            :func:`required_history` for how many the delays need.
+        include_alpha: append ``info["obs_action_delay_ticks"]``, the age of
+            the action in force during the returned observation's tick.
+        include_obs_delay: append ``info["obs_delay_ticks"]``, the returned observation's age.
+        include_latency: append ``info["latency_ticks"]`` (leak-free, see the module docs).
     """
 
-    def __init__(self, env: gym.Env, k: int, include_latency: bool = False) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, k=k, include_latency=include_latency)
+    def __init__(
+        self,
+        env: gym.Env,
+        k: int,
+        include_latency: bool = False,
+        *,
+        include_alpha: bool = False,
+        include_obs_delay: bool = False,
+    ) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self, k=k, include_latency=include_latency, include_alpha=include_alpha, include_obs_delay=include_obs_delay
+        )
         gym.Wrapper.__init__(self, env)
         dtype = _check_spaces(env.observation_space, k, "ActionHistory")
         self.k = int(k)
         self.include_latency = include_latency
+        self.include_alpha = include_alpha
+        self.include_obs_delay = include_obs_delay
+        self._keys = _feature_keys(include_alpha, include_obs_delay, include_latency)
+        _check_length(env, self.k, include_alpha, "ActionHistory")
         self._encoder = _ActionEncoder(env.action_space, dtype, "ActionHistory")
-        self.observation_space = _augmented_space(env.observation_space, self._encoder, self.k, include_latency, dtype)
+        self.observation_space = _augmented_space(env.observation_space, self._encoder, self.k, len(self._keys), dtype)
         self._history = np.zeros((self.k, self._encoder.size), dtype=dtype)
-        self._latency = 0.0
+        self._features = np.zeros(len(self._keys), dtype=dtype)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
         self._history[:] = 0
-        self._latency = _latency(info.get("latency_ticks"))
+        self._features[:] = [_latency(info.get(key)) for key in self._keys]
         return self._augment(obs), info
 
     def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
@@ -145,7 +222,7 @@ class ActionHistory(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self.k:
             self._history[:-1] = self._history[1:]
             self._history[-1] = features[0]
-        self._latency = _latency(info.get("latency_ticks"))
+        self._features[:] = [_latency(info.get(key)) for key in self._keys]
         return self._augment(obs), reward, terminated, truncated, info
 
     @property
@@ -154,9 +231,7 @@ class ActionHistory(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return self._history.copy()
 
     def _augment(self, obs: Any) -> np.ndarray:
-        parts = [np.asarray(obs, dtype=self._history.dtype).reshape(-1), self._history.reshape(-1)]
-        if self.include_latency:
-            parts.append(np.array([self._latency], dtype=self._history.dtype))
+        parts = [np.asarray(obs, dtype=self._history.dtype).reshape(-1), self._history.reshape(-1), self._features]
         return np.concatenate(parts)
 
 
@@ -181,24 +256,38 @@ class ActionHistoryVector(VectorWrapper, gym.utils.RecordConstructorArgs):
     - SAME_STEP: the step that ends an episode returns the next episode's first
       observation, with a zero history; ``infos["final_obs"]`` holds the
       ended episode's last observation augmented with its history (including
-      the final action) and the latency in ``infos["final_info"]``.
+      the final action) and its features from ``infos["final_info"]``.
     - DISABLED: ``reset(options={"reset_mask": mask})`` zeroes the masked worlds.
     """
 
-    def __init__(self, env: VectorEnv, k: int, include_latency: bool = False) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, k=k, include_latency=include_latency)
+    def __init__(
+        self,
+        env: VectorEnv,
+        k: int,
+        include_latency: bool = False,
+        *,
+        include_alpha: bool = False,
+        include_obs_delay: bool = False,
+    ) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self, k=k, include_latency=include_latency, include_alpha=include_alpha, include_obs_delay=include_obs_delay
+        )
         VectorWrapper.__init__(self, env)
         dtype = _check_spaces(env.single_observation_space, k, "ActionHistoryVector")
         self.k = int(k)
         self.include_latency = include_latency
+        self.include_alpha = include_alpha
+        self.include_obs_delay = include_obs_delay
+        self._keys = _feature_keys(include_alpha, include_obs_delay, include_latency)
+        _check_length(env, self.k, include_alpha, "ActionHistoryVector")
         self._encoder = _ActionEncoder(env.single_action_space, dtype, "ActionHistoryVector")
-        single = _augmented_space(env.single_observation_space, self._encoder, self.k, include_latency, dtype)
+        single = _augmented_space(env.single_observation_space, self._encoder, self.k, len(self._keys), dtype)
         self.single_observation_space = single
         self.observation_space = batch_space(single, self.num_envs)
         self.autoreset_mode = AutoresetMode(env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP))
         n = self.num_envs
         self._history = np.zeros((n, self.k, self._encoder.size), dtype=dtype)
-        self._latency = np.zeros(n, dtype=dtype)
+        self._features = np.zeros((n, len(self._keys)), dtype=dtype)
         self._restarting = np.zeros(n, dtype=bool)
 
     def reset(
@@ -209,9 +298,10 @@ class ActionHistoryVector(VectorWrapper, gym.utils.RecordConstructorArgs):
         worlds = np.ones(self.num_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
         self._history[worlds] = 0
         self._restarting[worlds] = False
-        for w, value in enumerate(_masked(infos, "latency_ticks", self.num_envs)):
-            if worlds[w]:
-                self._latency[w] = _latency(value)
+        for j, key in enumerate(self._keys):
+            for w, value in enumerate(_masked(infos, key, self.num_envs)):
+                if worlds[w]:
+                    self._features[w, j] = _latency(value)
         return self._augment(obs), infos
 
     def step(self, actions: Any) -> tuple[np.ndarray, Any, Any, Any, dict[str, Any]]:
@@ -223,7 +313,8 @@ class ActionHistoryVector(VectorWrapper, gym.utils.RecordConstructorArgs):
         if self.k:
             self._history[recorded, :-1] = self._history[recorded, 1:]
             self._history[recorded, -1] = features[recorded]
-        self._latency[:] = [_latency(v) for v in _masked(infos, "latency_ticks", n)]
+        for j, key in enumerate(self._keys):
+            self._features[:, j] = [_latency(v) for v in _masked(infos, key, n)]
         ended = np.logical_or(terminated, truncated)
         if self.autoreset_mode == AutoresetMode.SAME_STEP and ended.any():
             infos = self._augment_final(infos, ended)
@@ -239,9 +330,11 @@ class ActionHistoryVector(VectorWrapper, gym.utils.RecordConstructorArgs):
 
     def _augment(self, obs: Any) -> np.ndarray:
         n = self.num_envs
-        parts = [np.asarray(obs, dtype=self._history.dtype).reshape(n, -1), self._history.reshape(n, -1)]
-        if self.include_latency:
-            parts.append(self._latency.reshape(n, 1))
+        parts = [
+            np.asarray(obs, dtype=self._history.dtype).reshape(n, -1),
+            self._history.reshape(n, -1),
+            self._features,
+        ]
         return np.concatenate(parts, axis=1)
 
     def _augment_final(self, infos: dict[str, Any], ended: np.ndarray) -> dict[str, Any]:
@@ -251,13 +344,13 @@ class ActionHistoryVector(VectorWrapper, gym.utils.RecordConstructorArgs):
             return infos
         final = np.array(final, dtype=object, copy=True)
         final_infos = infos.get("final_info") or {}
-        latencies = _masked(final_infos, "latency_ticks", self.num_envs)
+        columns = [_masked(final_infos, key, self.num_envs) for key in self._keys]
         dtype = self._history.dtype
         for w in np.flatnonzero(ended):
             if final[w] is None:
                 continue
-            parts = [np.asarray(final[w], dtype=dtype).reshape(-1), self._history[w].reshape(-1)]
-            if self.include_latency:
-                parts.append(np.array([_latency(latencies[w])], dtype=dtype))
-            final[w] = np.concatenate(parts)
+            extra = np.array([_latency(column[w]) for column in columns], dtype=dtype)
+            final[w] = np.concatenate(
+                [np.asarray(final[w], dtype=dtype).reshape(-1), self._history[w].reshape(-1), extra]
+            )
         return {**infos, "final_obs": final}

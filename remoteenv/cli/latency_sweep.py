@@ -19,6 +19,11 @@ It writes ``sweep.csv`` (one row per episode), ``sweep.json`` (the
 configuration, the rows and a summary per delay: mean over seeds of each
 seed's mean return, with the spread over seeds) and ``sweep.png`` (mean
 return against delay, the band spanning the seeds' means) into ``--out``.
+In the lock-step modes each row also has the measured mean age of the
+action in force (``info["action_delay_ticks"]`` per tick) and how many of
+the episode's actions never took effect (overtaken, or still on their way
+when it ended); the printed table gives both per delay (mean age per tick,
+fraction of the actions sent).
 """
 
 from __future__ import annotations
@@ -43,7 +48,16 @@ BUILTIN_POLICIES = {
     "reacher_reach": "Reacher",
 }
 MODES = ("action_delay", "obs_delay", "real_time")
-CSV_FIELDS = ("delay", "seed", "episode", "return", "length", "latency_ticks")
+CSV_FIELDS = (
+    "delay",
+    "seed",
+    "episode",
+    "return",
+    "length",
+    "latency_ticks",
+    "action_age_ticks",
+    "actions_never_acted",
+)
 
 Policy = Callable[[np.ndarray], Any]
 
@@ -145,7 +159,7 @@ def run_point(env: Any, policy: Policy, seed: int, episodes: int, think_s: float
     rows = []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed if episode == 0 else None)
-        total, length, latencies = 0.0, 0, []
+        total, length, latencies, ages, acted = 0.0, 0, [], [], 0
         done = False
         while not done:
             if think_s:
@@ -155,6 +169,9 @@ def run_point(env: Any, policy: Policy, seed: int, episodes: int, think_s: float
             length += 1
             if info.get("latency_ticks") is not None:
                 latencies.append(float(info["latency_ticks"]))
+            if info.get("action_delay_ticks") is not None:  # delayed lock-step: the action in force
+                ages.append(float(info["action_delay_ticks"]))
+                acted += info.get("action_took_effect") is True
             done = terminated or truncated
         rows.append(
             {
@@ -163,6 +180,10 @@ def run_point(env: Any, policy: Policy, seed: int, episodes: int, think_s: float
                 "return": total,
                 "length": length,
                 "latency_ticks": float(np.mean(latencies)) if latencies else 0.0,
+                # the mean age of the action in force, and the actions that never took effect
+                # (overtaken, or still on their way at the end); empty without a lock-step delay
+                "action_age_ticks": float(np.mean(ages)) if ages else None,
+                "actions_never_acted": len(ages) - acted if ages else None,
             }
         )
     return rows
@@ -174,6 +195,8 @@ def summarize(rows: list[dict[str, Any]], delays: list[int], seeds: list[int]) -
     for d in delays:
         per_seed = [float(np.mean([r["return"] for r in rows if r["delay"] == d and r["seed"] == s])) for s in seeds]
         lat = [r["latency_ticks"] for r in rows if r["delay"] == d]
+        measured = [r for r in rows if r["delay"] == d and r.get("action_age_ticks") is not None]
+        steps = sum(r["length"] for r in measured)
         out.append(
             {
                 "delay": d,
@@ -183,6 +206,11 @@ def summarize(rows: list[dict[str, Any]], delays: list[int], seeds: list[int]) -
                 "max_over_seeds": float(np.max(per_seed)),
                 "seed_means": per_seed,
                 "mean_latency_ticks": float(np.mean(lat)),
+                # per tick over every episode of the point (None without a lock-step delay)
+                "mean_action_age_ticks": (
+                    sum(r["action_age_ticks"] * r["length"] for r in measured) / steps if steps else None
+                ),
+                "never_acted_fraction": sum(r["actions_never_acted"] for r in measured) / steps if steps else None,
             }
         )
     return out
@@ -289,11 +317,16 @@ def run(args: argparse.Namespace) -> int:
     xlabel = "think time d (ticks)" if args.mode == "real_time" else f"{kind} d (ticks)"
     if not args.no_plot:
         plot(summary, os.path.join(args.out, "sweep.png"), f"{args.env}, {args.policy}: {kind}", xlabel)
-    print(f"{'delay':>5}  {'mean return':>11}  {'std (seeds)':>11}  {'latency ticks':>13}")
+    print(
+        f"{'delay':>5}  {'mean return':>11}  {'std (seeds)':>11}  {'latency ticks':>13}  "
+        f"{'action age':>10}  {'never acted':>11}"
+    )
     for point in summary:
+        age, never = point["mean_action_age_ticks"], point["never_acted_fraction"]
         print(
             f"{point['delay']:5d}  {point['mean_return']:11.2f}  {point['std_over_seeds']:11.2f}  "
-            f"{point['mean_latency_ticks']:13.2f}"
+            f"{point['mean_latency_ticks']:13.2f}  {'-' if age is None else f'{age:10.2f}':>10}  "
+            f"{'-' if never is None else f'{never:11.3f}':>11}"
         )
     print(f"wrote {files.csv_path}, sweep.json{'' if args.no_plot else ', sweep.png'} in {wall:.1f} s")
     return 0

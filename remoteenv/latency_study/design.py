@@ -17,9 +17,11 @@ from typing import Any
 from remoteenv.delays import DelaySpec, Uniform
 
 #: What the policy sees. ``plain``: the env's observation only (delay-unaware).
-#: ``history``: the observation followed by the last ``k`` actions sent
-#: (:class:`remoteenv.wrappers.ActionHistory`, ``k`` = the largest delay), and
-#: for random delays also the latency of the last step (``include_latency``).
+#: ``history``: the observation followed by the last actions sent
+#: (:class:`remoteenv.wrappers.ActionHistory`): ``k`` of them for a constant
+#: delay ``k``; for random delays ``k + 1`` (enough to hold the action in
+#: force at any delay, :func:`remoteenv.wrappers.required_history`) and the
+#: age of that action, alpha (``include_alpha``).
 VARIANTS = ("plain", "history")
 
 #: Delay models: ``constant`` is ``action_delay=k``; ``uniform`` is
@@ -133,18 +135,22 @@ class Cell:
 
     @property
     def history_length(self) -> int:
-        """Actions the policy sees: the most that can be in flight (``k``) for
-        ``history``, none for ``plain``."""
-        return self.delay if self.variant == "history" else 0
+        """Actions the policy sees, none for ``plain``; for ``history`` the
+        most that can be in flight (``k``) under a constant delay, and under
+        random delays one more, so the buffer holds the action in force even
+        at its largest age ``k`` (:func:`remoteenv.wrappers.required_history`)."""
+        if self.variant != "history":
+            return 0
+        return self.delay + 1 if self.kind == "uniform" else self.delay
 
     @property
-    def include_latency(self) -> bool:
-        """``history`` under random delays also sees the last step's latency."""
+    def include_alpha(self) -> bool:
+        """``history`` under random delays also sees alpha, the age of the action in force."""
         return self.variant == "history" and self.kind == "uniform"
 
     @property
     def uses_wrapper(self) -> bool:
-        return self.history_length > 0 or self.include_latency
+        return self.history_length > 0 or self.include_alpha
 
     def delay_spec(self) -> int | DelaySpec:
         """The ``action_delay`` to pass to the env."""

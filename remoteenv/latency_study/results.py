@@ -5,7 +5,7 @@ Markdown table and the figure (agent side; the figure needs matplotlib).
 
     {"config": {...StudyConfig...}, "wall_s": float or null, "host": {...},
      "records": [{"variant", "kind", "delay", "seed", "mean_return",
-                  "returns", "history_length", "include_latency", "steps",
+                  "returns", "history_length", "include_alpha", "steps",
                   "train_s", "train_return", "curve"}, ...]}
 
 ``mean_return`` is the mean of ``returns``: the deterministic policy's

@@ -87,7 +87,7 @@ def make_train_env(config: StudyConfig, cell: Cell) -> Any:
         **config.env_kwargs,
     )
     if cell.uses_wrapper:
-        venv = ActionHistoryVector(venv, cell.history_length, include_latency=cell.include_latency)
+        venv = ActionHistoryVector(venv, cell.history_length, include_alpha=cell.include_alpha)
     env: Any = VecMonitor(SB3VecEnv(venv))
     if config.ppo_settings["normalize_obs"]:
         env = VecNormalize(env, norm_obs=True, norm_reward=False)
@@ -98,7 +98,7 @@ def make_eval_env(config: StudyConfig, cell: Cell) -> gym.Env:
     """A single env with the cell's delay model and observation."""
     env = gym.make(config.env_id, action_delay=cell.delay_spec(), **config.env_kwargs)
     if cell.uses_wrapper:
-        env = ActionHistory(env, cell.history_length, include_latency=cell.include_latency)
+        env = ActionHistory(env, cell.history_length, include_alpha=cell.include_alpha)
     return env
 
 
@@ -211,7 +211,7 @@ def run_cell(config: StudyConfig, cell: Cell, policy_dir: str | None = None) -> 
         "mean_return": float(np.mean(returns)),
         "returns": returns,
         "history_length": cell.history_length,
-        "include_latency": cell.include_latency,
+        "include_alpha": cell.include_alpha,
         "steps": config.steps,
         **trained,
     }

@@ -13,6 +13,7 @@ from remoteenv.sim.process.log import log_to_stderr
 from remoteenv.sim.process.pacing_levers import GC_MODES, apply_levers
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.wire.delays.channel_rules import DELIVERY_RULES, NEWEST, ChannelRules
 from remoteenv.wire.delays.delay_file import read_delay_file
 from remoteenv.wire.delays.delays import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
 from remoteenv.wire.errors import EXIT_SCENE_ARGS, SCENE_ARGS_MARKER, ProtocolError, short_repr
@@ -45,6 +46,13 @@ def seconds_delay_argument(text: str) -> DelaySpec:
     return _delay_argument(text, SECONDS)
 
 
+def apply_channel_flags(args: argparse.Namespace) -> None:
+    """Set ``args.channel`` from ``--action-delivery``, ``--obs-delivery`` and
+    ``--delayed-rewards`` (None for the default rules)."""
+    rules = ChannelRules(args.action_delivery, args.obs_delivery, args.delayed_rewards)
+    args.channel = None if rules.is_default else rules
+
+
 def apply_delay_file(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Set ``args.action_delay``/``obs_delay``/``link_delay`` from ``--delay-file``;
     exits through ``parser.error`` if the file is bad or repeats a delay flag."""
@@ -52,10 +60,15 @@ def apply_delay_file(parser: argparse.ArgumentParser, args: argparse.Namespace) 
         specs = read_delay_file(args.delay_file)
     except ProtocolError as exc:
         parser.error(str(exc))
-    defaults = {"action_delay": 0, "obs_delay": 0, "link_delay": None}
+    defaults = {"action_delay": 0, "obs_delay": 0, "link_delay": None, "channel": None}
     for key, spec in specs.items():
-        if getattr(args, key) != defaults[key]:
-            parser.error(f"--{key.replace('_', '-')} is given twice: as a flag and in --delay-file")
+        if getattr(args, key, None) != defaults[key]:
+            flag = (
+                "--action-delivery/--obs-delivery/--delayed-rewards"
+                if key == "channel"
+                else "--" + key.replace("_", "-")
+            )
+            parser.error(f"{flag} is given twice: as a flag and in --delay-file")
         setattr(args, key, spec)
 
 
@@ -104,6 +117,18 @@ def scene_argument_parser(description: str | None = None) -> argparse.ArgumentPa
         "remoteenv.wire.delays.delay_file): how launchers pass them, since a recorded trace is too long for "
         "a command line. A delay given here and as its own flag is refused",
     )
+    p.add_argument(
+        "--action-delivery",
+        choices=DELIVERY_RULES,
+        default=NEWEST,
+        help="lock-step: which delayed action acts: the newest arrived (default) or in order (TCP-like)",
+    )
+    p.add_argument("--obs-delivery", choices=DELIVERY_RULES, default=NEWEST, help="the same for observations")
+    p.add_argument(
+        "--delayed-rewards",
+        action="store_true",
+        help="lock-step: reward, terminated and the scene's info travel with the delayed observation",
+    )
     levers = p.add_argument_group("real-time pacing levers (see remoteenv.sim.process.pacing_levers)")
     levers.add_argument("--rt-priority", type=int, default=0, help="run under SCHED_FIFO at this priority (1..99)")
     levers.add_argument("--rt-cpus", default=None, help="pin the process to these CPUs, e.g. 1 or 0,1")
@@ -148,6 +173,7 @@ def run_scene(
     parser = scene_argument_parser(description)
     args = parser.parse_args(argv)
     log_to_stderr(args.instance)
+    apply_channel_flags(args)
     if args.delay_file is not None:
         apply_delay_file(parser, args)
     env_kwargs: dict[str, Any] = json.loads(args.env_kwargs)
@@ -182,6 +208,7 @@ def run_scene(
         action_delay=args.action_delay,
         obs_delay=args.obs_delay,
         link_delay=args.link_delay,
+        channel=args.channel,
         seed=args.seed,
         allow_remote=args.allow_remote,
         curve_secret_key=secret,

@@ -113,7 +113,9 @@ physics substep) and ``frame_skip``; ``stepping`` holds ``mode``
 ``action_delay`` (ticks; the largest of a random model) and, with delays
 beyond a constant action delay, ``obs_delay`` (the largest, ticks),
 ``action_delay_spec`` and ``obs_delay_spec`` (the models' wire forms, see
-:mod:`remoteenv.wire.delays.delays`); in real time ``real_time_factor`` and, with an
+:mod:`remoteenv.wire.delays.delays`) and, with a delay and delivery rules or
+delayed rewards other than the default, ``channel`` (see
+:mod:`remoteenv.wire.delays.channel_rules`); in real time ``real_time_factor`` and, with an
 emulated link, ``link_delay_spec``.
 
 ``reset`` ``{"world": int, "seed": int | nil, "options": map | nil}`` ->

@@ -60,10 +60,17 @@ def test_reacher_first_k_steps_use_the_default_then_actions_arrive_k_late(delay)
         else:
             np.testing.assert_array_equal(info["applied_action"], applied[t - 1])
             np.testing.assert_array_equal(info["applied_action"], actions[t - 1 - delay])
-        assert info["latency_ticks"] == delay and info["ticks_elapsed"] == 1
-        assert info["latency_s"] == pytest.approx(delay * 0.02)
+        assert info["action_delay_ticks"] == min(t, delay) and info["ticks_elapsed"] == 1
+        if t <= delay:  # the default acts: its latency is not a thing yet
+            assert info["latency_ticks"] is None and info["latency_s"] is None
+        else:  # after the fact: the action in force arrived delay ticks after the observation it answered
+            assert info["latency_ticks"] == delay and info["latency_s"] == pytest.approx(delay * 0.02)
         assert info["sim_time"] == pytest.approx(t * 0.02)
     assert stats["latency_ticks"]["max"] == delay and stats["late_actions"] == len(actions)
+    # the run's stats: the action in force is delay ticks old once the default is gone;
+    # the last delay actions were still on their way when the run stopped
+    assert stats["action_age_ticks"]["max"] == delay and stats["actions_sent"] == len(actions)
+    assert stats["never_acted_fraction"] == pytest.approx(delay / len(actions))
     # The delay changes the trajectory: the zero-delay run differs after tick 1.
     undelayed, _ = run_local(ReacherEnv(), 0, 5, actions)
     assert not np.array_equal(undelayed[2], local[2])

@@ -57,8 +57,10 @@ def test_a_reduced_study_writes_every_record_the_table_the_figure_and_the_twin_c
         assert r["variant"] in ("plain", "history")
         assert len(r["returns"]) == 2 and math.isclose(r["mean_return"], float(np.mean(r["returns"])))
         assert all(ret >= 1 for ret in r["returns"])  # CartPole pays +1 per step survived
-        assert r["history_length"] == (r["delay"] if r["variant"] == "history" else 0)
-        assert r["include_latency"] == (r["variant"] == "history" and r["kind"] == "uniform")
+        # random delays keep one action more: the in-force one at its largest age
+        uniform = r["kind"] == "uniform"
+        assert r["history_length"] == (r["delay"] + uniform if r["variant"] == "history" else 0)
+        assert r["include_alpha"] == (r["variant"] == "history" and r["kind"] == "uniform")
         assert r["steps"] == 512 and r["train_s"] > 0
     assert data["config"]["delays"] == [0, 2] and data["wall_s"] > 0 and data["host"]["cpus"] >= 1
     table = (out / "delay_effect.md").read_text()

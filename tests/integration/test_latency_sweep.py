@@ -25,6 +25,16 @@ def test_a_tiny_sweep_writes_csv_json_and_plot(tmp_path, mode):
     doc = json.loads((out / "sweep.json").read_text())
     assert [s["delay"] for s in doc["summary"]] == [0, 3] and doc["config"]["mode"] == mode
     assert all(len(s["seed_means"]) == 2 for s in doc["summary"])
+    if mode == "action_delay":  # constant delay 3: the action in force is 3 ticks old once the default is gone
+        for r in rows:
+            length = int(r["length"])
+            if r["delay"] == "0":
+                assert r["action_age_ticks"] == "" and r["actions_never_acted"] == ""
+            else:
+                assert float(r["action_age_ticks"]) == pytest.approx((3 * length - 3) / length)
+                assert int(r["actions_never_acted"]) == 3  # the last three were on their way at the end
+        assert doc["summary"][0]["mean_action_age_ticks"] is None
+        assert 2 < doc["summary"][1]["mean_action_age_ticks"] < 3
     assert (out / "sweep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # Lock-step repeats: the same sweep gives the same table.
     again = tmp_path / "again"

@@ -81,7 +81,9 @@ def test_the_twin_replays_the_recorded_ticks_exactly(tmp_path):
         twin.close()
     assert len(ticks) == episode.ticks
     for n, tick in enumerate(ticks, start=1):
-        assert tick["latency_ticks"] == values[n - 1]  # the sim drew the trace's own value
+        # the sim drew the trace's own values: the action in force is as old as they say
+        due = [t for t in range(1, n + 1) if t + values[t - 1] <= n]
+        assert tick["action_delay_ticks"] == n - max(due, default=0)
         expected = in_force(values, per_tick, n)
         if expected is None:
             assert tick["applied_action"] is None

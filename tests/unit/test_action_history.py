@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections import deque
 
 import gymnasium as gym
@@ -203,3 +204,97 @@ def test_vector_refuses_a_bad_action_batch_before_stepping():
     with pytest.raises(ValueError, match="do not fit 2"):
         env.step(np.array([0, 1, 1]))
     np.testing.assert_array_equal(env.history, 0)
+
+
+# --- the RDMDP features and the buffer's length ------------------------------------------------
+
+
+class DelayInfo(gym.Wrapper):
+    """Puts made-up delayed lock-step keys in each info: alpha = t % 3, omega = t % 2, latency t."""
+
+    def reset(self, **kwargs):
+        self.t = 0
+        return self.env.reset(**kwargs)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.t += 1
+        info = {**info, "obs_action_delay_ticks": self.t % 3, "obs_delay_ticks": self.t % 2, "latency_ticks": self.t}
+        return obs, reward, terminated, truncated, info
+
+
+def test_alpha_omega_and_latency_follow_the_actions_in_that_order():
+    env = ActionHistory(
+        DelayInfo(gym.make("CartPole-v1")), k=2, include_latency=True, include_alpha=True, include_obs_delay=True
+    )
+    assert env.observation_space.shape == (4 + 2 * 2 + 3,)
+    obs, _ = env.reset(seed=0)
+    np.testing.assert_array_equal(obs[-3:], 0)  # absent at the reset
+    for t in range(1, 5):
+        obs, *_ = env.step(1)
+        assert obs[-3:].tolist() == [t % 3, t % 2, t]
+    only_alpha = ActionHistory(DelayInfo(gym.make("CartPole-v1")), k=1, include_alpha=True)
+    only_alpha.reset(seed=0)
+    assert only_alpha.step(0)[0][-1] == 1 and only_alpha.observation_space.shape == (4 + 2 + 1,)
+
+
+def test_vector_alpha_and_omega_per_world_and_in_final_obs():
+    make = lambda: DelayInfo(gym.make("CartPole-v1"))  # noqa: E731
+    venv = SyncVectorEnv([make, make], autoreset_mode=AutoresetMode.SAME_STEP)
+    env = ActionHistoryVector(venv, k=1, include_alpha=True, include_obs_delay=True)
+    env.reset(seed=0)
+    obs = env.step(np.array([0, 1]))[0]
+    assert obs[:, -2:].tolist() == [[1, 1], [1, 1]]
+    ended = False
+    while not ended:
+        obs, _, term, trunc, infos = env.step(np.array([1, 1]))
+        ended = bool((term | trunc).any())
+    w = int(np.flatnonzero(term | trunc)[0])
+    t = infos["final_info"]["obs_action_delay_ticks"][w]
+    assert infos["final_obs"][w][-2:].tolist() == [t, infos["final_info"]["obs_delay_ticks"][w]]
+
+
+def test_the_buffer_holds_the_action_in_force_at_the_largest_delays():
+    """k = K_a + K_o + 1: at the largest alpha and omega the in-force action of the
+    returned tick is the oldest entry, k - 1 - omega - alpha = 0; with k one shorter it is gone."""
+    from remoteenv.delays import Uniform
+    from remoteenv.wire.delays.delay_line import LockStepDelays
+    from remoteenv.wrappers import required_history
+
+    assert required_history(Uniform(0, 8)) == 9 and required_history(3, Uniform(1, 2)) == 6
+    K_a, K_o = 4, 2
+    k = required_history(Uniform(0, K_a), Uniform(0, K_o))
+    engine = LockStepDelays(Uniform(0, K_a), Uniform(0, K_o))
+    engine.reset(None, 0.0, None, seed=3)
+    sent: list[int] = []
+    worst = 0
+    for t in range(1, 20_000):
+        engine.apply(t)
+        sent.append(t)
+        _, record = engine.observe(t, 0.0)
+        s = record.obs_tick - record.obs_action_delay_ticks  # who sent the in-force action of the returned tick
+        if s == 0:
+            continue  # the default
+        buffer = ([0] * k + sent)[-k:]  # zeros before the first actions, as the wrapper keeps it
+        assert buffer[k - 1 - record.obs_delay_ticks - record.obs_action_delay_ticks] == s
+        worst = max(worst, record.obs_delay_ticks + record.obs_action_delay_ticks)
+    assert worst == K_a + K_o  # the largest case happened, so k - 1 would have missed it
+
+
+def test_include_alpha_warns_when_the_env_reports_delays_the_buffer_cannot_hold():
+    from gymnasium.envs.classic_control import CartPoleEnv
+
+    class Reported(CartPoleEnv):
+        """An env that reports its delays as a remoteenv env's handshake does."""
+
+        class _Hs:
+            action_delay, obs_delay = 8, 2
+
+        handshake = _Hs()
+
+    with pytest.warns(UserWarning, match="k >= 11"):
+        ActionHistory(Reported(), k=10, include_alpha=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ActionHistory(Reported(), k=11, include_alpha=True)
+        ActionHistory(Reported(), k=8)  # without alpha: the constant-delay predictor's k

@@ -12,7 +12,7 @@ import pytest
 
 from remoteenv.agent.launch.sim_command import write_sim_delay_file
 from remoteenv.delays import MAX_DELAY_TICKS, Categorical, Constant, Trace, Uniform
-from remoteenv.sim.scene_main import apply_delay_file, scene_argument_parser
+from remoteenv.sim.scene_main import apply_channel_flags, apply_delay_file, scene_argument_parser
 from remoteenv.wire.delays import delay_file
 from remoteenv.wire.delays.delay_file import delay_file_text, read_delay_file, write_delay_file
 from remoteenv.wire.delays.delays import MAX_VALUES
@@ -117,3 +117,32 @@ def test_the_scene_command_line_takes_delays_from_the_file_and_refuses_them_twic
     with pytest.raises(SystemExit):
         apply_delay_file(parser, parser.parse_args(["--address", "ipc:///x", "--delay-file", str(bad)]))
     assert "unknown delay kind" in capsys.readouterr().err
+
+
+def test_channel_rules_travel_in_the_file_only_with_a_lock_step_delay_and_are_checked(tmp_path, capsys):
+    from remoteenv.wire.delays.channel_rules import ChannelRules
+
+    rules = ChannelRules("in_order", "in_order", True)
+    assert delay_file_text(0, 0, None, rules) is None  # no delay: nothing for the rules to act on
+    assert "channel" not in (delay_file_text(2, 0, None, ChannelRules()) or "")  # the default is not written
+    path = write_sim_delay_file(str(tmp_path), 0, delay_file_text(Uniform(0, 3), 1, None, rules))
+    assert path is not None
+    assert read_delay_file(path) == {"action_delay": Uniform(0, 3), "obs_delay": Constant(1), "channel": rules}
+    parser = scene_argument_parser()
+    args = parser.parse_args(["--address", "ipc:///x", "--delay-file", path])
+    apply_channel_flags(args)
+    assert args.channel is None
+    apply_delay_file(parser, args)
+    assert args.channel == rules
+    flags = parser.parse_args(["--address", "ipc:///x", "--action-delivery", "in_order", "--delayed-rewards"])
+    apply_channel_flags(flags)
+    assert flags.channel == ChannelRules(action_delivery="in_order", delayed_rewards=True)
+    twice = parser.parse_args(["--address", "ipc:///x", "--delay-file", path, "--delayed-rewards"])
+    apply_channel_flags(twice)
+    with pytest.raises(SystemExit):
+        apply_delay_file(parser, twice)
+    assert "--delayed-rewards is given twice" in capsys.readouterr().err
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"obs_delay": Constant(1).to_wire(), "channel": {"obs_delivery": "lifo"}}))
+    with pytest.raises(ProtocolError, match="channel rules"):
+        read_delay_file(bad)

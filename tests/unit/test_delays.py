@@ -112,7 +112,7 @@ def test_every_delay_model_matches_the_plain_replay_exactly(action_spec, obs_spe
     d = [None, *replay_draws(action_spec, seed, ACTION_STREAM, n)]
     o = [None, *replay_draws(obs_spec, seed, OBS_STREAM, n)]
     expected = replay_episode(actions, d, o, default, x0)
-    prev_obs_tick = 0
+    held = [0]  # held[s - 1]: the observation tick the agent held when sending a_s
     for t, ((obs, delays), (x, n_star, s_star)) in enumerate(zip(got, expected), 1):
         assert obs == x, f"step {t}"
         assert delays.step == t
@@ -120,8 +120,10 @@ def test_every_delay_model_matches_the_plain_replay_exactly(action_spec, obs_spe
         assert delays.obs_sim_time == n_star * 0.02
         assert delays.action_step == s_star and delays.action_delay_ticks == t - s_star
         assert delays.sent_delay_ticks == d[t]
-        assert delays.latency_ticks == t + d[t] - 1 - prev_obs_tick
-        prev_obs_tick = n_star
+        # after the fact: the latency of the action in force, None while the default acts
+        expected_latency = None if s_star == 0 else s_star + d[s_star] - 1 - held[s_star - 1]
+        assert delays.latency_ticks == expected_latency
+        held.append(n_star)
 
 
 def test_constant_action_delay_is_the_existing_lock_step_rule():
@@ -133,7 +135,7 @@ def test_constant_action_delay_is_the_existing_lock_step_rule():
     for a in actions:
         applied.append(engine.apply(a)[0])
         _, delays = engine.observe(f"x{engine.step}", 0.0)
-        assert delays.latency_ticks == k and delays.obs_delay_ticks == 0
+        assert delays.latency_ticks == (k if engine.step > k else None) and delays.obs_delay_ticks == 0
     assert applied == ["default"] * k + actions[:-k]
 
 

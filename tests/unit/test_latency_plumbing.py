@@ -93,7 +93,8 @@ def test_an_observation_delay_returns_older_observations_with_their_sim_time():
     assert info["sim_time"] == pytest.approx(4 * DT) and info["action_delay_ticks"] == 0
     assert info["tick"] == 4 and replies[3]["reward"] == 4.0  # reward and scene info of the tick that ran
     # The agent held x_1 (returned by step 3) when sending a4, due at tick 4, which starts at 3 * DT.
-    assert info["latency_ticks"] == 2 and info["late"] is True
+    # ``late`` says whether a tick ran on an older action: a4 acted at once here.
+    assert info["latency_ticks"] == 2 and info["late"] is False
 
 
 def test_the_launch_seed_seeds_delays_until_a_reset_brings_one():

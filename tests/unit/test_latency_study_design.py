@@ -25,9 +25,10 @@ def test_cells_cover_every_variant_delay_and_seed_once_in_a_fixed_order():
 def test_a_cell_says_what_the_policy_sees_and_which_delay_the_env_gets():
     assert Cell("plain", "constant", 8, 0).history_length == 0
     assert Cell("history", "constant", 8, 0).history_length == 8
-    assert not Cell("history", "constant", 8, 0).include_latency
-    assert Cell("history", "uniform", 8, 0).include_latency
-    assert not Cell("plain", "uniform", 8, 0).include_latency
+    assert Cell("history", "uniform", 8, 0).history_length == 9  # the in-force action at age 8 too
+    assert not Cell("history", "constant", 8, 0).include_alpha
+    assert Cell("history", "uniform", 8, 0).include_alpha
+    assert not Cell("plain", "uniform", 8, 0).include_alpha
     assert Cell("history", "constant", 0, 0).uses_wrapper is False
     assert Cell("plain", "constant", 4, 0).delay_spec() == 4
     assert Cell("plain", "uniform", 4, 0).delay_spec() == Uniform(0, 4)

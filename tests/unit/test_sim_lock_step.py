@@ -65,7 +65,10 @@ def test_with_delay_k_the_default_runs_k_ticks_then_each_action_k_ticks_late(del
         assert info["tick"] == t + 1  # the scene's own keys stay
         assert info["sim_time"] == pytest.approx((t + 1) * DT)
         assert info["ticks_elapsed"] == 1 and info["late"] is True
-        assert info["latency_ticks"] == delay and info["latency_s"] == pytest.approx(delay * DT)
+        if t < delay:  # the default acts: no latency to report yet
+            assert info["latency_ticks"] is None and info["latency_s"] is None
+        else:  # after the fact: the action in force arrived delay ticks after the observation it answered
+            assert info["latency_ticks"] == delay and info["latency_s"] == pytest.approx(delay * DT)
     assert stepper.describe() == {"mode": "lock_step", "action_delay": delay}
 
 

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 from remoteenv.agent.connection.sim_connection import SimConnection
+from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delay_file import delay_file_text
 from remoteenv.wire.delays.delays import SECONDS, TICKS, DelaySpec, as_delay
 from remoteenv.wire.files.keys import KeyPair
@@ -58,6 +59,8 @@ class LaunchSpec:
         obs_delay: lock-step; observations arrive this many ticks late (the same).
         link_delay: real time; emulated extra link delay per action in wall
             seconds (a number, or a spec with ``unit="s"``); None: none.
+        channel: lock-step; delivery rules and delayed rewards
+            (:class:`~remoteenv.wire.delays.channel_rules.ChannelRules`; None: the default).
         startup_timeout: seconds to wait for each sim to start (and, by
             default, to answer the handshake).
     """
@@ -74,10 +77,13 @@ class LaunchSpec:
     obs_delay: int | DelaySpec = 0
     link_delay: float | DelaySpec | None = None
     startup_timeout: float = 60.0
+    channel: ChannelRules | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scene", os.fspath(self.scene))
         object.__setattr__(self, "env_kwargs", dict(self.env_kwargs))
+        if self.channel is not None and self.channel.is_default:
+            object.__setattr__(self, "channel", None)  # one spelling of the default
         if self.num_instances < 1 or self.worlds_per_instance < 1:
             raise ValueError("num_instances and worlds_per_instance must be >= 1")
         # Checked here so a bad delay fails in the agent, before any process starts.
@@ -87,6 +93,11 @@ class LaunchSpec:
             raise ValueError(
                 "action_delay and obs_delay are lock-step's reproducible twin of real_time; use one or the "
                 "other (an emulated link in real time is link_delay)"
+            )
+        if self.real_time and self.channel is not None and not self.channel.is_default:
+            raise ValueError(
+                "action_delivery, obs_delivery and delayed_rewards are rules of lock-step's delays; "
+                "real time has none of them"
             )
         if link_delayed and not self.real_time:
             raise ValueError(
@@ -100,7 +111,7 @@ class LaunchSpec:
     def delay_file_text(self) -> str | None:
         """The text of each sim's delay file (see :mod:`remoteenv.wire.delays.delay_file`):
         every delay's wire form in JSON; None without delays."""
-        return delay_file_text(self.action_delay, self.obs_delay, self.link_delay)
+        return delay_file_text(self.action_delay, self.obs_delay, self.link_delay, self.channel)
 
     def layout(self, source: str) -> SimLayout:
         """The layout of the sims this spec starts; ``source`` names who started them, for messages."""

@@ -41,6 +41,7 @@ from remoteenv.sim.transport.limits import EXPENSIVE_COMMANDS, EXPENSIVE_PER_PAS
 from remoteenv.sim.transport.router import open_router
 from remoteenv.wire import protocol
 from remoteenv.wire.addresses import is_loopback
+from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delays import DelaySpec
 from remoteenv.wire.errors import PROTOCOL
 
@@ -69,6 +70,8 @@ class RemoteControlledAgent:
             per wall-clock second.
         action_delay, obs_delay: lock-step only: delays (control ticks, an int
             or a spec) of actions and observations (:mod:`remoteenv.sim.stepping.lock_step`).
+        channel: lock-step only: delivery rules and delayed rewards
+            (:class:`~remoteenv.wire.delays.channel_rules.ChannelRules`; None: the default).
         link_delay: real time only: emulated extra link delay per action (wall
             seconds, a number or a spec; :mod:`remoteenv.sim.stepping.real_time`).
         seed: launch seed of world 0 (world ``w``: ``seed + w``), seeding the
@@ -100,6 +103,7 @@ class RemoteControlledAgent:
         action_delay: DelaySpec | int = 0,
         obs_delay: DelaySpec | int = 0,
         link_delay: DelaySpec | float | None = None,
+        channel: ChannelRules | None = None,
         seed: int | None = None,
         allow_remote: bool = False,
         curve_secret_key: bytes | None = None,
@@ -134,6 +138,7 @@ class RemoteControlledAgent:
             action_delay=action_delay,
             obs_delay=obs_delay,
             link_delay=link_delay,
+            channel=channel,
             seed=seed,
             clock=clock,
         )

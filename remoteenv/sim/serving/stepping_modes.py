@@ -13,6 +13,7 @@ from remoteenv.sim.stepping.batch import BatchCommands
 from remoteenv.sim.stepping.lock_step import LockStepping
 from remoteenv.sim.stepping.real_time import Clock, RealTimeStepping
 from remoteenv.sim.stepping.stepping import Stepping
+from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delays import DelaySpec
 
 
@@ -27,6 +28,7 @@ def stepping_and_commands(
     link_delay: DelaySpec | float | None,
     seed: int | None,
     clock: Clock,
+    channel: ChannelRules | None = None,
 ) -> tuple[Stepping, dict[str, Handler]]:
     """The stepping of the requested mode and the commands only that mode answers:
     ``timing``, ``pause`` and ``resume`` in real time, ``reset_batch``,
@@ -38,10 +40,14 @@ def stepping_and_commands(
                     f"{name} is lock-step's reproducible twin of real_time; use one or the other "
                     "(an emulated link in real time is link_delay)"
                 )
+        if channel is not None and not channel.is_default:
+            raise ValueError(
+                "delivery rules and delayed_rewards are lock-step's (action_delay/obs_delay), not real time's"
+            )
         real = RealTimeStepping(envs, real_time_factor=real_time_factor, clock=clock, link_delay=link_delay, seed=seed)
         return real, {"timing": real.timing, "pause": real.pause, "resume": real.resume}
     if link_delay:
         raise ValueError("link_delay emulates a network in real time; in lock-step use action_delay/obs_delay")
-    lock = LockStepping(envs, action_delay=action_delay, obs_delay=obs_delay, seed=seed)
+    lock = LockStepping(envs, action_delay=action_delay, obs_delay=obs_delay, seed=seed, rules=channel)
     batch = BatchCommands(lock.worlds, envs[0].action_space, instance)
     return lock, batch.handlers()

@@ -17,6 +17,7 @@ from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.transport.channels import Channel, Outgoing
+from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delay_line import LockStepDelays
 from remoteenv.wire.delays.delays import TICKS, Constant, DelaySpec, as_delay
 from remoteenv.wire.scalar_types import describe_scalars
@@ -38,23 +39,31 @@ class LockStepper:
     Without delays each action is applied in its own tick and the reply's
     ``info`` is the scene's. With ``action_delay`` and/or ``obs_delay``
     (ticks: an int, or a :class:`~remoteenv.wire.delays.delays.DelaySpec`) the
-    action sent with step ``t`` takes effect at tick ``t + d_t`` and the
-    step returns the newest observation that has arrived; during the first
-    ticks the scene's default action is applied (see
-    :meth:`BaseEnv.default_action`). The reply's ``info`` then also carries
-    ``applied_action`` (the action in force, None for the default),
-    ``action_delay_ticks``, ``obs_delay_ticks``, ``obs_sim_time`` and
-    real-time mode's timing keys with their exact values: ``sim_time`` (the
-    world's time after the tick), ``ticks_elapsed`` = 1, ``latency_ticks``,
-    ``latency_s`` = ``latency_ticks * dt`` and ``late`` (the action waits at
-    least one whole tick). With ``action_delay=k`` alone that is the old
-    rule: the default for ``k`` ticks, then each action ``k`` ticks late.
+    action sent with step ``t`` arrives at tick ``t + d_t`` (or later, in
+    order, with ``action_delivery="in_order"``) and the step returns the
+    newest observation that has arrived; during the first ticks the scene's
+    default action is applied (see :meth:`BaseEnv.default_action`). The
+    reply's ``info`` then also carries :meth:`StepDelays.info`'s keys
+    (``action_delay_ticks``, ``applied_action``, ``action_took_effect``,
+    ``obs_delay_ticks``, ``obs_sim_time``, ``obs_action_delay_ticks``,
+    ``obs_applied_action``, ``latency_ticks``) and real-time mode's timing
+    keys with their exact values: ``sim_time`` (the world's time after the
+    tick), ``ticks_elapsed`` = 1, ``latency_s`` = ``latency_ticks * dt`` (None
+    with it) and ``late`` (the tick ran on an older action than this step's:
+    ``action_delay_ticks > 0``). Every one is known once the tick has run: none
+    tells a delay that has not elapsed. With ``delayed_rewards`` the reward,
+    ``terminated`` and the scene's info are the returned observation's and
+    the physics freezes at termination (see
+    :mod:`remoteenv.wire.delays.delay_line`). With ``action_delay=k`` alone
+    that is the old rule: the default for ``k`` ticks, then each action ``k``
+    ticks late.
 
     Args:
         env: the world.
         action_delay, obs_delay: the delay models (ticks).
         seed: the world's launch seed: seeds the delay streams at the first
             reset when that reset brings no seed (None: OS entropy).
+        rules: delivery rules and delayed rewards (default: newest, not delayed).
     """
 
     def __init__(
@@ -63,11 +72,12 @@ class LockStepper:
         action_delay: DelaySpec | int = 0,
         obs_delay: DelaySpec | int = 0,
         seed: int | None = None,
+        rules: ChannelRules | None = None,
     ) -> None:
         action_spec = _tick_delay(action_delay, "action_delay")
         obs_spec = _tick_delay(obs_delay, "obs_delay")
         self.env = env
-        self.delays = LockStepDelays(action_spec, obs_spec)
+        self.delays = LockStepDelays(action_spec, obs_spec, rules)
         #: The largest action delay (ticks); the handshake's ``action_delay``.
         self.action_delay = int(action_spec.max)
         self.has_reset = False
@@ -77,11 +87,14 @@ class LockStepper:
     def describe(self) -> dict[str, Any]:
         """``action_delay`` (ticks; the largest one for a random model), and when
         the models are more than a constant action delay: ``obs_delay`` (the
-        largest, ticks) and both specs' wire forms."""
+        largest, ticks) and both specs' wire forms; with delays and rules other
+        than the default, ``channel`` (:meth:`ChannelRules.to_wire`)."""
         out: dict[str, Any] = {"mode": "lock_step", "action_delay": self.action_delay}
         action, obs = self.delays.action_delay, self.delays.obs_delay
         if not (isinstance(action, Constant) and obs.is_zero):
             out.update(obs_delay=int(obs.max), action_delay_spec=action.to_wire(), obs_delay_spec=obs.to_wire())
+        if not self.delays.is_zero and not self.delays.rules.is_default:
+            out["channel"] = self.delays.rules.to_wire()
         return out
 
     def reset(self, *, seed: int | None, options: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
@@ -104,17 +117,25 @@ class LockStepper:
             obs, reward, terminated, info = self.env.step(action)
         else:
             in_force, _ = delays.apply(action)
-            tick_obs, reward, terminated, info = self.env.step(in_force)
-            sim_time = float(self.env.data.time)
-            obs, record = delays.observe(tick_obs, sim_time)
-            info = dict(info)
+            tick_reward: Any
+            tick_info: dict[str, Any]
+            if delays.frozen:
+                _, record = delays.observe_frozen()
+                tick_reward, tick_terminated, tick_info = 0.0, True, {}
+            else:
+                tick_obs, tick_reward, tick_terminated, tick_info = self.env.step(in_force)
+                _, record = delays.observe(
+                    tick_obs, float(self.env.data.time), float(tick_reward), bool(tick_terminated), tick_info
+                )
+            sent = delays.deliver(tick_reward, tick_terminated, tick_info)
+            obs, reward, terminated = sent.obs, sent.reward, sent.terminated
+            info = dict(sent.scene_info or {})
             info.update(record.info())
-            info["applied_action"] = in_force
             # The timing keys of real-time mode, exact by construction here.
-            info["sim_time"] = sim_time
+            info["sim_time"] = float(self.env.data.time)
             info["ticks_elapsed"] = 1
-            info["latency_s"] = record.latency_ticks * self.env.dt
-            info["late"] = record.latency_ticks > 0
+            info["latency_s"] = None if record.latency_ticks is None else record.latency_ticks * self.env.dt
+            info["late"] = record.action_delay_ticks > 0
         return describe_scalars(
             {
                 "obs": obs,
@@ -136,6 +157,7 @@ class LockStepping:
             world draws from its own streams.
         seed: launch seed of world 0 (world ``w`` uses ``seed + w``), seeding
             the delay streams until a reset brings a seed; None: OS entropy.
+        rules: delivery rules and delayed rewards of every world.
     """
 
     #: Lock-step has no clock to start.
@@ -147,9 +169,10 @@ class LockStepping:
         action_delay: DelaySpec | int = 0,
         obs_delay: DelaySpec | int = 0,
         seed: int | None = None,
+        rules: ChannelRules | None = None,
     ) -> None:
         self._worlds = [
-            LockStepper(env, action_delay, obs_delay, seed=None if seed is None else seed + w)
+            LockStepper(env, action_delay, obs_delay, seed=None if seed is None else seed + w, rules=rules)
             for w, env in enumerate(envs)
         ]
 
