@@ -45,20 +45,23 @@ gets ``L' = ticks_elapsed``: due one tick after the end.
 """
 
 from remoteenv.latency_twin.compare import (
-    DEFAULT_RELATIVE_TOLERANCE,
     compare_real_time_and_replay,
     compare_recorded,
-    compare_returns,
+    first_difference,
     replay_episode,
     run_real_time,
 )
+from remoteenv.latency_twin.exact_twin import ExactTwin
 from remoteenv.latency_twin.recorder import LatencyRecorder, RecordedEpisode, save_episode
+from remoteenv.latency_twin.recording_file import load_recording, save_recording
 from remoteenv.latency_twin.replay import LockStepTwin, make_twin
+from remoteenv.latency_twin.return_stats import DEFAULT_RELATIVE_TOLERANCE, compare_returns
 from remoteenv.latency_twin.trace import ROUNDINGS, decision_ticks, twin_latency, twin_values
 from remoteenv.latency_twin.vector_recorder import LatencyRecorderVector
 
 __all__ = [
     "DEFAULT_RELATIVE_TOLERANCE",
+    "ExactTwin",
     "LatencyRecorder",
     "LatencyRecorderVector",
     "LockStepTwin",
@@ -68,10 +71,13 @@ __all__ = [
     "compare_recorded",
     "compare_returns",
     "decision_ticks",
+    "first_difference",
+    "load_recording",
     "make_twin",
     "replay_episode",
     "run_real_time",
     "save_episode",
+    "save_recording",
     "twin_latency",
     "twin_values",
 ]

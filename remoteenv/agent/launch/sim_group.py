@@ -36,6 +36,7 @@ from remoteenv.agent.connection.sim_connection import SimConnection
 from remoteenv.wire.delays.delay_file import delay_file_text
 from remoteenv.wire.delays.delays import SECONDS, TICKS, DelaySpec, as_delay
 from remoteenv.wire.files.keys import KeyPair
+from remoteenv.wire.real_time_modes import ELASTIC, check_real_time_mode
 
 
 @dataclass(frozen=True)
@@ -53,6 +54,8 @@ class LaunchSpec:
         render_mode: passed to the scene's env.
         real_time: run each sim on a paced wall clock.
         real_time_factor: simulated seconds per wall-clock second.
+        real_time_mode: real time; the regime, ``"elastic"`` or ``"fixed_step"``
+            (:mod:`remoteenv.wire.real_time_modes`).
         action_delay: lock-step; an action takes effect this many ticks later
             (an int, or a :mod:`remoteenv.delays` spec in ticks).
         obs_delay: lock-step; observations arrive this many ticks late (the same).
@@ -70,6 +73,7 @@ class LaunchSpec:
     render_mode: str | None = None
     real_time: bool = False
     real_time_factor: float = 1.0
+    real_time_mode: str = ELASTIC
     action_delay: int | DelaySpec = 0
     obs_delay: int | DelaySpec = 0
     link_delay: float | DelaySpec | None = None
@@ -88,6 +92,9 @@ class LaunchSpec:
                 "action_delay and obs_delay are lock-step's reproducible twin of real_time; use one or the "
                 "other (an emulated link in real time is link_delay)"
             )
+        check_real_time_mode(self.real_time_mode)
+        if self.real_time_mode != ELASTIC and not self.real_time:
+            raise ValueError(f"real_time_mode={self.real_time_mode!r} is a real-time regime: add real_time=True")
         if link_delayed and not self.real_time:
             raise ValueError(
                 "link_delay emulates a network in real time (real_time=True); in lock-step use action_delay/obs_delay"

@@ -14,6 +14,7 @@ from remoteenv.sim.stepping.lock_step import LockStepping
 from remoteenv.sim.stepping.real_time import Clock, RealTimeStepping
 from remoteenv.sim.stepping.stepping import Stepping
 from remoteenv.wire.delays.delays import DelaySpec
+from remoteenv.wire.real_time_modes import ELASTIC
 
 
 def stepping_and_commands(
@@ -22,6 +23,7 @@ def stepping_and_commands(
     *,
     real_time: bool,
     real_time_factor: float,
+    real_time_mode: str = ELASTIC,
     action_delay: DelaySpec | int,
     obs_delay: DelaySpec | int,
     link_delay: DelaySpec | float | None,
@@ -38,8 +40,12 @@ def stepping_and_commands(
                     f"{name} is lock-step's reproducible twin of real_time; use one or the other "
                     "(an emulated link in real time is link_delay)"
                 )
-        real = RealTimeStepping(envs, real_time_factor=real_time_factor, clock=clock, link_delay=link_delay, seed=seed)
+        real = RealTimeStepping(
+            envs, real_time_factor, clock=clock, link_delay=link_delay, seed=seed, mode=real_time_mode
+        )
         return real, {"timing": real.timing, "pause": real.pause, "resume": real.resume}
+    if real_time_mode != ELASTIC:
+        raise ValueError(f"real_time_mode={real_time_mode!r} is a real-time regime: launch with real_time=True")
     if link_delay:
         raise ValueError("link_delay emulates a network in real time; in lock-step use action_delay/obs_delay")
     lock = LockStepping(envs, action_delay=action_delay, obs_delay=obs_delay, seed=seed)

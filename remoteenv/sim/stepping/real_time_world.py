@@ -17,11 +17,13 @@ from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.stepping.emulated_link import EmulatedLink
+from remoteenv.sim.stepping.real_time_replay import ReplayCursor
 from remoteenv.sim.transport.channels import Channel, Outgoing
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.wire.delays.delays import DelaySpec
-from remoteenv.wire.errors import SCENE
+from remoteenv.wire.errors import PROTOCOL, SCENE
 from remoteenv.wire.protocol import error_reply
+from remoteenv.wire.real_time_modes import ELASTIC, FIXED_STEP, check_real_time_mode, split_replay
 from remoteenv.wire.stats import RunningStats
 
 #: A clock: seconds, monotonic (``time.monotonic`` in a sim process).
@@ -39,7 +41,9 @@ class _PendingStep:
     arrived: float  # clock time when the request was handed over
     link_delay: float = 0.0  # emulated link: wall seconds it is held back after arriving
     applied_sim_time: float | None = None
+    applied_substep: int | None = None
     apply_delay_s: float | None = None
+    apply_at: int = 0  # replay: the substep at which the action takes effect
 
 
 class RealTimeStepper:
@@ -53,6 +57,8 @@ class RealTimeStepper:
             number or a spec in seconds); None or 0: none.
         seed: the world's launch seed: seeds the link stream at the first
             reset when that reset brings no seed (None: OS entropy).
+        mode: the regime, ``"elastic"`` or ``"fixed_step"``
+            (:mod:`remoteenv.wire.real_time_modes`).
     """
 
     def __init__(
@@ -62,7 +68,9 @@ class RealTimeStepper:
         clock: Clock = time.monotonic,
         link_delay: DelaySpec | float | None = None,
         seed: int | None = None,
+        mode: str = ELASTIC,
     ) -> None:
+        self.mode = check_real_time_mode(mode)
         factor = float(real_time_factor)
         if not (math.isfinite(factor) and factor > 0):
             raise ValueError(f"real_time_factor must be a finite number > 0, got {real_time_factor!r}")
@@ -96,6 +104,7 @@ class RealTimeStepper:
         #: Emulated link delays drawn (wall seconds).
         self.link_delay = self._link.delays
         self._paused_at: float | None = None
+        self._replay: ReplayCursor | None = None
 
     # ------------------------------------------------------------ queries
 
@@ -118,12 +127,13 @@ class RealTimeStepper:
 
     def next_deadline(self) -> float | None:
         """Clock time at which the next substep boundary is due (None: nothing runs)."""
-        if self.state != _RUNNING or self._paused_at is not None:
+        if self.state != _RUNNING or self._paused_at is not None or self._replay is not None:
             return None
         return self._t0 + self._n * self.period
 
     def describe(self) -> dict[str, Any]:
         out: dict[str, Any] = {"mode": "real_time", "real_time_factor": self.factor, "action_delay": 0}
+        out["real_time_mode"] = self.mode
         self._link.describe(out)
         return out
 
@@ -148,8 +158,16 @@ class RealTimeStepper:
     # ------------------------------------------------------------ episode
 
     def reset(self, *, seed: int | None, options: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
-        """Synchronous reset; the clock starts with :meth:`start` once the reply is sent."""
+        """Synchronous reset; the clock starts with :meth:`start` once the reply is sent.
+
+        Options carrying a replay schedule put the world into replay for this
+        episode (:mod:`remoteenv.sim.stepping.real_time_replay`)."""
+        try:
+            options, schedule = split_replay(options, self.mode)
+        except ValueError as exc:
+            raise RequestError(PROTOCOL, str(exc)) from None
         obs, info = self.env.reset(seed=seed, options=options)
+        self._replay = None if schedule is None else ReplayCursor(schedule, self.env.frame_skip)
         self._link.reset(seed)
         self.state = _READY
         self._held = self.env.default_action()
@@ -203,6 +221,8 @@ class RealTimeStepper:
         pending = _PendingStep(channel, reply_to, seq, action, self.clock())
         if self.state == _FROZEN:
             return self._reply(pending, terminated=True)
+        if self._replay is not None:
+            return self._replay_step(pending)
         pending.link_delay = self._link.draw()
         # A newer request supersedes one still pending: its sender gave up on it.
         self._pending = pending
@@ -229,12 +249,34 @@ class RealTimeStepper:
         At a tick end the tick is scored (and may end the episode); then a
         newly arrived action takes effect, and the next substep is computed.
         """
-        env = self.env
         deadline = self._t0 + self._n * self.period
         lateness = now - deadline
         self.pacing_error.add(lateness)
         if lateness > self.period:
             self.overruns += 1
+        return self._boundary(now)
+
+    def _replay_step(self, pending: _PendingStep) -> dict[str, Any]:
+        """Replay: run boundaries until ``pending``'s reply, its action arriving
+        just before the substep the schedule names."""
+        assert self._replay is not None
+        if self.state != _RUNNING:
+            raise RequestError(PROTOCOL, "a replayed step before its reset's reply: reset first")
+        pending.apply_at = self._replay.next_substep(self._n)
+        self._pending = pending
+        while True:
+            try:
+                out = self._boundary(None)
+            except Exception as exc:  # the scene raised: stop as on the clock
+                self.fail(exc)
+                raise RequestError(SCENE, self._failure) from None
+            if out:
+                return out[0][2]
+
+    def _boundary(self, now: float | None) -> list[Outgoing]:
+        """Process substep boundary ``self._n`` at clock time ``now`` (None: replay,
+        where the pending action arrives at its scheduled substep)."""
+        env = self.env
         out: list[Outgoing] = []
         fs = env.frame_skip
         if self._n and self._n % fs == 0:
@@ -251,18 +293,32 @@ class RealTimeStepper:
                 self.state = _FROZEN
                 return out
         pending = self._pending
-        if pending is not None and pending.applied_sim_time is None and now >= pending.arrived + pending.link_delay:
+        if pending is not None and pending.applied_sim_time is None and self._arrived(pending, now):
             env.prepare_step(pending.action)
             self._held = pending.action
             pending.applied_sim_time = float(env.data.time)
-            pending.apply_delay_s = self.clock() - pending.arrived
-            self.apply_delay.add(pending.apply_delay_s)
+            pending.applied_substep = self._n
+            if now is not None:
+                pending.apply_delay_s = self.clock() - pending.arrived
+                self.apply_delay.add(pending.apply_delay_s)
+            if self.mode == FIXED_STEP:  # the step ends at the boundary where its action takes effect
+                self._pending = None
+                out.append((pending.channel, pending.reply_to, self._reply(pending, terminated=False)))
         elif self._n % fs == 0:
             env.prepare_step(self._held)
         env.substep()
         self._n += 1
         self.substeps += 1
         return out
+
+    def _arrived(self, pending: _PendingStep, now: float | None) -> bool:
+        """Whether ``pending``'s action may take effect at boundary ``self._n``
+        (fixed-step: only at a tick boundary after the episode's first tick)."""
+        if self.mode == FIXED_STEP and (self._n == 0 or self._n % self.env.frame_skip):
+            return False
+        if now is None:
+            return self._n >= pending.apply_at
+        return now >= pending.arrived + pending.link_delay
 
     def _reply(self, pending: _PendingStep, *, terminated: bool) -> dict[str, Any]:
         """The reply to ``pending``: the current observation and what accumulated since the last reply."""
@@ -273,7 +329,9 @@ class RealTimeStepper:
         info = dict(self._info)
         info.update(
             sim_time=sim_time,
+            substep=self._n,
             action_sim_time=applied,
+            action_substep=pending.applied_substep,
             ticks_elapsed=self._ticks,
             latency_s=latency,
             latency_ticks=None if latency is None else latency / dt,
