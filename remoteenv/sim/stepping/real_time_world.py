@@ -12,12 +12,12 @@ import math
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.stepping.emulated_link import EmulatedLink
 from remoteenv.sim.stepping.real_time_replay import ReplayCursor
+from remoteenv.sim.stepping.real_time_reply import PendingStep, SinceReply
 from remoteenv.sim.transport.channels import Channel, Outgoing
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.wire.delays.delays import DelaySpec
@@ -30,20 +30,6 @@ from remoteenv.wire.stats import RunningStats
 Clock = Callable[[], float]
 
 _IDLE, _READY, _RUNNING, _FROZEN, _FAILED = "idle", "ready", "running", "frozen", "failed"
-
-
-@dataclass
-class _PendingStep:
-    channel: Channel | None
-    reply_to: Any
-    seq: int
-    action: Any
-    arrived: float  # clock time when the request was handed over
-    link_delay: float = 0.0  # emulated link: wall seconds it is held back after arriving
-    applied_sim_time: float | None = None
-    applied_substep: int | None = None
-    apply_delay_s: float | None = None
-    apply_at: int = 0  # replay: the substep at which the action takes effect
 
 
 class RealTimeStepper:
@@ -91,12 +77,8 @@ class RealTimeStepper:
         self._t0 = 0.0
         self._n = 0
         self._held: Any = None
-        self._pending: _PendingStep | None = None
-        self._reward = 0.0
-        self._ticks = 0
-        self._obs: Any = None
-        self._obs_time = 0.0
-        self._info: dict[str, Any] = {}
+        self._pending: PendingStep | None = None
+        self._since = SinceReply()
         self._failure = ""
         self._link = EmulatedLink(link_delay, seed)
         #: The emulated link delay's draws (None: no emulated link).
@@ -172,11 +154,7 @@ class RealTimeStepper:
         self.state = _READY
         self._held = self.env.default_action()
         self._pending = None
-        self._reward = 0.0
-        self._ticks = 0
-        self._obs = obs
-        self._obs_time = float(self.env.data.time)
-        self._info = {}
+        self._since.start(obs, float(self.env.data.time))
         self._n = 0
         return obs, info
 
@@ -218,7 +196,7 @@ class RealTimeStepper:
         """
         if self.state == _FAILED:
             raise RequestError(SCENE, self._failure)
-        pending = _PendingStep(channel, reply_to, seq, action, self.clock())
+        pending = PendingStep(channel, reply_to, seq, action, self.clock())
         if self.state == _FROZEN:
             return self._reply(pending, terminated=True)
         if self._replay is not None:
@@ -256,7 +234,7 @@ class RealTimeStepper:
             self.overruns += 1
         return self._boundary(now)
 
-    def _replay_step(self, pending: _PendingStep) -> dict[str, Any]:
+    def _replay_step(self, pending: PendingStep) -> dict[str, Any]:
         """Replay: run boundaries until ``pending``'s reply, its action arriving
         just before the substep the schedule names."""
         assert self._replay is not None
@@ -281,9 +259,7 @@ class RealTimeStepper:
         fs = env.frame_skip
         if self._n and self._n % fs == 0:
             obs, reward, terminated, info = env.finish_tick(self._held)
-            self._obs, self._info = obs, info
-            self._reward += float(reward)
-            self._ticks += 1
+            self._since.add_tick(obs, reward, info)
             pending = self._pending
             if pending is not None and (pending.applied_sim_time is not None or terminated):
                 self._pending = None
@@ -311,7 +287,7 @@ class RealTimeStepper:
         self.substeps += 1
         return out
 
-    def _arrived(self, pending: _PendingStep, now: float | None) -> bool:
+    def _arrived(self, pending: PendingStep, now: float | None) -> bool:
         """Whether ``pending``'s action may take effect at boundary ``self._n``
         (fixed-step: only at a tick boundary after the episode's first tick)."""
         if self.mode == FIXED_STEP and (self._n == 0 or self._n % self.env.frame_skip):
@@ -320,39 +296,16 @@ class RealTimeStepper:
             return self._n >= pending.apply_at
         return now >= pending.arrived + pending.link_delay
 
-    def _reply(self, pending: _PendingStep, *, terminated: bool) -> dict[str, Any]:
+    def _reply(self, pending: PendingStep, *, terminated: bool) -> dict[str, Any]:
         """The reply to ``pending``: the current observation and what accumulated since the last reply."""
-        dt = self.env.dt
-        sim_time = float(self.env.data.time)
-        applied = pending.applied_sim_time
-        latency = None if applied is None else applied - self._obs_time
-        info = dict(self._info)
-        info.update(
-            sim_time=sim_time,
+        return self._since.reply(
+            pending,
+            terminated=terminated,
+            sim_time=float(self.env.data.time),
             substep=self._n,
-            action_sim_time=applied,
-            action_substep=pending.applied_substep,
-            ticks_elapsed=self._ticks,
-            latency_s=latency,
-            latency_ticks=None if latency is None else latency / dt,
-            late=applied is None or self._ticks > 1,
-            apply_delay_s=pending.apply_delay_s,
-            link_delay_s=pending.link_delay,
-            pacing_overruns=self.overruns,
+            frame_skip=self.env.frame_skip,
+            overruns=self.overruns,
         )
-        reply = {
-            "seq": pending.seq,
-            "ok": True,
-            "obs": self._obs,
-            "reward": self._reward,
-            "terminated": terminated,
-            "truncated": False,
-            "info": info,
-        }
-        self._reward = 0.0
-        self._ticks = 0
-        self._obs_time = sim_time
-        return reply
 
 
 __all__ = ["Clock", "RealTimeStepper"]
