@@ -1,4 +1,5 @@
-"""Replaying a recorded real-time episode in lock-step (see :mod:`remoteenv.latency_twin`)."""
+"""Making a recorded real-time episode's twin: the exact one, or the rounded lock-step one
+(see :mod:`remoteenv.latency_twin`)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,9 @@ from typing import Any, SupportsFloat
 
 import gymnasium as gym
 
+from remoteenv.latency_twin.episode import RecordedEpisode
+from remoteenv.latency_twin.exact_twin import ExactTwin, check_replayable
+from remoteenv.latency_twin.recording_file import is_recording, load_recording
 from remoteenv.latency_twin.trace import decision_ticks
 from remoteenv.wire.delays.delays import Trace
 
@@ -111,20 +115,41 @@ class LockStepTwin(gym.Wrapper):
 
 def make_twin(
     env_id: str,
-    trace: Trace | Sequence[int] | str | os.PathLike[str],
+    trace: RecordedEpisode | Trace | Sequence[int] | str | os.PathLike[str],
     max_episode_steps: int | None = None,
     **kwargs: Any,
-) -> LockStepTwin:
-    """``LockStepTwin(gym.make(env_id, action_delay=trace, ...), trace, max_episode_steps)``.
+) -> ExactTwin | LockStepTwin:
+    """The twin of one recorded real-time episode.
 
-    ``trace``: a :class:`~remoteenv.delays.Trace`, its values, or a trace
-    file's path (as :meth:`LatencyRecorder.save
-    <remoteenv.latency_twin.LatencyRecorder.save>` writes it).
+    ``trace`` a :class:`~remoteenv.latency_twin.RecordedEpisode` or the path of
+    a recording file (as :meth:`LatencyRecorder.save
+    <remoteenv.latency_twin.LatencyRecorder.save>` writes it): the exact twin,
+    ``ExactTwin(gym.make(env_id, real_time=True,
+    real_time_mode=<the recording's>, max_episode_steps=...), episode)``; it
+    refuses an episode that cannot be replayed, saying why.
+
+    A :class:`~remoteenv.delays.Trace`, its values, or a plain trace file's
+    path (:meth:`LatencyRecorder.save_trace
+    <remoteenv.latency_twin.LatencyRecorder.save_trace>`): the rounded
+    lock-step twin, ``LockStepTwin(gym.make(env_id, action_delay=trace, ...),
+    trace, max_episode_steps)``; the lock-step env itself gets no time limit
+    (its steps are ticks).
+
     ``max_episode_steps``: the twin's limit in steps (decisions), as the
-    real-time run counted them; None: the env id's registered limit. The
-    lock-step env itself gets no time limit (its steps are ticks).
+    real-time run counted them; None: the env id's registered limit.
     ``kwargs`` go to ``gym.make`` (e.g. the scene's own, like ``continuous=True``).
     """
+    if isinstance(trace, (str, os.PathLike)) and is_recording(trace):
+        trace, _ = load_recording(trace)
+    if isinstance(trace, RecordedEpisode):
+        check_replayable(trace)  # before a sim starts
+        limit: dict[str, Any] = {} if max_episode_steps is None else {"max_episode_steps": max_episode_steps}
+        env = gym.make(env_id, real_time=True, real_time_mode=trace.mode, **limit, **kwargs)
+        try:
+            return ExactTwin(env, trace)
+        except BaseException:
+            env.close()
+            raise
     spec = trace if isinstance(trace, Trace) else Trace(trace)
     if max_episode_steps is None:
         max_episode_steps = gym.spec(env_id).max_episode_steps
