@@ -28,8 +28,9 @@ class LockStepTwin(gym.Wrapper):
     episode ends, and returns as a real-time reply does: the observation at
     the end of the last tick, the reward summed over the ticks, that tick's
     ``terminated`` and ``info``, with ``ticks_elapsed`` (ticks run),
-    ``latency_ticks`` (the twin's whole-tick latency of this step: the
-    countdown's first value, scheduled as lock-step reports it), ``latency_s``
+    ``latency_ticks`` (the twin's whole-tick latency of this step, the
+    countdown's first value, reported only once the action is in force by the
+    reply, as real time reports it: None when it is not), ``latency_s``
     and ``late`` (more than one tick, or the action not in force by the
     reply). The infos of the ticks of the last step are kept in
     :attr:`last_ticks`.
@@ -100,12 +101,13 @@ class LockStepTwin(gym.Wrapper):
                 break
         self._steps += 1
         ticks = len(self.last_ticks)
+        landed = first < ticks  # a latency is known once the action took effect, never before
         info = dict(info)
         info.update(
             ticks_elapsed=ticks,
-            latency_ticks=first,
-            latency_s=first * float(getattr(self.env.unwrapped, "dt", 0.0)),
-            late=ticks > 1 or first >= ticks,
+            latency_ticks=first if landed else None,
+            latency_s=first * float(getattr(self.env.unwrapped, "dt", 0.0)) if landed else None,
+            late=ticks > 1 or not landed,
             twin_beyond_recording=self._draws > len(self.trace.values),
         )
         if self.max_steps is not None and self._steps >= self.max_steps and not terminated:

@@ -187,6 +187,8 @@ def test_an_episode_that_ends_mid_hold_ends_the_step():
     twin.reset(seed=0)
     _, reward, terminated, truncated, info = twin.step(np.zeros(1, np.float32))
     assert (reward, terminated, truncated, info["ticks_elapsed"], info["late"]) == (2.0, True, False, 2, True)
+    # The action was due at tick 4 and never landed: its latency is not known, so none is reported.
+    assert info["latency_ticks"] is None and info["latency_s"] is None
 
 
 def test_the_comparison_tells_equivalent_different_and_inconclusive_apart():
