@@ -14,6 +14,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from remoteenv.agent.launch.dir_reaper import forget_dir
+
 _STDERR_TAIL_LINES = 20
 
 
@@ -142,6 +144,7 @@ def stop_all(state: LaunchState, grace: float = 2.0) -> None:
             kill_group(sim.proc.pid, signal.SIGKILL)
             sim.proc.wait()
     shutil.rmtree(state.workdir, ignore_errors=True)
+    forget_dir(state.workdir)
     for sim in state.sims:
         # Reap the group even if the sim exited by itself but left children (its orphan guard).
         kill_group(sim.proc.pid, signal.SIGKILL)
