@@ -21,6 +21,10 @@ from typing import Any, Protocol
 from remoteenv.agent.errors import RemoteEnvError, SceneArgumentError
 from remoteenv.wire.delays.delay_file import write_delay_file
 from remoteenv.wire.errors import SCENE_ARGS_MARKER
+from remoteenv.wire.files.file_reads import UnreadableFile, read_json
+
+#: Largest ready file read (a sim writes its endpoint and pid: well under 1 KiB).
+READY_FILE_LIMIT = 64 << 10
 
 
 def scene_command(
@@ -154,12 +158,11 @@ def wait_ready(sim: StartingSim, timeout: float, what: str) -> None:
     delay = 0.001
     while True:
         try:
-            with open(sim.ready_file) as f:
-                info = json.load(f)
+            info = read_json(sim.ready_file, READY_FILE_LIMIT, what="ready file")
             sim.endpoint = str(info["endpoint"]).replace("tcp://0.0.0.0:", "tcp://127.0.0.1:")
             return
-        except (FileNotFoundError, json.JSONDecodeError, KeyError):
-            pass
+        except (FileNotFoundError, UnreadableFile, KeyError, TypeError):
+            pass  # not there yet, or half written: look again
         why = sim.death()
         if why is not None:
             raise startup_failure(sim, what, why)
