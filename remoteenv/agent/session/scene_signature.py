@@ -24,7 +24,6 @@ import os
 from collections.abc import Iterable
 
 from remoteenv.agent.errors import SceneArgumentError
-
 from remoteenv.wire.files.file_reads import read_text
 
 #: Largest scene script whose source is read for its keywords.
