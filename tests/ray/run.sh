@@ -47,6 +47,8 @@ cd "$ROOT"
 export PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}"
 export MUJOCO_GL=${MUJOCO_GL:-egl}
 export RAY_USAGE_STATS_ENABLED=0
+# Without Ray in this venv the suite fails (tests/ray/conftest.py) instead of collecting nothing.
+export REMOTEENV_RAY_SUITE=1
 # Ray's cluster utility leaves a multiprocessing listener socket in the temp
 # dir when its nodes stop; the tests get a temp dir of their own, removed at the end.
 TEST_TMP=$(mktemp -d "${TMPDIR:-/tmp}/rt-XXXXXX")
