@@ -23,7 +23,7 @@ if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ] || [ "$0" -nt "$
     echo "tests/ray: setting up $VENV" >&2
     python3 -m venv "$VENV"
     "$VENV/bin/pip" install -qq torch==2.13.0
-    "$VENV/bin/pip" install -qq "ray[default,rllib]==2.60.0"
+    "$VENV/bin/pip" install -qq "ray[default,rllib]>=2.60.0,<3"
     # remoteenv's runtime and test dependencies, as pyproject.toml lists them.
     mapfile -t DEPS < <(python3 - "$ROOT/pyproject.toml" <<'EOF'
 import sys, tomllib
