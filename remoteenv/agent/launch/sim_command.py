@@ -126,6 +126,19 @@ class StartingSim(Protocol):
     def stderr_tail(self, lines: int = ...) -> str: ...
 
 
+def scene_exception(stderr: str) -> tuple[str, str] | None:
+    """The exception line (``ValueError: ...``) of the last Python traceback in
+    ``stderr`` and that traceback, or None if it holds none."""
+    lines = stderr.splitlines()
+    starts = [i for i, line in enumerate(lines) if line.startswith("Traceback (most recent call last):")]
+    if not starts:
+        return None
+    for line in lines[starts[-1] + 1 :]:
+        if line and not line[0].isspace():
+            return line[:500], "\n".join(lines[starts[-1] :])
+    return None
+
+
 def startup_failure(sim: StartingSim, what: str, why: str) -> RemoteEnvError:
     """The error for a sim that exited before reporting ready; ``why`` is its
     ``death()`` text, ``what`` names the scene. A
@@ -137,7 +150,14 @@ def startup_failure(sim: StartingSim, what: str, why: str) -> RemoteEnvError:
     if refused:
         reason = refused[-1].split(SCENE_ARGS_MARKER, 1)[1].strip()
         return SceneArgumentError(f"{reason} (sim instance {sim.instance} of {what})", instance=sim.instance)
-    text = f"sim instance {sim.instance} of {what} failed to start: {why}"
+    raised = scene_exception(sim.stderr_tail(lines=400))
+    if raised is not None:  # the scene's own exception first, then how the process ended and its traceback
+        ended = why.split("; last lines of its stderr:", 1)[0]
+        text = (
+            f"sim instance {sim.instance} of {what} failed to start: {raised[0]}\n{ended}; its traceback:\n{raised[1]}"
+        )
+    else:
+        text = f"sim instance {sim.instance} of {what} failed to start: {why}"
     if "exited with code 0" in why:
         text += (
             "\nIt exited without serving: did the script call run_scene(YourEnv) under "
