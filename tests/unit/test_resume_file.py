@@ -170,3 +170,13 @@ def test_a_records_value_that_is_not_a_list_is_refused(tmp_path):
     path = tmp_path / "delay_effect.json"
     path.write_text(json.dumps({"config": CONFIG.to_json(), "records": {"a": 1}}))
     _refused(path, "not a list")
+
+
+def test_a_saved_policy_is_read_through_the_bounded_reader(tmp_path):
+    """A FIFO where a policy should be (``--policies`` is the user's) is refused, not waited on."""
+    pytest.importorskip("stable_baselines3")
+    from remoteenv.latency_study.training import TrainedPolicy
+
+    os.mkfifo(tmp_path / "plain-constant-0-seed0.zip")
+    with pytest.raises(ValueError, match="not a regular file"):
+        TrainedPolicy.load(str(tmp_path / "plain-constant-0-seed0"))
