@@ -144,3 +144,33 @@ def test_a_trace_npy_whose_header_claims_10_to_the_12_values_is_refused_before_a
         Trace(str(tmp_path / "short.npy"))
     np.save(tmp_path / "fine.npy", np.arange(5))
     assert Trace(str(tmp_path / "fine.npy")).values == (0, 1, 2, 3, 4)
+
+
+def test_a_sim_log_replaced_by_a_fifo_is_not_waited_on(tmp_path):
+    """A sim's log is read for its tail without blocking (a FIFO gives nothing)."""
+    from remoteenv.agent.launch.sim_process import SimProcess
+
+    os.mkfifo(tmp_path / "sim-0.log")
+
+    class Exited:
+        pid, returncode = 12345, 1
+
+        def poll(self):
+            return 1
+
+        def wait(self, timeout=None):
+            return 1
+
+    sim = SimProcess(instance=0, proc=Exited(), log_path=str(tmp_path / "sim-0.log"), ready_file="")
+    outcome = []
+    reader = threading.Thread(target=lambda: outcome.append(sim.stderr_tail()), daemon=True)
+    reader.start()
+    reader.join(10.0)
+    if reader.is_alive():
+        os.close(os.open(tmp_path / "sim-0.log", os.O_WRONLY | os.O_NONBLOCK))
+        reader.join(5.0)
+        pytest.fail("reading a FIFO as the sim's log blocked")
+    assert outcome == [""]
+    (tmp_path / "real.log").write_bytes(b"x" * 20000 + b"\nlast line\n")
+    sim.log_path = str(tmp_path / "real.log")
+    assert sim.stderr_tail(1) == "last line"

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from remoteenv.agent.launch.dir_reaper import forget_dir
+from remoteenv.wire.files.file_reads import read_tail
 
 _STDERR_TAIL_LINES = 20
 
@@ -70,12 +71,8 @@ class SimProcess:
     def stderr_tail(self, lines: int = _STDERR_TAIL_LINES) -> str:
         """The last ``lines`` lines the process wrote to stderr."""
         try:
-            with open(self.log_path, "rb") as f:
-                f.seek(0, os.SEEK_END)
-                size = f.tell()
-                f.seek(max(self.log_offset, size - 16384))
-                text = f.read().decode("utf-8", "replace")
-        except OSError:
+            text = read_tail(self.log_path, 16384, self.log_offset, what="sim log").decode("utf-8", "replace")
+        except (OSError, ValueError):  # gone, or not a regular file any more (UnreadableFile)
             return ""
         return "\n".join(text.splitlines()[-lines:])
 
