@@ -3,7 +3,7 @@
 A resumed record is published as it is, so each one must be what this
 study's own run could have written: its cell (variant, delay model, delay,
 seed) in the study's design and not repeated, the fields a cell's record
-has with their types, ``history_length`` and ``include_latency`` as the cell
+has with their types, ``history_length`` and ``include_alpha`` as the cell
 defines them, ``steps`` the study's budget, ``eval_episodes`` finite returns,
 each within the scene's bounds where they are known (see
 :func:`return_bounds`), and ``mean_return`` their mean.
@@ -80,8 +80,8 @@ def _check_record(
         raise BadRecord(f"cell {_short(key)} is not in this study's design")
     if _field(record, "history_length", int) != cell.history_length:
         raise BadRecord(f"history_length {record['history_length']} is not the cell's {cell.history_length}")
-    if _field(record, "include_latency", bool) != cell.include_latency:
-        raise BadRecord(f"include_latency {record['include_latency']} is not the cell's {cell.include_latency}")
+    if _field(record, "include_alpha", bool) != cell.include_alpha:
+        raise BadRecord(f"include_alpha {record['include_alpha']} is not the cell's {cell.include_alpha}")
     if _field(record, "steps", int) != config.steps:
         raise BadRecord(f"steps {record['steps']} is not the study's {config.steps}")
     returns = _field(record, "returns", list)

@@ -152,7 +152,7 @@ def test_a_resume_file_that_fails_its_checks_is_refused_in_one_line_and_nothing_
         config = _config(parser.parse_args(["latency-study", *args]))
         records = [
             {"variant": c.variant, "kind": c.kind, "delay": c.delay, "seed": c.seed, "mean_return": 1e308}
-            | {"returns": [1e308], "history_length": c.history_length, "include_latency": c.include_latency}
+            | {"returns": [1e308], "history_length": c.history_length, "include_alpha": c.include_alpha}
             | {"steps": 256, "train_s": 1.0, "train_return": 1e308, "curve": []}
             for c in cells(config)
         ]

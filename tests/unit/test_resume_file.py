@@ -26,7 +26,7 @@ def _record(cell, returns=(100.0, 120.0)):
         "mean_return": sum(returns) / len(returns),
         "returns": list(returns),
         "history_length": cell.history_length,
-        "include_latency": cell.include_latency,
+        "include_alpha": cell.include_alpha,
         "steps": CONFIG.steps,
         "train_s": 3.5,
         "train_return": 80.0,
