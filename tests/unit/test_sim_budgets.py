@@ -213,6 +213,12 @@ def test_the_gate_admits_at_most_max_peers_and_admits_again_when_one_leaves(serv
         assert len({rid for rid, _ in got}) == limits.MAX_PEERS  # the others never got a connection
         admitted = {seq for _, seq in ids(got)}
         socks[min(admitted)].close(linger=0)  # one leaves: a newcomer gets its place
+        # once the gate has seen it leave (the monitor's event and the newcomer's
+        # handshake are separate events; a newcomer ahead of it is refused, and
+        # a refused DEALER does not retry)
+        _wait_for(
+            lambda: server._gate.count.admitted(time.monotonic()) < limits.MAX_PEERS, "the gate to see a peer leave"
+        )
         newcomer = ctx.socket(zmq.DEALER)
         newcomer.setsockopt(zmq.LINGER, 0)
         socks.append(newcomer)
