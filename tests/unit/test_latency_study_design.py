@@ -86,7 +86,7 @@ def test_resume_keeps_records_of_the_same_configuration_only(tmp_path):
     assert load_records(path, config) == []
     record = {
         **_record("plain", "constant", 0, 0, 9.0),
-        **{"returns": [9.0] * config.eval_episodes, "history_length": 0, "include_latency": False},
+        **{"returns": [9.0] * config.eval_episodes, "history_length": 0, "include_alpha": False},
         **{"steps": 10, "train_s": 1.0, "train_return": 9.0, "curve": []},
     }
     write_json(path, {"config": config.to_json(), "records": [record]})
