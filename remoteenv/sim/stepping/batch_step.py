@@ -22,6 +22,7 @@ import numpy as np
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.scene.batch_result import BatchResult
+from remoteenv.sim.scene.camera_rig import observe_worlds
 from remoteenv.sim.scene.step_check import check_batch
 from remoteenv.sim.stepping.batch_physics import PhysicsThreads, default_threads
 from remoteenv.sim.stepping.batch_worlds import BatchedWorlds, StackedWorlds, available, batch_state
@@ -101,6 +102,8 @@ class WorldsStepper:
             finite=env.check_finite,
         )
         self._check_obs(result.obs)
+        if env.camera_rig is not None:
+            result.obs = observe_worlds(envs, result.obs)
         return result
 
     def _check_obs(self, obs: Any) -> None:
