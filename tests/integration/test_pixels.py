@@ -143,3 +143,21 @@ def test_reacher_takes_the_same_obs_modes():
         assert obs["pixels"].shape == (32, 32, 3) and obs["state"].shape == (10,)
     finally:
         env.close()
+
+
+def test_demo_takes_env_kwargs_and_balances_on_the_dicts_state(capsys):
+    from remoteenv.cli import main as cli_main
+
+    kwargs = '{"obs_mode": "state_pixels", "image_size": 24}'
+    assert cli_main(["demo", "cartpole", "--episodes", "1", "--max-steps", "60", "--env-kwargs", kwargs]) == 0
+    out = capsys.readouterr().out
+    assert "env kwargs {'obs_mode': 'state_pixels', 'image_size': 24}" in out
+    assert "'pixels': Box(0, 255, (24, 24, 3), uint8)" in out
+    assert "steps   60 (truncated)" in out  # the LQR balanced on obs["state"]
+
+
+def test_demo_refuses_env_kwargs_that_are_not_a_map():
+    from remoteenv.cli import main as cli_main
+
+    with pytest.raises(SystemExit, match="--env-kwargs must be a JSON map"):
+        cli_main(["demo", "cartpole", "--env-kwargs", "[1]"])
