@@ -188,3 +188,30 @@ def test_state_mode_is_unchanged():
         assert obs.shape == (4,) and obs.dtype == np.float32
     finally:
         env.close()
+
+
+def test_batched_images_render_in_place_into_the_given_rows():
+    """The shared region's rows: images go straight in, no copy after."""
+    worlds = [CartPole(obs_mode="pixels", image_size=16) for _ in range(2)]
+    stepper = WorldsStepper(worlds, threads=1)
+    rows = np.zeros((4, 16, 16, 3), dtype=np.uint8)  # a region holds rows for every world of the process
+    try:
+        for i, env in enumerate(worlds):
+            env.reset(seed=i)
+        batch = stepper.step([0, 1], np.array([1, 0]), rows[:2])
+        assert np.shares_memory(batch.obs, rows) and batch.obs.shape == (2, 16, 16, 3)
+        assert rows[:2].any() and not rows[2:].any()
+        np.testing.assert_array_equal(rows[0], _in_process_image(worlds[0].data, 16))
+    finally:
+        stepper.close()
+        for env in worlds:
+            env.close()
+
+
+def test_sims_get_one_llvmpipe_thread_unless_the_user_chose(monkeypatch):
+    from remoteenv.agent.launch.sim_command import launch_environment
+
+    monkeypatch.delenv("LP_NUM_THREADS", raising=False)
+    assert launch_environment(None)["LP_NUM_THREADS"] == "1"
+    monkeypatch.setenv("LP_NUM_THREADS", "4")
+    assert launch_environment(None)["LP_NUM_THREADS"] == "4"

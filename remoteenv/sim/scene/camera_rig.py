@@ -126,7 +126,7 @@ def observe_worlds(envs: Sequence[Any], states: Any, out: np.ndarray | None = No
     n = len(envs)
     if len(observation.cameras) == 1 and not observation.with_state:
         camera = observation.cameras[0]
-        images = out[:n] if out is not None else np.empty((n, *camera.shape), dtype=camera.space.dtype)
+        images = out[:n] if out is not None else np.empty((n, *camera.shape), dtype=camera.dtype)
         for i, env in enumerate(envs):
             env.camera_rig.image(env.data, camera, images[i])
         return images

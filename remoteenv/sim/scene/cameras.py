@@ -64,6 +64,11 @@ class Camera:
         return (self.height, self.width, 3) if self.kind == "rgb" else (self.height, self.width)
 
     @property
+    def dtype(self) -> np.dtype:
+        """The image's dtype: uint8 for rgb, float32 for depth."""
+        return np.dtype(np.uint8) if self.kind == "rgb" else np.dtype(np.float32)
+
+    @property
     def space(self) -> spaces.Box:
         """The image's space: ``Box(0, 255, shape, uint8)`` or ``Box(0, inf, shape, float32)``."""
         if self.kind == "rgb":

@@ -69,9 +69,12 @@ class WorldsStepper:
         #: Every world, with the batch's state (the common request: built once).
         self._every = StackedWorlds(self.envs, batch_state(self.batched, None)) if self.batched is not None else None
 
-    def step(self, worlds: Sequence[int], actions: Any) -> BatchResult:
+    def step(self, worlds: Sequence[int], actions: Any, obs_out: np.ndarray | None = None) -> BatchResult:
         """One tick of worlds ``worlds`` (indices, in order) with ``actions[j]``
-        for ``worlds[j]`` (checked and stacked, see :meth:`BaseEnv.prepare_steps`)."""
+        for ``worlds[j]`` (checked and stacked, see :meth:`BaseEnv.prepare_steps`).
+        ``obs_out``: where camera images alone (one camera, no state) may be
+        rendered in place, e.g. the shared region's rows (see
+        :func:`~remoteenv.sim.scene.camera_rig.observe_worlds`)."""
         every = list(worlds) == self._all
         batched = self.batched
         if batched is not None:
@@ -103,7 +106,7 @@ class WorldsStepper:
         )
         self._check_obs(result.obs)
         if env.camera_rig is not None:
-            result.obs = observe_worlds(envs, result.obs)
+            result.obs = observe_worlds(envs, result.obs, obs_out)
         return result
 
     def _check_obs(self, obs: Any) -> None:
