@@ -161,3 +161,25 @@ def test_demo_refuses_env_kwargs_that_are_not_a_map():
 
     with pytest.raises(SystemExit, match="--env-kwargs must be a JSON map"):
         cli_main(["demo", "cartpole", "--env-kwargs", "[1]"])
+
+
+def test_the_default_layout_spreads_costly_worlds_over_more_processes():
+    from remoteenv.agent.vector.vector_layout import COSTLY_WORLD_S, default_envs_per_process
+
+    made = []
+    try:
+        for kwargs in ({}, {"obs_mode": "pixels", "image_size": 32}):
+            made.append(gym.make_vec(ENV_ID, num_envs=8, vectorization_mode="vector_entry_point", **kwargs).unwrapped)
+        state, pixels = made
+        cost_state = state._session.handshake.world_cost_s
+        cost_pixels = pixels._session.handshake.world_cost_s
+        assert 0 < cost_state < cost_pixels  # rendering a camera image costs more than CartPole's physics
+        for env, cost in ((state, cost_state), (pixels, cost_pixels)):
+            assert env.envs_per_process == min(8, default_envs_per_process(8, cost))
+        if cost_pixels > COSTLY_WORLD_S:
+            assert len(pixels.slices) > len(state.slices)
+        obs, _ = pixels.reset(seed=0)
+        assert obs.shape == (8, 32, 32, 3)
+    finally:
+        for env in made:
+            env.close()
