@@ -61,7 +61,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
             one process up to N = 8, then two up to N = 16; the fastest splits measured
             there (see :func:`default_envs_per_process`). Worlds the sim reports
             as costly (its handshake's ``world_cost_s``, e.g. camera images)
-            are then relaunched once over ``2 * cpu_count`` processes.
+            are then relaunched once over up to ``4 * cpu_count`` processes.
             Must be 1 with ``real_time``.
         autoreset_mode: Gymnasium's :class:`~gymnasium.vector.AutoresetMode`
             (or its string): ``NEXT_STEP`` (default; the step after an episode
