@@ -183,3 +183,37 @@ def test_the_default_layout_spreads_costly_worlds_over_more_processes():
     finally:
         for env in made:
             env.close()
+
+
+BAD_CAMERA_SCENE = """
+import os
+import numpy as np
+from gymnasium import spaces
+import remoteenv
+from remoteenv.sim import BaseEnv, Camera, camera_observation, run_scene
+
+MODEL = os.path.join(os.path.dirname(remoteenv.scene_path("cartpole")), "cartpole.xml")
+
+
+class BadCamEnv(BaseEnv):
+    def __init__(self, render_mode=None):
+        pixels = camera_observation("pixels", Camera("top"))
+        super().__init__(MODEL, 10, spaces.Box(-1, 1, (2,), np.float32), spaces.Discrete(2), cameras=pixels)
+
+    def reset_model(self, options):
+        return np.zeros(2, np.float32), {}
+
+
+if __name__ == "__main__":
+    run_scene(BadCamEnv)
+"""
+
+
+def test_a_camera_the_model_lacks_fails_the_start_naming_the_cameras_it_has(tmp_path):
+    from remoteenv import OpenAIRemoteEnv
+    from remoteenv.agent.errors import LaunchError
+
+    script = tmp_path / "bad_camera_scene.py"
+    script.write_text(BAD_CAMERA_SCENE)
+    with pytest.raises(LaunchError, match=r"camera 'top' is not in the model; its cameras are \['side', 'agent'\]"):
+        OpenAIRemoteEnv(str(script))
