@@ -37,11 +37,8 @@ class BaseEnv:
     drive the pieces itself (real-time mode applies an action at the substep
     where it arrives), so subclasses must keep all per-step logic in these hooks.
 
-    Cameras: a scene that observes through cameras passes ``cameras`` (a
-    :class:`~remoteenv.sim.scene.cameras.CameraObservation`); its hooks keep
-    returning the state obs of ``observation_space`` (then :attr:`state_space`),
-    and the observation becomes the cameras' images, alone or beside the state
-    (:meth:`observe`), rendered in this process (see docs/cameras.md).
+    Cameras (``cameras=``, a :class:`~remoteenv.sim.scene.cameras.CameraObservation`):
+    the hooks keep returning the state obs; :meth:`observe` adds the images (docs/cameras.md).
 
     Truncation (episode time limits) is the agent side's business
     (``gymnasium.make``'s ``max_episode_steps``); ``post_step`` reports only
@@ -100,8 +97,7 @@ class BaseEnv:
         self.model = mujoco.MjModel.from_xml_path(model_file(os.fspath(model_path), type(self).__name__))
         self._data = mujoco.MjData(self.model)
         self.frame_skip = int(frame_skip)
-        #: What the hooks return as the observation (the state); the observation
-        #: itself is this, or with ``cameras`` its images (see :meth:`observe`).
+        #: What the hooks return (the state); the observation adds the cameras' images to it.
         self.state_space = observation_space
         self.observation_space = observation_space if cameras is None else cameras.space(observation_space)
         self.action_space = action_space
@@ -238,9 +234,7 @@ class BaseEnv:
         return (self.observe(result[0]), *result[1:])
 
     def observe(self, state: Any) -> Any:
-        """The observation of the world as it is now, from the hooks' state obs:
-        ``state`` itself without cameras, else composed with the cameras' images
-        (:class:`~remoteenv.sim.scene.cameras.CameraObservation`)."""
+        """The observation now from the hooks' state obs: ``state``, or with cameras composed with their images."""
         rig = self.camera_rig
         return state if rig is None else rig.observation.compose(state, rig.pixels(self.data))
 
