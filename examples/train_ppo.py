@@ -1,9 +1,13 @@
 """Train PPO on a registered remote env (default remoteenv/CartPole-v0), save it, evaluate it.
 
-A compact PPO (clipped surrogate, GAE, separate actor and critic MLPs) in
-plain torch on the CPU, for any remote env id whose observations are a flat
-Box and whose actions are Discrete (a categorical policy) or a Box (a
-Gaussian policy, actions clipped to the bounds). The worlds run in sim
+A compact PPO (clipped surrogate, GAE, separate actor and critic networks) in
+plain torch on the CPU, for any remote env id whose observations are a Box,
+an image or a Dict of them and whose actions are Discrete (a categorical
+policy) or a Box (a Gaussian policy, actions clipped to the bounds). The
+network reads the observation space: flat values go to MLPs as they are; an
+image (uint8 ``H x W x C``, e.g. a camera ``obs_mode="pixels"``) first goes
+through a small CNN; a Dict (``{"state", "pixels"}``) through one input each,
+their features side by side. The worlds run in sim
 processes (RemoteVectorEnv; by default one process hosts all 8 and steps them
 from one request); the agent sees a Gymnasium vector env.
 
@@ -22,15 +26,18 @@ from one request); the agent sees a Gymnasium vector env.
     python examples/train_ppo.py --think-ms 0,10,20,40,80          # ... then the real-time table
     python examples/train_ppo.py --env my_arm:my_arm/MyArm-v0 --budget 100000 --save my_arm_ppo.pt
     python examples/train_ppo.py --eval-only --save my_arm_ppo.pt  # load and evaluate again
+    python examples/train_ppo.py --env-kwargs '{"obs_mode": "state_pixels"}' --budget 200000
 
 ``--env`` takes any registered id; ``module:id`` imports ``module`` first
-(an env package of your own). Needs torch and tqdm (``pip install
+(an env package of your own); ``--env-kwargs`` is a JSON map of the env's
+keyword arguments (saved with the policy). Needs torch and tqdm (``pip install
 torch==2.13.0 tqdm``).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -62,6 +69,73 @@ def mlp(n_in: int, n_out: int, out_gain: float) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
+def is_image(shape: tuple[int, ...], dtype: Any) -> bool:
+    """An image: uint8 ``H x W x C`` with 1, 3 or 4 channels (as SB3 reads one)."""
+    return np.dtype(dtype) == np.uint8 and len(shape) == 3 and shape[-1] in (1, 3, 4)
+
+
+def describe_obs_space(space: gym.Space) -> dict[str, Any]:
+    """The observation's inputs, by key (``"obs"`` for a Box): shape and whether
+    it is an image (saved with the policy)."""
+    boxes = dict(space.spaces) if isinstance(space, gym.spaces.Dict) else {"obs": space}
+    inputs = {}
+    for key, sub in boxes.items():
+        if not isinstance(sub, gym.spaces.Box):
+            raise SystemExit(f"this PPO takes Box observations, images and Dicts of them, not {space}")
+        inputs[key] = {"shape": list(sub.shape), "image": is_image(sub.shape, sub.dtype)}
+    return {"dict": isinstance(space, gym.spaces.Dict), "inputs": inputs}
+
+
+def small_cnn(shape: list[int]) -> tuple[nn.Module, int]:
+    """A small CNN for ``H x W x C`` uint8 images (scaled to [0, 1]): two strided
+    convolutions and a linear layer of 128 features; returns it and 128."""
+    h, w, c = shape
+    conv = nn.Sequential(nn.Conv2d(c, 16, 8, stride=4), nn.ReLU(), nn.Conv2d(16, 32, 4, stride=2), nn.ReLU())
+    with torch.no_grad():
+        flat = conv(torch.zeros(1, c, h, w)).numel()
+    return nn.Sequential(conv, nn.Flatten(), nn.Linear(flat, 128), nn.ReLU()), 128
+
+
+class Encoder(nn.Module):
+    """Observation (a dict of batched tensors, see :func:`as_inputs`) -> feature vector:
+    images through :func:`small_cnn`, other inputs flattened, side by side."""
+
+    def __init__(self, obs: dict[str, Any]) -> None:
+        super().__init__()
+        self.images = nn.ModuleDict()
+        self.size = 0
+        for key, entry in obs["inputs"].items():
+            if entry["image"]:
+                self.images[key], n = small_cnn(entry["shape"])
+            else:
+                n = int(np.prod(entry["shape"]))
+            self.size += n
+
+    def forward(self, inputs: dict[str, torch.Tensor]) -> torch.Tensor:
+        parts = []
+        for key, x in inputs.items():
+            if key in self.images:  # N x H x W x C uint8 -> N x C x H x W in [0, 1]
+                parts.append(self.images[key](x.permute(0, 3, 1, 2).float() / 255.0))
+            else:
+                parts.append(x.reshape(len(x), -1).float())
+        return parts[0] if len(parts) == 1 else torch.cat(parts, dim=-1)
+
+
+def as_inputs(obs: Any, layout: dict[str, Any], n: int) -> dict[str, torch.Tensor]:
+    """``n`` observations (a batch array or a dict of them) as the encoder's input tensors."""
+    arrays = obs if layout["dict"] else {"obs": obs}
+    out = {}
+    for key, entry in layout["inputs"].items():
+        x = torch.as_tensor(np.asarray(arrays[key]))
+        out[key] = x.reshape(n, *entry["shape"]) if entry["image"] else x.float().reshape(n, *entry["shape"])
+    return out
+
+
+def pick(obs: Any, mask: np.ndarray) -> Any:
+    """The observations of the worlds ``mask`` selects (a batch array or a dict of them)."""
+    return {k: v[mask] for k, v in obs.items()} if isinstance(obs, dict) else obs[mask]
+
+
 def describe_action_space(space: gym.Space) -> dict[str, Any]:
     """What the policy needs to know of the action space (saved with it)."""
     if isinstance(space, gym.spaces.Discrete):
@@ -72,26 +146,29 @@ def describe_action_space(space: gym.Space) -> dict[str, Any]:
 
 
 class ActorCritic(nn.Module):
-    """A categorical (Discrete) or diagonal Gaussian (Box) policy, and a value function."""
+    """A categorical (Discrete) or diagonal Gaussian (Box) policy, and a value
+    function; each reads the observation through its own :class:`Encoder`."""
 
-    def __init__(self, obs_dim: int, action: dict[str, Any]) -> None:
+    def __init__(self, obs: dict[str, Any], action: dict[str, Any]) -> None:
         super().__init__()
-        self.action = action
+        self.obs, self.action = obs, action
         self.discrete = action["kind"] == "discrete"
-        self.actor = mlp(obs_dim, action["n"] if self.discrete else action["dim"], out_gain=0.01)
-        self.critic = mlp(obs_dim, 1, out_gain=1.0)
+        self.actor_in, self.critic_in = Encoder(obs), Encoder(obs)
+        self.actor = mlp(self.actor_in.size, action["n"] if self.discrete else action["dim"], out_gain=0.01)
+        self.critic = mlp(self.critic_in.size, 1, out_gain=1.0)
         if not self.discrete:
             self.log_std = nn.Parameter(torch.zeros(action["dim"]))
             self.register_buffer("low", torch.tensor(action["low"], dtype=torch.float32))
             self.register_buffer("high", torch.tensor(action["high"], dtype=torch.float32))
 
-    def value(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.critic(obs).squeeze(-1)
+    def value(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        return self.critic(self.critic_in(obs)).squeeze(-1)
 
-    def dist(self, obs: torch.Tensor) -> torch.distributions.Distribution:
+    def dist(self, obs: dict[str, torch.Tensor]) -> torch.distributions.Distribution:
+        logits = self.actor(self.actor_in(obs))
         if self.discrete:
-            return torch.distributions.Categorical(logits=self.actor(obs))
-        return torch.distributions.Independent(torch.distributions.Normal(self.actor(obs), self.log_std.exp()), 1)
+            return torch.distributions.Categorical(logits=logits)
+        return torch.distributions.Independent(torch.distributions.Normal(logits, self.log_std.exp()), 1)
 
     def to_env(self, action: torch.Tensor) -> np.ndarray:
         """A sampled action as the env takes it (Box actions clipped to their bounds)."""
@@ -100,9 +177,10 @@ class ActorCritic(nn.Module):
         return torch.max(torch.min(action, self.high), self.low).numpy().astype(np.float32)
 
     @torch.no_grad()
-    def act(self, obs: np.ndarray, greedy: bool = False) -> Any:
+    def act(self, obs: Any, greedy: bool = False) -> Any:
         """The action for one observation: the most likely (greedy) or a sampled one."""
-        d = self.dist(torch.as_tensor(obs, dtype=torch.float32).reshape(1, -1))
+        one = {k: v[None] for k, v in obs.items()} if isinstance(obs, dict) else np.asarray(obs)[None]
+        d = self.dist(as_inputs(one, self.obs, 1))
         if greedy:
             action = d.probs.argmax(-1) if self.discrete else d.mean
         else:
@@ -115,10 +193,13 @@ class ActorCritic(nn.Module):
 
 
 def train(args: argparse.Namespace) -> tuple[ActorCritic, bool]:
+    kwargs = args.env_kwargs
     if args.vectorization == "remote":  # RemoteVectorEnv, the id's vector entry point
-        envs = gym.make_vec(args.env, num_envs=args.num_envs, vectorization_mode="vector_entry_point", seed=args.seed)
+        envs = gym.make_vec(
+            args.env, num_envs=args.num_envs, vectorization_mode="vector_entry_point", seed=args.seed, **kwargs
+        )
     else:  # Gymnasium's SyncVectorEnv over single remote envs, for comparison
-        envs = gym.make_vec(args.env, num_envs=args.num_envs, vectorization_mode="sync")
+        envs = gym.make_vec(args.env, num_envs=args.num_envs, vectorization_mode="sync", **kwargs)
     try:
         return _train(envs, args)
     finally:
@@ -128,8 +209,8 @@ def train(args: argparse.Namespace) -> tuple[ActorCritic, bool]:
 def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorCritic, bool]:
     torch.manual_seed(args.seed)
     n, T = envs.num_envs, args.rollout_steps
-    obs_dim = int(np.prod(envs.single_observation_space.shape))
-    model = ActorCritic(obs_dim, describe_action_space(envs.single_action_space))
+    layout = describe_obs_space(envs.single_observation_space)
+    model = ActorCritic(layout, describe_action_space(envs.single_action_space))
     act_shape = () if model.discrete else (model.action["dim"],)
     optim = torch.optim.Adam(model.parameters(), lr=args.lr, eps=1e-5)
     # NEXT_STEP autoreset: the step after a done only resets that env; that
@@ -138,7 +219,11 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
         envs.metadata.get("autoreset_mode", gym.vector.AutoresetMode.NEXT_STEP) == gym.vector.AutoresetMode.NEXT_STEP
     )
 
-    buf_obs = torch.zeros(T, n, obs_dim)
+    # Images stay uint8 in the buffer (a quarter of the memory); the encoder scales them.
+    buf_obs = {
+        key: torch.zeros(T, n, *e["shape"], dtype=torch.uint8 if e["image"] else torch.float32)
+        for key, e in layout["inputs"].items()
+    }
     buf_act = torch.zeros(T, n, *act_shape, dtype=torch.long if model.discrete else torch.float32)
     buf_logp, buf_val, buf_rew = torch.zeros(T, n), torch.zeros(T, n), torch.zeros(T, n)
     buf_done, buf_valid = torch.zeros(T, n), torch.zeros(T, n)
@@ -154,12 +239,14 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
     while steps < args.budget and not reached:
         # ---- collect T steps from each env
         for t in range(T):
-            o = torch.as_tensor(obs, dtype=torch.float32).reshape(n, obs_dim)
+            o = as_inputs(obs, layout, n)
             with torch.no_grad():
                 d = model.dist(o)
                 action = d.sample()
                 buf_logp[t], buf_val[t] = d.log_prob(action), model.value(o)
-            buf_obs[t], buf_act[t] = o, action
+            for key, x in o.items():
+                buf_obs[key][t] = x
+            buf_act[t] = action
             buf_valid[t] = torch.as_tensor(~resetting, dtype=torch.float32)
             obs, reward, terminated, truncated, infos = envs.step(model.to_env(action))
             live = ~resetting
@@ -169,10 +256,15 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
             reward = raw.copy()
             cut = truncated & ~terminated & live
             if cut.any():  # a time limit is no failure: bootstrap from the episode's last obs
-                final = obs[cut] if next_step else np.stack(list(infos["final_obs"][cut]))
-                final_t = torch.as_tensor(final, dtype=torch.float32).reshape(len(final), obs_dim)
+                if next_step:
+                    final = pick(obs, cut)
+                elif layout["dict"]:
+                    finals = list(infos["final_obs"][cut])
+                    final = {key: np.stack([f[key] for f in finals]) for key in layout["inputs"]}
+                else:
+                    final = np.stack(list(infos["final_obs"][cut]))
                 with torch.no_grad():
-                    reward[cut] += args.gamma * model.value(final_t).numpy()
+                    reward[cut] += args.gamma * model.value(as_inputs(final, layout, int(cut.sum()))).numpy()
             buf_rew[t] = torch.as_tensor(reward, dtype=torch.float32)
             buf_done[t] = torch.as_tensor(done, dtype=torch.float32)
             for i in np.flatnonzero(done):
@@ -185,7 +277,7 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
 
         # ---- advantages (GAE); a done cuts the chain
         with torch.no_grad():
-            next_value = model.value(torch.as_tensor(obs, dtype=torch.float32).reshape(n, obs_dim))
+            next_value = model.value(as_inputs(obs, layout, n))
             adv = torch.zeros(T, n)
             last = torch.zeros(n)
             for t in reversed(range(T)):
@@ -198,18 +290,20 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
 
         # ---- PPO epochs over shuffled minibatches of valid samples
         valid = buf_valid.reshape(-1).bool()
-        b_obs, b_act = buf_obs.reshape(-1, obs_dim)[valid], buf_act.reshape(T * n, *act_shape)[valid]
+        b_obs = {key: x.reshape(T * n, *x.shape[2:])[valid] for key, x in buf_obs.items()}
+        b_act = buf_act.reshape(T * n, *act_shape)[valid]
         b_logp, b_adv, b_ret = buf_logp.reshape(-1)[valid], adv.reshape(-1)[valid], ret.reshape(-1)[valid]
         for g in optim.param_groups:  # linear learning-rate decay over the budget
             g["lr"] = args.lr * max(0.0, 1.0 - steps / args.budget)
         for _ in range(args.epochs):
-            for idx in torch.randperm(len(b_obs)).split(args.minibatch):
-                d = model.dist(b_obs[idx])
+            for idx in torch.randperm(len(b_act)).split(args.minibatch):
+                mb_obs = {key: x[idx] for key, x in b_obs.items()}
+                d = model.dist(mb_obs)
                 ratio = torch.exp(d.log_prob(b_act[idx]) - b_logp[idx])
                 a = b_adv[idx]
                 a = (a - a.mean()) / (a.std() + 1e-8)
                 policy_loss = -torch.min(ratio * a, ratio.clamp(1 - args.clip, 1 + args.clip) * a).mean()
-                value_loss = 0.5 * (model.value(b_obs[idx]) - b_ret[idx]).pow(2).mean()
+                value_loss = 0.5 * (model.value(mb_obs) - b_ret[idx]).pow(2).mean()
                 loss = policy_loss + args.vf_coef * value_loss - args.ent_coef * d.entropy().mean()
                 optim.zero_grad()
                 loss.backward()
@@ -245,24 +339,24 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
 # ---------------------------------------------------------------- saving and evaluation
 
 
-def save(model: ActorCritic, path: str, env_id: str) -> None:
+def save(model: ActorCritic, path: str, env_id: str, env_kwargs: dict[str, Any]) -> None:
     """The policy and what rebuilding it needs: the env id (as given, ``module:`` and
-    all), the sizes, the action space."""
-    obs_dim = model.critic[0].in_features
-    torch.save({"env_id": env_id, "obs_dim": obs_dim, "action": model.action, "state": model.state_dict()}, path)
+    all) and its kwargs, the observation's inputs, the action space."""
+    saved = {"env_id": env_id, "env_kwargs": env_kwargs, "obs": model.obs, "action": model.action}
+    torch.save({**saved, "state": model.state_dict()}, path)
     print(f"saved the policy to {os.path.abspath(path)}")
 
 
-def load(path: str) -> tuple[ActorCritic, str]:
+def load(path: str) -> tuple[ActorCritic, str, dict[str, Any]]:
     saved = torch.load(path)
-    model = ActorCritic(saved["obs_dim"], saved["action"])
+    model = ActorCritic(saved["obs"], saved["action"])
     model.load_state_dict(saved["state"])
-    return model, saved["env_id"]
+    return model, saved["env_id"], saved.get("env_kwargs", {})
 
 
-def evaluate(model: ActorCritic, env_id: str, episodes: int, seed: int) -> None:
+def evaluate(model: ActorCritic, env_id: str, episodes: int, seed: int, env_kwargs: dict[str, Any]) -> None:
     """The greedy policy for ``episodes`` lock-step episodes: mean return and length."""
-    env = gym.make(env_id)
+    env = gym.make(env_id, **env_kwargs)
     try:
         returns, lengths = [], []
         for e in range(episodes):
@@ -283,14 +377,16 @@ def evaluate(model: ActorCritic, env_id: str, episodes: int, seed: int) -> None:
     )
 
 
-def evaluate_real_time(model: ActorCritic, env_id: str, think_times_ms: list[float], episodes: int, seed: int) -> None:
+def evaluate_real_time(
+    model: ActorCritic, env_id: str, think_times_ms: list[float], episodes: int, seed: int, env_kwargs: dict[str, Any]
+) -> None:
     """Run the greedy policy with real_time=True, sleeping ``think`` ms before each action.
 
     In real time the reward of a step is summed over every control tick since
     the previous reply (for CartPole: the return counts the ticks the pole
     stayed up), while the time limit counts the agent's steps: a slow agent
     that still balances collects more than the limit."""
-    env = gym.make(env_id, real_time=True)
+    env = gym.make(env_id, real_time=True, **env_kwargs)
     dt_ms = 1000 * env.unwrapped.dt
     print(
         f"\nreal-time evaluation, {episodes} episode(s) per think time "
@@ -327,11 +423,25 @@ def evaluate_real_time(model: ActorCritic, env_id: str, think_times_ms: list[flo
         env.close()
 
 
+def env_kwargs(text: str | None) -> dict[str, Any]:
+    """``--env-kwargs``: a JSON map (exits with a message otherwise)."""
+    if not text:
+        return {}
+    try:
+        value = json.loads(text)
+    except ValueError:
+        value = None
+    if not isinstance(value, dict):
+        raise SystemExit(f"--env-kwargs must be a JSON map, got {text[:80]!r}")
+    return value
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument(
         "--env", default=None, help=f"registered id, module:id to import module first (default {DEFAULT_ENV})"
     )
+    p.add_argument("--env-kwargs", default=None, help='env keyword arguments as JSON, e.g. \'{"obs_mode": "pixels"}\'')
     p.add_argument("--num-envs", type=int, default=8)
     p.add_argument(
         "--vectorization",
@@ -360,10 +470,12 @@ def main() -> int:
     torch.set_num_threads(1)  # small nets: threads only add overhead next to the sims
 
     ok = True
+    args.env_kwargs = env_kwargs(args.env_kwargs)
     if args.eval_only:
         if args.save is None:
             p.error("--eval-only needs --save (the saved policy)")
-        model, saved_env = load(args.save)
+        model, saved_env, saved_kwargs = load(args.save)
+        args.env_kwargs = args.env_kwargs or saved_kwargs
         args.env = find_spec(args.env or saved_env).id  # imports the env's module, if named
     else:
         given = args.env or DEFAULT_ENV
@@ -373,11 +485,11 @@ def main() -> int:
             args.target = spec.reward_threshold
         args.save = args.save or f"{spec.name.lower()}_ppo.pt"
         model, ok = train(args)
-        save(model, args.save, given)
-    evaluate(model, args.env, args.eval_episodes, args.seed + 1000)
+        save(model, args.save, given, args.env_kwargs)
+    evaluate(model, args.env, args.eval_episodes, args.seed + 1000, args.env_kwargs)
     if args.think_ms:
         think = [float(x) for x in args.think_ms.split(",")]
-        evaluate_real_time(model, args.env, think, max(1, min(args.eval_episodes, 2)), args.seed)
+        evaluate_real_time(model, args.env, think, max(1, min(args.eval_episodes, 2)), args.seed, args.env_kwargs)
     return 0 if ok else 1
 
 

@@ -9,15 +9,21 @@ back as a fresh model, and evaluated on a single remote env with SB3's
     python examples/train_sb3.py                                      # CartPole, 100k steps
     python examples/train_sb3.py --env my_arm:my_arm/MyArm-v0 --steps 200000
     python examples/train_sb3.py --eval-only --save my_arm_sb3_ppo.zip --env my_arm:my_arm/MyArm-v0
+    python examples/train_sb3.py --env-kwargs '{"obs_mode": "pixels"}'  # CartPole from its camera
 
 ``--env`` takes any registered id; ``module:id`` imports ``module`` first
-(an env package of your own). Needs ``pip install remoteenv[sb3]`` (install
-``torch==2.13.0`` first). SB3's PPO defaults are used; tune them for your env.
+(an env package of your own); ``--env-kwargs`` is a JSON map of the env's
+keyword arguments (e.g. a camera ``obs_mode``). The policy follows the
+observation space (:func:`policy_for`): ``CnnPolicy`` for an image,
+``MultiInputPolicy`` for a Dict (e.g. ``{"state", "pixels"}``), else
+``MlpPolicy``. Needs ``pip install remoteenv[sb3]`` (install ``torch==2.13.0``
+first). SB3's PPO defaults are used; tune them for your env.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -27,6 +33,7 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 import remoteenv  # noqa: F401  (registers the shipped scenes' ids)
@@ -36,6 +43,28 @@ from remoteenv.sb3 import make_sb3_vec_env
 DEFAULT_ENV = "remoteenv/CartPole-v0"
 
 
+def policy_for(space: gym.Space) -> str:
+    """SB3's policy for an observation space: CNN for an image, multi-input for a Dict."""
+    if isinstance(space, gym.spaces.Dict):
+        return "MultiInputPolicy"
+    if is_image_space(space, check_channels=False):
+        return "CnnPolicy"
+    return "MlpPolicy"
+
+
+def env_kwargs(text: str | None) -> dict:
+    """``--env-kwargs``: a JSON map (exits with a message otherwise)."""
+    if not text:
+        return {}
+    try:
+        value = json.loads(text)
+    except ValueError:
+        value = None
+    if not isinstance(value, dict):
+        raise SystemExit(f"--env-kwargs must be a JSON map, got {text[:80]!r}")
+    return value
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--env", default=DEFAULT_ENV, help="registered id; module:id imports module first")
@@ -43,20 +72,24 @@ def main() -> int:
     p.add_argument("--num-envs", type=int, default=8)
     p.add_argument("--n-steps", type=int, default=2048, help="PPO rollout length per env (SB3's n_steps)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--env-kwargs", default=None, help='env keyword arguments as JSON, e.g. \'{"obs_mode": "pixels"}\'')
     p.add_argument("--save", default=None, help="where to save the model (default: <name>_sb3_ppo.zip)")
     p.add_argument("--eval-only", action="store_true", help="skip training; load --save and evaluate")
     p.add_argument("--eval-episodes", type=int, default=10)
     args = p.parse_args()
     torch.set_num_threads(1)  # small nets: threads only add overhead next to the sims
     spec = find_spec(args.env)
+    kwargs = env_kwargs(args.env_kwargs)
     save = args.save or f"{spec.name.lower()}_sb3_ppo.zip"
 
     if not args.eval_only:
-        venv = make_sb3_vec_env(args.env, num_envs=args.num_envs, seed=args.seed)
+        venv = make_sb3_vec_env(args.env, num_envs=args.num_envs, seed=args.seed, **kwargs)
         try:
             start = time.perf_counter()
             batch = min(64, args.n_steps * args.num_envs)
-            model = PPO("MlpPolicy", venv, n_steps=args.n_steps, batch_size=batch, seed=args.seed, verbose=0)
+            policy = policy_for(venv.observation_space)
+            print(f"{policy} for observations {venv.observation_space}", flush=True)
+            model = PPO(policy, venv, n_steps=args.n_steps, batch_size=batch, seed=args.seed, verbose=0)
             model.learn(args.steps)
             elapsed = time.perf_counter() - start
             model.save(save)
@@ -68,7 +101,7 @@ def main() -> int:
         )
 
     model = PPO.load(save)  # a fresh model from the file, as another program would load it
-    env = DummyVecEnv([lambda: Monitor(gym.make(spec.id))])  # one remote env, as evaluate_policy wants it
+    env = DummyVecEnv([lambda: Monitor(gym.make(spec.id, **kwargs))])  # one remote env, as evaluate_policy wants it
     env.seed(args.seed + 1000)
     try:
         mean, std = evaluate_policy(model, env, n_eval_episodes=args.eval_episodes, deterministic=True)

@@ -60,7 +60,9 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
             each sim process; ``ceil(N / K)`` processes are launched. Default
             ``max(8, ceil(N / cpu_count))`` capped at N: on a 2-core machine
             one process up to N = 8, then two up to N = 16; the fastest splits measured
-            there (see :func:`default_envs_per_process`).
+            there (see :func:`default_envs_per_process`). Worlds the sim reports
+            as costly (its handshake's ``world_cost_s``, e.g. camera images)
+            are then relaunched once over up to ``4 * cpu_count`` processes.
             Must be 1 with ``real_time``.
         autoreset_mode: Gymnasium's :class:`~gymnasium.vector.AutoresetMode`
             (or its string): ``NEXT_STEP`` (default; the step after an episode
@@ -152,13 +154,13 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         group = choose_group(launcher, attach, transport=transport, bind_host=bind_host, curve=curve)
         layout = group.layout
+        asked = envs_per_process
         envs_per_process, real_time = plan_layout(
             num_envs, envs_per_process, real_time, layout, max_episode_steps=max_episode_steps, batch_size=batch_size
         )
         #: Worlds :meth:`recv` returns.
         self.batch_size = int(batch_size or num_envs)
         self.num_envs = int(num_envs)
-        self.envs_per_process = min(int(envs_per_process), self.num_envs)
         self.autoreset_mode = AutoresetMode(autoreset_mode)
         self.max_episode_steps = max_episode_steps
         self.render_mode = render_mode
@@ -166,31 +168,32 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         self.timeout = timeout
         self.scene = os.fspath(scene)
         self.closed = False
-        k = self.envs_per_process
-        #: ``(first, end)`` world indices of each process.
-        self.slices: list[tuple[int, int]] = world_slices(self.num_envs, k)
-        self._session = open_session(
-            group,
-            scene_label(type(self).__name__, self.scene),
-            self.scene,
-            len(self.slices),
-            k,
-            timeout=timeout,
-            call_timeouts=call_timeouts,
-            startup_timeout=startup_timeout,
-            restart_on_failure=restart_on_failure,
-            max_restarts=max_restarts,
-            seed=seed,
-            env_kwargs=scene_kwargs,
-            render_mode=render_mode,
-            real_time=real_time,
-            real_time_factor=real_time_factor,
-            real_time_mode=real_time_mode,
-            action_delay=action_delay,
-            obs_delay=obs_delay,
-            link_delay=link_delay,
-            channel=ChannelRules(action_delivery, obs_delivery, delayed_rewards),
-        )
+        launch: dict[str, Any] = {
+            "timeout": timeout,
+            "call_timeouts": call_timeouts,
+            "startup_timeout": startup_timeout,
+            "restart_on_failure": restart_on_failure,
+            "max_restarts": max_restarts,
+            "seed": seed,
+            "env_kwargs": scene_kwargs,
+            "render_mode": render_mode,
+            "real_time": real_time,
+            "real_time_factor": real_time_factor,
+            "real_time_mode": real_time_mode,
+            "action_delay": action_delay,
+            "obs_delay": obs_delay,
+            "link_delay": link_delay,
+            "channel": ChannelRules(action_delivery, obs_delivery, delayed_rewards),
+        }
+        self._open(group, int(envs_per_process), launch)
+        if asked is None and launcher is None and attach is None and not self.real_time:
+            # The default layout, chosen again from what a world costs (the handshake's
+            # world_cost_s): costly worlds are relaunched over more processes, once.
+            better = min(default_envs_per_process(self.num_envs, self._session.handshake.world_cost_s), self.num_envs)
+            if better != self.envs_per_process:
+                self._session.close()
+                group = choose_group(None, None, transport=transport, bind_host=bind_host, curve=curve)
+                self._open(group, better, launch)
         try:
             self._set_spaces(self._session.handshake)
             self._episodes = VectorEpisodes(
@@ -203,6 +206,14 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         self.latency_stats = LatencyStats()
         self._pauser = Pauser(self._session)
         self._reach = SceneReach(self._session)
+
+    def _open(self, group: SimGroup, per_process: int, launch: dict[str, Any]) -> None:
+        """Start (or take) the sims of ``per_process`` worlds each: :attr:`slices` and the session."""
+        self.envs_per_process = min(per_process, self.num_envs)
+        #: ``(first, end)`` world indices of each process.
+        self.slices: list[tuple[int, int]] = world_slices(self.num_envs, self.envs_per_process)
+        label = scene_label(type(self).__name__, self.scene)
+        self._session = open_session(group, label, self.scene, len(self.slices), self.envs_per_process, **launch)
 
     def _set_spaces(self, hs: Handshake) -> None:
         self.single_observation_space = hs.observation_space

@@ -6,7 +6,7 @@ observation restores the Markov property (the state augmentation of
 Ramstedt & Pal 2019 and the action buffer of Bouteiller et al. 2021; rtgym's
 ``act_in_obs``). Works on any Gymnasium env, remote or in-process.
 
-Layout of the new observation (one flat :class:`~gymnasium.spaces.Box`)::
+Layout of the new observation, for a Box of values (one flat :class:`~gymnasium.spaces.Box`)::
 
     [ env obs (flattened) | a_{t-k+1} ... a_t (oldest first) | alpha | omega | latency ]
 
@@ -28,9 +28,19 @@ tick is replaced at the next one for sure.) With ``include_alpha=True`` a
 buffer shorter than that, on an env that reports its delays
 (``env.unwrapped.handshake``), warns.
 
+For images and Dicts the action features stay a separate vector input (a
+network reads pixels and features differently; flattening an image into an
+MLP's input would lose what a CNN needs) in a :class:`~gymnasium.spaces.Dict`::
+
+    image Box (uint8, H x W x C)  ->  {"pixels": image, "history": features}
+    Dict {"state": ..., ...}      ->  {"state": ..., ..., "history": features}
+
+with ``features`` the flat ``[ a_{t-k+1} ... a_t | alpha | omega | latency ]`` (float32; each
+of the last three only when asked for).
+
 - Observation spaces: a :class:`~gymnasium.spaces.Box` of any shape
-  (flattened in C order). Anything else raises ``TypeError``; flatten it
-  first (``gymnasium.wrappers.FlattenObservation``).
+  (flattened in C order; an image as above), or a flat ``Dict`` (no nested
+  Dict or Tuple) without a ``"history"`` key. Anything else raises ``TypeError``.
 - Action spaces: :class:`~gymnasium.spaces.Box` (each action flattened, as
   passed to ``step``: put ``ClipAction`` outside this wrapper to record
   clipped actions) and :class:`~gymnasium.spaces.Discrete` (one-hot of
@@ -61,7 +71,10 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from gymnasium.vector.utils import batch_space
 
-__all__ = ["ActionHistory", "ActionHistoryVector", "required_history"]
+__all__ = ["HISTORY_KEY", "PIXELS_KEY", "ActionHistory", "ActionHistoryVector", "is_image", "required_history"]
+
+#: The key of the action features in a Dict observation, and of an image observation.
+HISTORY_KEY, PIXELS_KEY = "history", "pixels"
 
 #: The info keys of the optional features, in the order they are appended.
 _FEATURE_KEYS = ("obs_action_delay_ticks", "obs_delay_ticks", "latency_ticks")
@@ -97,6 +110,11 @@ def _check_length(env: Any, k: int, include_alpha: bool, owner: str) -> None:
             f"{need - 1} steps old: keep k >= {need} (remoteenv.wrappers.required_history)",
             stacklevel=3,
         )
+
+
+def is_image(space: spaces.Space) -> bool:
+    """Whether ``space`` is an image: a uint8 Box of 3 dimensions (H x W x C, as SB3's CNNs take it)."""
+    return isinstance(space, spaces.Box) and space.dtype == np.uint8 and len(space.shape) == 3
 
 
 class _ActionEncoder:
@@ -139,24 +157,41 @@ class _ActionEncoder:
 
 def _augmented_space(
     obs_space: spaces.Space, encoder: _ActionEncoder, k: int, features: int, dtype: np.dtype
-) -> spaces.Box:
+) -> spaces.Space:
+    low = [np.tile(encoder.low, k), np.zeros(features, dtype=dtype)]
+    high = [np.tile(encoder.high, k), np.full(features, np.inf, dtype=dtype)]
+    if _separate(obs_space):
+        vector = spaces.Box(np.concatenate(low), np.concatenate(high), dtype=dtype)
+        inputs = dict(obs_space.spaces) if isinstance(obs_space, spaces.Dict) else {PIXELS_KEY: obs_space}
+        return spaces.Dict({**inputs, HISTORY_KEY: vector})
     assert isinstance(obs_space, spaces.Box)
-    low = [obs_space.low.reshape(-1).astype(dtype), np.tile(encoder.low, k)]
-    high = [obs_space.high.reshape(-1).astype(dtype), np.tile(encoder.high, k)]
-    low.append(np.zeros(features, dtype=dtype))
-    high.append(np.full(features, np.inf, dtype=dtype))
+    low.insert(0, obs_space.low.reshape(-1).astype(dtype))
+    high.insert(0, obs_space.high.reshape(-1).astype(dtype))
     return spaces.Box(np.concatenate(low), np.concatenate(high), dtype=dtype)
+
+
+def _separate(obs_space: spaces.Space) -> bool:
+    """Whether the action features go beside the observation (a Dict) rather than after it."""
+    return isinstance(obs_space, spaces.Dict) or is_image(obs_space)
 
 
 def _check_spaces(obs_space: spaces.Space, k: int, owner: str) -> np.dtype:
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 0:
         raise ValueError(f"{owner} needs k >= 0 actions to keep, got {k!r:.60}")
+    if isinstance(obs_space, spaces.Dict):
+        nested = [key for key, sub in obs_space.spaces.items() if isinstance(sub, (spaces.Dict, spaces.Tuple))]
+        if nested or HISTORY_KEY in obs_space.spaces:
+            raise TypeError(
+                f"{owner} supports flat Dict observations without a {HISTORY_KEY!r} key, got {obs_space}; "
+                f"flatten the nested entries {nested} or rename the key"
+            )
+        return np.dtype(np.float32)
     if not isinstance(obs_space, spaces.Box):
         raise TypeError(
-            f"{owner} supports Box observation spaces, got {obs_space}; "
+            f"{owner} supports Box and Dict observation spaces, got {obs_space}; "
             "flatten it first (gymnasium.wrappers.FlattenObservation)"
         )
-    return np.result_type(obs_space.dtype, np.float32)
+    return np.dtype(np.float32) if is_image(obs_space) else np.result_type(obs_space.dtype, np.float32)
 
 
 def _latency(value: Any) -> float:
@@ -174,7 +209,7 @@ class ActionHistory(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """The env's observation followed by its last ``k`` actions (see the module docs).
 
     Args:
-        env: an env with a Box observation space and a Box or Discrete action space.
+        env: an env with a Box or flat Dict observation space and a Box or Discrete action space.
         k: how many past actions to append (0 appends none); see
             :func:`required_history` for how many the delays need.
         include_alpha: append ``info["obs_action_delay_ticks"]``, the age of
@@ -208,15 +243,13 @@ class ActionHistory(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._history = np.zeros((self.k, self._encoder.size), dtype=dtype)
         self._features = np.zeros(len(self._keys), dtype=dtype)
 
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
         self._history[:] = 0
         self._features[:] = [_latency(info.get(key)) for key in self._keys]
         return self._augment(obs), info
 
-    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         features = self._encoder.encode(action, 1)  # before stepping: a bad action changes nothing
         obs, reward, terminated, truncated, info = self.env.step(action)
         if self.k:
@@ -230,9 +263,12 @@ class ActionHistory(gym.Wrapper, gym.utils.RecordConstructorArgs):
         """A copy of the action features, ``(k, features per action)``, oldest first."""
         return self._history.copy()
 
-    def _augment(self, obs: Any) -> np.ndarray:
-        parts = [np.asarray(obs, dtype=self._history.dtype).reshape(-1), self._history.reshape(-1), self._features]
-        return np.concatenate(parts)
+    def _augment(self, obs: Any) -> Any:
+        parts = [self._history.reshape(-1), self._features]
+        if _separate(self.env.observation_space):
+            inputs = dict(obs) if isinstance(obs, dict) else {PIXELS_KEY: obs}
+            return {**inputs, HISTORY_KEY: np.concatenate(parts)}
+        return np.concatenate([np.asarray(obs, dtype=self._history.dtype).reshape(-1), *parts])
 
 
 def _masked(infos: dict[str, Any], key: str, n: int) -> list[Any]:
@@ -290,9 +326,7 @@ class ActionHistoryVector(VectorWrapper, gym.utils.RecordConstructorArgs):
         self._features = np.zeros((n, len(self._keys)), dtype=dtype)
         self._restarting = np.zeros(n, dtype=bool)
 
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         mask = None if options is None else options.get("reset_mask")  # read before the env pops it
         obs, infos = self.env.reset(seed=seed, options=options)
         worlds = np.ones(self.num_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
@@ -328,14 +362,13 @@ class ActionHistoryVector(VectorWrapper, gym.utils.RecordConstructorArgs):
         """A copy of the action features, ``(num_envs, k, features per action)``, oldest first."""
         return self._history.copy()
 
-    def _augment(self, obs: Any) -> np.ndarray:
+    def _augment(self, obs: Any) -> Any:
         n = self.num_envs
-        parts = [
-            np.asarray(obs, dtype=self._history.dtype).reshape(n, -1),
-            self._history.reshape(n, -1),
-            self._features,
-        ]
-        return np.concatenate(parts, axis=1)
+        parts = [self._history.reshape(n, -1), self._features]
+        if _separate(self.env.single_observation_space):
+            inputs = dict(obs) if isinstance(obs, dict) else {PIXELS_KEY: obs}
+            return {**inputs, HISTORY_KEY: np.concatenate(parts, axis=1)}
+        return np.concatenate([np.asarray(obs, dtype=self._history.dtype).reshape(n, -1), *parts], axis=1)
 
     def _augment_final(self, infos: dict[str, Any], ended: np.ndarray) -> dict[str, Any]:
         """``infos`` with each ended world's ``final_obs`` augmented (a new dict and array)."""
@@ -346,11 +379,14 @@ class ActionHistoryVector(VectorWrapper, gym.utils.RecordConstructorArgs):
         final_infos = infos.get("final_info") or {}
         columns = [_masked(final_infos, key, self.num_envs) for key in self._keys]
         dtype = self._history.dtype
+        separate = _separate(self.env.single_observation_space)
         for w in np.flatnonzero(ended):
             if final[w] is None:
                 continue
-            extra = np.array([_latency(column[w]) for column in columns], dtype=dtype)
-            final[w] = np.concatenate(
-                [np.asarray(final[w], dtype=dtype).reshape(-1), self._history[w].reshape(-1), extra]
-            )
+            parts = [self._history[w].reshape(-1), np.array([_latency(column[w]) for column in columns], dtype=dtype)]
+            if separate:
+                inputs = dict(final[w]) if isinstance(final[w], dict) else {PIXELS_KEY: final[w]}
+                final[w] = {**inputs, HISTORY_KEY: np.concatenate(parts)}
+            else:
+                final[w] = np.concatenate([np.asarray(final[w], dtype=dtype).reshape(-1), *parts])
         return {**infos, "final_obs": final}

@@ -1,6 +1,7 @@
 """``python -m remoteenv bench``: throughput (default), ``--batched`` (batched stepping
 next to EnvPool and the physics limit), ``--real-time`` pacing, ``--soak``, ``--sb3``
-(SB3 PPO on remote CartPole next to SubprocVecEnv)."""
+(SB3 PPO on remote CartPole next to SubprocVecEnv), ``--pixels`` (camera
+observations in vector envs next to Gymnasium's of the same in-process task)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ BENCHMARKS = {
     "soak": "--soak",
     "sb3_ppo": "--sb3",
     "startup": "--startup",
+    "pixels": "--pixels",
 }
 
 
@@ -28,7 +30,9 @@ def add_parser(sub: Any) -> None:
         "--batched: batched stepping next to EnvPool and MuJoCo's physics limit, in alternating rounds. "
         "--real-time: pacing and action-application delay of real-time mode. "
         "--soak: a long run that reports agent and sim memory. "
-        "--sb3: SB3 PPO on remote CartPole next to the same PPO on SubprocVecEnv and DummyVecEnv.",
+        "--sb3: SB3 PPO on remote CartPole next to the same PPO on SubprocVecEnv and DummyVecEnv. "
+        "--pixels: the camera CartPole's RemoteVectorEnv next to Gymnasium's Async/SyncVectorEnv of the same "
+        "task in process (--hog for a CPU hog beside it).",
     )
     mode = p.add_mutually_exclusive_group()
     for name, flag in BENCHMARKS.items():

@@ -22,7 +22,14 @@ from typing import Any
 import gymnasium as gym
 
 from remoteenv import SHIPPED_SCENES as SCENES
-from remoteenv.cli.arguments import non_negative_int, non_negative_number, positive_factor, positive_int, seed_int
+from remoteenv.cli.arguments import (
+    json_map,
+    non_negative_int,
+    non_negative_number,
+    positive_factor,
+    positive_int,
+    seed_int,
+)
 from remoteenv.cli.optional import require
 from remoteenv.remote_env import OpenAIRemoteEnv
 
@@ -61,6 +68,13 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--seed", type=seed_int, default=0, help="seed of the first reset (default 0)")
     p.add_argument("--continuous", action="store_true", help="cartpole: Box(-1, 1) action instead of Discrete(2)")
     p.add_argument("--random", action="store_true", help="random actions instead of the controller")
+    p.add_argument(
+        "--env-kwargs",
+        metavar="JSON",
+        default=None,
+        help='keyword arguments of the env as a JSON map, e.g. \'{"obs_mode": "pixels", "image_size": 84}\' '
+        "(a camera observation: the controllers then read its 'state' part, or act at random on pixels alone)",
+    )
     p.add_argument(
         "--transport",
         choices=["pipe", "ipc", "tcp"],
@@ -155,6 +169,17 @@ def make_policy(scene: str, env: gym.Env, random: bool) -> Policy:
     return lambda obs, t: controllers.cartpole_continuous(obs)
 
 
+def on_state(policy: Policy, env: gym.Env) -> Policy:
+    """``policy`` for a camera observation: a Dict's ``"state"`` part goes to
+    the controller; pixels alone get random actions (no controller reads images)."""
+    space = env.observation_space
+    if isinstance(space, gym.spaces.Dict) and "state" in space.spaces:
+        return lambda obs, t: policy(obs["state"], t)
+    if isinstance(space, gym.spaces.Box) and space.dtype == "uint8" and len(space.shape) == 3:
+        return lambda obs, t: env.action_space.sample()
+    return policy
+
+
 def has_display() -> bool:
     """Whether a window can be opened (an X11 or Wayland display is set)."""
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
@@ -168,6 +193,9 @@ def make_env(args: argparse.Namespace) -> gym.Env:
         kwargs.update(real_time=True, real_time_factor=args.real_time_factor)
     if getattr(args, "action_delay", 0):
         kwargs["action_delay"] = args.action_delay
+    env_kwargs = getattr(args, "env_kwargs", None)
+    if env_kwargs:
+        kwargs.update(json_map(env_kwargs, "--env-kwargs"))
     if getattr(args, "viewer", False):
         kwargs["render_mode"] = "human"
     record = getattr(args, "record", None)
@@ -267,7 +295,7 @@ def run(args: argparse.Namespace) -> int:
     env = make_env(args)
     try:
         shipped = {env_id: name for name, env_id in SCENES.items()}.get(args.scene, args.scene)
-        policy = make_policy(shipped, env, args.random)
+        policy = on_state(make_policy(shipped, env, args.random), env)
         env.action_space.seed(args.seed)
         obs, info = env.reset(seed=args.seed)
         remote: Any = env.unwrapped  # the OpenAIRemoteEnv under gym.make's wrappers
@@ -275,7 +303,8 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"{env.spec.id if env.spec else args.scene}: sim pid {getattr(remote, 'pid', None)}, "
             f"obs {env.observation_space}, action {env.action_space}; "
-            f"make + first reset {time.perf_counter() - t0:.3f} s"
+            + (f"env kwargs {json_map(args.env_kwargs, '--env-kwargs')}; " if args.env_kwargs else "")
+            + f"make + first reset {time.perf_counter() - t0:.3f} s"
         )
         total_steps, total_time = 0, 0.0
         for episode in range(args.episodes):

@@ -6,7 +6,9 @@ For every delay (constant ``k`` ticks, and ``Uniform(0, k)``), every variant
 (``plain``: the observation only; ``history``: the observation followed by the
 last ``k`` actions sent, plus the last step's latency under random delays)
 and every seed, it trains Stable-Baselines3 PPO in lock-step (so every run
-repeats from its seed) and evaluates the deterministic policy at the delay it
+repeats from its seed; the policy follows the observation: an MLP for values,
+a CNN for an image, multi-input for a Dict, the actions in flight a separate
+input beside images) and evaluates the deterministic policy at the delay it
 was trained under. Then it runs trained policies in real time with a think
 time, records the latency every action had, replays the recordings in
 lock-step, and compares the two return distributions.
@@ -111,6 +113,18 @@ def _config(args: argparse.Namespace) -> Any:
         raise SystemExit(str(exc)) from None
 
 
+def _check_spaces(config: Any) -> None:
+    """Refuse spaces the study cannot train on, before it starts its sims (reading
+    the spaces makes one env, whose sim is closed at once)."""
+    from remoteenv.latency_study.spaces import check_spaces, probe_spaces
+
+    observation_space, action_space = probe_spaces(config.env_id, config.env_kwargs)
+    try:
+        check_spaces(config.env_id, observation_space, action_space)
+    except ValueError as exc:
+        raise SystemExit(str(exc)) from None
+
+
 def _check_writable(folder: str) -> None:
     """Fail now, not after an hour of training, if ``folder`` cannot take the outputs."""
     try:
@@ -137,6 +151,7 @@ def run(args: argparse.Namespace) -> int:
     for module in ("torch", "stable_baselines3", "tqdm") + (() if args.no_plot else ("matplotlib",)):
         require(module, purpose)
     config = _config(args)
+    _check_spaces(config)
     _check_writable(args.out)
     if args.policies is not None:
         _check_writable(args.policies)

@@ -7,7 +7,8 @@ model as package data), ``D/src/NAME/NAME.xml``, ``D/src/NAME/NAME_scene.py``
 ``D/src/NAME/__init__.py`` (the agent side: registers ``NAME/<Name>-v0`` on
 import, ``<Name>`` being NAME in CamelCase, e.g. ``ball_plate/BallPlate-v0``),
 ``D/tests/test_NAME.py`` and a README. It passes Gymnasium's env checker as
-generated. NAME must not be the name of an importable module (``numpy``,
+generated. With ``--pixels`` the id observes through the scene's camera (the
+registration's ``obs_mode="pixels"``: uint8 images rendered in the sim). NAME must not be the name of an importable module (``numpy``,
 ``os``, ``remoteenv``, ...), which the package would hide.
 
 Why a src layout: with the package directly in ``D`` (``D/NAME/``), running
@@ -51,6 +52,12 @@ def add_parser(sub: Any) -> None:
     p.add_argument("name", help="package name: lower case letters, digits and _ (e.g. pointmass)")
     p.add_argument(
         "--dir", default=None, help="where to write the package (default: ./NAME); must not exist or be empty"
+    )
+    p.add_argument(
+        "--pixels",
+        action="store_true",
+        help="a camera scene: the id's observation is the overhead camera's 64x64 image "
+        "(obs_mode='pixels'; 'state_pixels' and 'state' stay available as kwargs)",
     )
     p.set_defaults(run=run)
 
@@ -103,14 +110,15 @@ def check_name(name: str) -> str:
     return name
 
 
-def write_package(name: str, directory: str | os.PathLike[str] | None = None) -> list[str]:
+def write_package(name: str, directory: str | os.PathLike[str] | None = None, *, pixels: bool = False) -> list[str]:
     """Write the package for ``name`` into ``directory`` (default ``./name``);
-    returns the paths written. Refuses a non-empty directory; never overwrites."""
+    returns the paths written. Refuses a non-empty directory; never overwrites.
+    ``pixels``: the id observes through the camera (``obs_mode="pixels"``)."""
     check_name(name)
     root = os.path.abspath(os.fspath(directory) if directory is not None else name)
     if os.path.exists(root) and (not os.path.isdir(root) or os.listdir(root)):
         raise FileExistsError(f"{root} exists and is not an empty directory; pick another --dir")
-    values = {"name": name, "Camel": camel(name)}
+    values = {"name": name, "Camel": camel(name), "obs_mode": "pixels" if pixels else "state"}
     templates = resources.files("remoteenv.cli").joinpath("scene_template")
     written = []
     for template, target in FILES.items():
@@ -125,7 +133,7 @@ def write_package(name: str, directory: str | os.PathLike[str] | None = None) ->
 
 def run(args: argparse.Namespace) -> int:
     try:
-        written = write_package(args.name, args.dir)
+        written = write_package(args.name, args.dir, pixels=args.pixels)
     except (ValueError, FileExistsError) as exc:
         print(f"new-scene: {exc}", file=sys.stderr)
         return 2

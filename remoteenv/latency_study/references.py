@@ -10,7 +10,8 @@ evaluation episodes and delays as the trained policies,
   (``ActionHistory(env, k)``), under the constant delays, where the history
   holds exactly the actions that will act.
 
-No training: seconds per delay. Other envs get no references.
+No training: seconds per delay. Other envs (and CartPole observed through
+its camera) get no references.
 """
 
 from __future__ import annotations
@@ -27,7 +28,12 @@ CARTPOLE_ID = "remoteenv/CartPole-v0"
 
 
 def has_references(config: StudyConfig) -> bool:
-    return config.env_id == CARTPOLE_ID and bool(config.env_kwargs.get("continuous"))
+    """Continuous CartPole observing its state (the controllers read the 4 numbers, not pixels)."""
+    return (
+        config.env_id == CARTPOLE_ID
+        and bool(config.env_kwargs.get("continuous"))
+        and config.env_kwargs.get("obs_mode", "state") == "state"
+    )
 
 
 def _mean_return(config: StudyConfig, policy: Any, action_delay: Any, history: int) -> float:

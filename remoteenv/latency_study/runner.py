@@ -5,6 +5,8 @@ a progress bar, writing ``delay_effect.json`` after every finished cell
 Each worker is a fresh (spawned) Python process that trains one cell at a
 time with one torch thread; each cell starts its own sim process. Use one
 worker per CPU core: PPO's updates and the sims then share the cores evenly.
+The progress bar counts training steps over all cells; workers report theirs
+through a queue every :data:`~remoteenv.latency_study.training.CURVE_EVERY` steps.
 """
 
 from __future__ import annotations
@@ -12,9 +14,10 @@ from __future__ import annotations
 import multiprocessing
 import os
 import platform
+import queue
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
 
 from remoteenv.latency_study.design import Cell, StudyConfig, cells
@@ -37,10 +40,50 @@ def host_facts() -> dict[str, Any]:
     }
 
 
-def _run_cell(config: StudyConfig, cell: Cell, policy_dir: str | None) -> dict[str, Any]:
+def _run_cell(config: StudyConfig, cell: Cell, policy_dir: str | None, steps: Any = None) -> dict[str, Any]:
+    """Run one cell in a worker; ``steps`` (a queue) gets ``(cell key, steps done)``."""
     from remoteenv.latency_study.training import run_cell
 
-    return run_cell(config, cell, policy_dir)
+    progress = None if steps is None else (lambda done: steps.put((cell.key, int(done))))
+    return run_cell(config, cell, policy_dir, progress)
+
+
+class _StepBar:
+    """A tqdm bar of training steps over the cells, each counted up to ``steps``."""
+
+    def __init__(self, cells: int, steps: int) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=cells * steps, unit="step", unit_scale=True, desc="delay study")
+        self.steps = steps
+        self._done: dict[Any, int] = {}
+
+    def advance(self, key: Any, done: int) -> None:
+        done = min(done, self.steps)
+        before = self._done.get(key, 0)
+        if done > before:
+            self._done[key] = done
+            self.bar.update(done - before)
+
+
+class _Direct:
+    """The queue's ``put`` for cells run in this process: straight to the bar."""
+
+    def __init__(self, bar: _StepBar, key: Any) -> None:
+        self._bar, self._key = bar, key
+
+    def put(self, report: tuple[Any, int]) -> None:
+        self._bar.advance(self._key, report[1])
+
+
+def _drain(reports: Any, bar: _StepBar) -> None:
+    """Count every step report the workers queued so far."""
+    while True:
+        try:
+            key, done = reports.get_nowait()
+        except queue.Empty:
+            return
+        bar.advance(tuple(key), int(done))
 
 
 def _stop_workers(pool: ProcessPoolExecutor) -> None:
@@ -78,8 +121,6 @@ def run_study(
         on_record: called in this process with each finished record.
         references: the reference controllers' returns, stored as they are.
     """
-    from tqdm import tqdm
-
     records = load_records(json_path, config) if resume else []
     done = {record_key(r) for r in records}
     todo = [c for c in cells(config) if c.key not in done]
@@ -99,22 +140,29 @@ def run_study(
         if on_record is not None:
             on_record(record)
 
-    with tqdm(total=len(todo), unit="run", desc="delay study") as bar:
+    steps = _StepBar(len(todo), config.steps)
+    with steps.bar as bar:
         if workers <= 1:
             for cell in todo:
                 bar.set_postfix_str(cell.label())
-                finished(_run_cell(config, cell, policy_dir))
-                bar.update(1)
+                finished(_run_cell(config, cell, policy_dir, _Direct(steps, cell.key)))
+                steps.advance(cell.key, config.steps)
         else:
             context = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+            with context.Manager() as manager, ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+                reports = manager.Queue()
                 try:
-                    futures = {pool.submit(_run_cell, config, cell, policy_dir): cell for cell in todo}
-                    for future in as_completed(futures):
-                        record = future.result()
-                        finished(record)
-                        bar.set_postfix_str(f"{futures[future].label()}: {record['mean_return']:.0f}")
-                        bar.update(1)
+                    futures = {pool.submit(_run_cell, config, cell, policy_dir, reports): cell for cell in todo}
+                    pending = set(futures)
+                    while pending:
+                        ready, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+                        _drain(reports, steps)
+                        for future in ready:
+                            record = future.result()
+                            cell = futures[future]
+                            finished(record)
+                            steps.advance(cell.key, config.steps)
+                            bar.set_postfix_str(f"{cell.label()}: {record['mean_return']:.0f}")
                 except BaseException:  # Ctrl-C, SIGTERM, a failed cell: the running cells stop too
                     _stop_workers(pool)
                     raise

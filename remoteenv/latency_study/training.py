@@ -21,8 +21,9 @@ import gymnasium as gym
 import numpy as np
 
 from remoteenv.latency_study.design import Cell, StudyConfig
+from remoteenv.latency_study.spaces import policy_for
 from remoteenv.wire.files.file_reads import read_bytes
-from remoteenv.wrappers import ActionHistory, ActionHistoryVector
+from remoteenv.wrappers import ActionHistory, ActionHistoryVector, is_image
 
 #: Largest saved policy file read back (an SB3 zip of an MLP policy is well under 1 MiB).
 MAX_POLICY_BYTES = 256 << 20
@@ -40,18 +41,30 @@ class TrainedPolicy:
 
     Saved as two files: the SB3 model (``<path>.zip``, SB3's format) and the
     normalisation statistics (``<path>.npz``: ``mean``, ``var``, ``clip``,
-    ``epsilon``; absent when the policy was trained without it)."""
+    ``epsilon``, and for a Dict observation ``mean/<key>`` and ``var/<key>``
+    for each normalised key instead; absent when the policy was trained without it)."""
 
     def __init__(self, model: Any, obs_stats: dict[str, np.ndarray] | None) -> None:
         self.model = model
         self.obs_stats = obs_stats
 
-    def normalize(self, obs: np.ndarray) -> np.ndarray:
-        if self.obs_stats is None:
-            return np.asarray(obs, dtype=np.float32)
+    def _scaled(self, obs: Any, mean: np.ndarray, var: np.ndarray) -> np.ndarray:
         s = self.obs_stats
-        scaled = (np.asarray(obs, dtype=np.float64) - s["mean"]) / np.sqrt(s["var"] + float(s["epsilon"]))
+        assert s is not None
+        scaled = (np.asarray(obs, dtype=np.float64) - mean) / np.sqrt(var + float(s["epsilon"]))
         return np.clip(scaled, -float(s["clip"]), float(s["clip"])).astype(np.float32)
+
+    def normalize(self, obs: Any) -> Any:
+        s = self.obs_stats
+        if isinstance(obs, dict):  # normalised keys as trained; images and the rest as they are
+            if s is None:
+                return obs
+            return {
+                k: self._scaled(v, s[f"mean/{k}"], s[f"var/{k}"]) if f"mean/{k}" in s else v for k, v in obs.items()
+            }
+        if s is None:
+            return obs if np.asarray(obs).dtype == np.uint8 else np.asarray(obs, dtype=np.float32)
+        return self._scaled(obs, s["mean"], s["var"])
 
     def __call__(self, obs: np.ndarray) -> Any:
         action, _ = self.model.predict(self.normalize(obs), deterministic=True)
@@ -72,14 +85,16 @@ class TrainedPolicy:
         if os.path.exists(path + ".npz"):
             data = read_bytes(path + ".npz", MAX_POLICY_BYTES, what="policy statistics")
             with np.load(io.BytesIO(data), allow_pickle=False) as f:
-                stats = {k: np.array(f[k]) for k in ("mean", "var", "clip", "epsilon")}
+                stats = {k: np.array(f[k]) for k in f.files}
         return cls(model, stats)
 
 
 def make_train_env(config: StudyConfig, cell: Cell) -> Any:
     """The SB3 vector env a cell trains on (SAME_STEP autoreset: one round
     trip per step even when an episode ends), observations normalised if the
-    settings say so (the returns the monitor records are the env's own)."""
+    settings say so (the returns the monitor records are the env's own):
+    a Box of values whole, a Dict's non-image entries; images never (SB3's
+    CNN scales them itself)."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from remoteenv.sb3 import SB3VecEnv
@@ -96,7 +111,13 @@ def make_train_env(config: StudyConfig, cell: Cell) -> Any:
         venv = ActionHistoryVector(venv, cell.history_length, include_alpha=cell.include_alpha)
     env: Any = VecMonitor(SB3VecEnv(venv))
     if config.ppo_settings["normalize_obs"]:
-        env = VecNormalize(env, norm_obs=True, norm_reward=False)
+        space = env.observation_space
+        if isinstance(space, gym.spaces.Dict):
+            keys = [k for k, sub in space.spaces.items() if isinstance(sub, gym.spaces.Box) and not is_image(sub)]
+            if keys:
+                env = VecNormalize(env, norm_obs=True, norm_reward=False, norm_obs_keys=keys)
+        elif not is_image(space):
+            env = VecNormalize(env, norm_obs=True, norm_reward=False)
     return env
 
 
@@ -158,7 +179,7 @@ def train(
     started = time.perf_counter()
     try:
         model = PPO(
-            "MlpPolicy",
+            policy_for(env.observation_space),
             env,
             n_steps=int(settings["n_steps"]),
             batch_size=int(settings["batch_size"]),
@@ -178,12 +199,10 @@ def train(
         stats = None
         if hasattr(env, "obs_rms"):
             rms = env.obs_rms
-            stats = {
-                "mean": np.array(rms.mean),
-                "var": np.array(rms.var),
-                "clip": np.array(env.clip_obs),
-                "epsilon": np.array(env.epsilon),
-            }
+            stats = {"clip": np.array(env.clip_obs), "epsilon": np.array(env.epsilon)}
+            for key, one in rms.items() if isinstance(rms, dict) else [(None, rms)]:
+                suffix = "" if key is None else f"/{key}"
+                stats[f"mean{suffix}"], stats[f"var{suffix}"] = np.array(one.mean), np.array(one.var)
     finally:
         env.close()
     return TrainedPolicy(model, stats), {
@@ -198,10 +217,13 @@ def policy_path(policy_dir: str, cell: Cell) -> str:
     return os.path.join(policy_dir, f"{cell.variant}-{cell.kind}-{cell.delay}-seed{cell.seed}")
 
 
-def run_cell(config: StudyConfig, cell: Cell, policy_dir: str | None = None) -> dict[str, Any]:
+def run_cell(
+    config: StudyConfig, cell: Cell, policy_dir: str | None = None, progress: Callable[[int], None] | None = None
+) -> dict[str, Any]:
     """Train and evaluate one cell; its record for ``delay_effect.json``. With
-    ``policy_dir`` the trained policy is saved at :func:`policy_path`."""
-    policy, trained = train(config, cell)
+    ``policy_dir`` the trained policy is saved at :func:`policy_path`;
+    ``progress(steps)`` is told the training steps done (see :func:`train`)."""
+    policy, trained = train(config, cell, progress)
     if policy_dir is not None:
         policy.save(policy_path(policy_dir, cell))
     env = make_eval_env(config, cell)

@@ -34,6 +34,8 @@ from remoteenv.wire.spaces import space_from_wire, value_nbytes
 LOCK_STEP = "lock_step"
 #: ``stepping["mode"]`` of a sim that runs on a paced wall clock.
 REAL_TIME = "real_time"
+#: The largest ``metadata["world_cost_s"]`` a reply may state (seconds).
+MAX_WORLD_COST_S = 60.0
 #: Commands every server answers.
 CORE_COMMANDS = frozenset({"handshake", "reset", "step", "render", "close"})
 #: Commands a server without a ``commands`` list answers in lock-step only...
@@ -83,6 +85,9 @@ class Handshake:
     real_time_mode: str | None = None
     #: Every command the server answers, if its reply lists them.
     commands: frozenset[str] | None = None
+    #: Wall seconds one world's control tick costs the server on one thread
+    #: (physics and camera rendering), if it says: a layout hint.
+    world_cost_s: float | None = None
     #: The reply map as received.
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
@@ -181,6 +186,9 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
     fps = _typed(meta, "render_fps", (int, float), "metadata ")
     timestep = _typed(meta, "timestep", (int, float), "metadata ")
     rtf = _typed(stepping, "real_time_factor", (int, float), "stepping ")
+    cost = _typed(meta, "world_cost_s", (int, float), "metadata ")
+    if cost is not None and not 0 <= cost <= MAX_WORLD_COST_S:
+        raise ProtocolError(f"handshake metadata 'world_cost_s' must be 0..{MAX_WORLD_COST_S} s, got {cost!r}")
     commands = _typed(reply, "commands", list, "")
     if commands is not None and not all(isinstance(c, str) for c in commands):
         raise ProtocolError(f"handshake 'commands' must be strings: {short_repr(commands)}")
@@ -203,6 +211,7 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
         real_time_factor=None if rtf is None else float(rtf),
         real_time_mode=_real_time_mode(stepping),
         commands=None if commands is None else frozenset(commands),
+        world_cost_s=None if cost is None else float(cost),
         raw=reply,
     )
 

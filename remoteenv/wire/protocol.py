@@ -108,7 +108,10 @@ command the server answers; a client that finds no such field assumes
 ``reset_batch``/``step_batch`` exist exactly when ``stepping.mode`` is
 ``"lock_step"`` and ``timing`` exactly when it is ``"real_time"``. ``metadata`` holds ``render_modes``, ``render_fps``,
 ``dt`` (seconds of simulated time per env step), ``timestep`` (seconds per
-physics substep) and ``frame_skip``; ``stepping`` holds ``mode``
+physics substep), ``frame_skip`` and, optionally, ``world_cost_s`` (wall
+seconds one world's control tick costs the server on one thread: physics and
+rendering its camera observation; a hint for how many worlds a process
+should host); ``stepping`` holds ``mode``
 (``"lock_step"`` or ``"real_time"``) and that mode's parameters: in lock-step
 ``action_delay`` (ticks; the largest of a random model) and, with delays
 beyond a constant action delay, ``obs_delay`` (the largest, ticks),

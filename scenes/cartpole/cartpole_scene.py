@@ -7,6 +7,12 @@ Reward +1 per step; terminated when ``|x| > 2.4`` or ``|theta| > 12 deg``.
 The agent side truncates after 500 steps. Control dt is 0.02 s (10 physics
 substeps of 0.002 s).
 
+Pixels: ``obs_mode="pixels"`` makes the observation the ``agent`` camera's
+image (uint8 ``(image_size, image_size, 3)``), ``"state_pixels"`` a Dict
+``{"state": <the 4 numbers>, "pixels": <the image>}``; rendered in the sim,
+without multisampling and shadows unless ``camera_quality=True``
+(docs/cameras.md). The default ``"state"`` is the 4 numbers alone.
+
 Run by the launcher as ``python cartpole_scene.py --address ... --seed ...``.
 """
 
@@ -20,7 +26,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from remoteenv.sim import BaseEnv, BatchResult, run_scene, stacked
+from remoteenv.sim import BaseEnv, BatchResult, Camera, camera_observation, run_scene, stacked
 
 MODEL_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "cartpole.xml")
 
@@ -42,8 +48,14 @@ class CartPoleEnv(BaseEnv):
         continuous: bool = False,
         width: int = 600,
         height: int = 400,
+        obs_mode: str = "state",
+        image_size: int = 64,
+        camera_quality: bool = False,
     ) -> None:
         self.continuous = bool(continuous)
+        cameras = camera_observation(
+            obs_mode, Camera("agent", width=int(image_size), height=int(image_size)), quality=bool(camera_quality)
+        )
         action_space: spaces.Space = (
             spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32) if self.continuous else spaces.Discrete(2)
         )
@@ -59,6 +71,7 @@ class CartPoleEnv(BaseEnv):
             render_mode=render_mode,
             width=width,
             height=height,
+            cameras=cameras,
         )
         self._terminated = False
         self._pole = self.model.body("pole").id

@@ -6,6 +6,12 @@ Semantics follow the code of Gymnasium's Reacher-v5: obs is
 reward is ``-|fingertip - target| - |a|^2`` computed after stepping; the
 episode never terminates (the agent side truncates after 50 steps).
 
+Pixels: ``obs_mode="pixels"`` makes the observation the ``overhead``
+camera's image (uint8 ``(image_size, image_size, 3)``), ``"state_pixels"`` a
+Dict ``{"state": <the 10 numbers>, "pixels": <the image>}``; rendered in the
+sim without multisampling and shadows unless ``camera_quality=True``
+(docs/cameras.md).
+
 Run by the launcher as ``python reacher_scene.py --address ... --seed ...``.
 """
 
@@ -18,7 +24,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from remoteenv.sim import BaseEnv, BatchResult, run_scene, stacked
+from remoteenv.sim import BaseEnv, BatchResult, Camera, camera_observation, run_scene, stacked
 
 MODEL_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "reacher.xml")
 
@@ -38,7 +44,13 @@ class ReacherEnv(BaseEnv):
         reward_control_weight: float = 1.0,
         width: int = 480,
         height: int = 480,
+        obs_mode: str = "state",
+        image_size: int = 64,
+        camera_quality: bool = False,
     ) -> None:
+        cameras = camera_observation(
+            obs_mode, Camera("overhead", width=int(image_size), height=int(image_size)), quality=bool(camera_quality)
+        )
         super().__init__(
             MODEL_PATH,
             frame_skip=2,
@@ -47,6 +59,7 @@ class ReacherEnv(BaseEnv):
             render_mode=render_mode,
             width=width,
             height=height,
+            cameras=cameras,
         )
         self.reward_dist_weight = float(reward_dist_weight)
         self.reward_control_weight = float(reward_control_weight)

@@ -33,6 +33,7 @@ DOCUMENTS = [
     "docs/latency.md",
     "docs/delays.md",
     "docs/startup.md",
+    "docs/cameras.md",
 ]
 SKIP = "<!-- skip-test -->"
 _BLOCK = re.compile(r"^(?P<indent>[ \t]*)```python[ \t]*\n(?P<code>.*?)^(?P=indent)```[ \t]*$", re.M | re.S)

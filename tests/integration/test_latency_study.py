@@ -216,3 +216,33 @@ def test_a_sigtermed_study_leaves_no_dir_and_no_process(tmp_path, pid_alive):
         for pid in left:
             if pid_alive(pid):
                 os.kill(pid, 9)
+
+
+@pytest.mark.parametrize("obs_mode", ["pixels", "state_pixels"])
+def test_a_study_on_the_camera_cartpole_trains_a_cnn_with_the_history_beside_the_image(tmp_path, obs_mode):
+    out = tmp_path / "study"
+    kwargs = json.dumps({"continuous": True, "obs_mode": obs_mode, "image_size": 36})
+    cmd = [sys.executable, "-m", "remoteenv", "latency-study", "--env-kwargs", kwargs, "--out", str(out)]
+    cmd += ["--delays", "2", "--random-delays", "", "--seeds", "0", "--steps", "128", "--eval-episodes", "1"]
+    cmd += ["--workers", "1", "--rt-episodes", "2", "--no-plot"]
+    cmd += ["--ppo", json.dumps({"n_steps": 16, "batch_size": 64, "n_epochs": 1})]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "| 128/256 [" in done.stderr and "step/s" in done.stderr  # the bar counts training steps (2 runs x 128)
+    records = json.loads((out / "delay_effect.json").read_text())["records"]
+    assert sorted(r["variant"] for r in records) == ["history", "plain"]
+    assert all(len(r["returns"]) == 1 and r["returns"][0] >= 1 for r in records)
+    assert json.loads((out / "delay_effect.json").read_text())["references"] is None  # no LQR on pixels
+    twin = json.loads((out / "rt_replay.json").read_text())  # real time with pixels, replayed in lock-step
+    assert twin["policies"] and all(len(p["real_time"]["returns"]) == 2 for p in twin["policies"])
+
+
+def test_a_space_the_study_cannot_train_on_is_refused_before_the_study_starts(tmp_path):
+    out = tmp_path / "study"
+    kwargs = json.dumps({"continuous": True, "obs_mode": "pixels", "image_size": 24})
+    cmd = [sys.executable, "-m", "remoteenv", "latency-study", "--env-kwargs", kwargs, "--out", str(out)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    assert "latency-study cannot train on remoteenv/CartPole-v0" in done.stderr
+    assert "smaller than the 36x36 SB3's CNN takes" in done.stderr and '"image_size": 64' in done.stderr
+    assert not out.exists()  # nothing trained, nothing written

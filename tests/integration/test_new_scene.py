@@ -178,3 +178,36 @@ def test_names_and_directories_are_checked(tmp_path):
         write_package("ok", tmp_path / "busy")
     assert (tmp_path / "busy" / "file").read_text() == "mine"
     assert cli_main(["new-scene", "Bad", "--dir", str(tmp_path / "y")]) == 2
+
+
+def test_pixels_writes_a_camera_scene_whose_tests_read_the_registration(tmp_path, capsys):
+    pkg = tmp_path / "pkg"
+    assert cli_main(["new-scene", "pix_mass", "--dir", str(pkg), "--pixels"]) == 0
+    generated_tests = (pkg / "tests" / "test_pix_mass.py").read_text()
+    assert "(4,)" not in generated_tests and "200" not in generated_tests
+    assert 'offsamples="0" shadowsize="0"' in (pkg / "src" / "pix_mass" / "pix_mass.xml").read_text()
+    env = dict(os.environ, PYTHONPATH=ROOT)  # the package's pytest config puts src/ on the path
+    probe = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import gymnasium as gym, pix_mass; e = gym.make(pix_mass.ENV_ID); o, _ = e.reset(seed=0); "
+            "print(o.dtype, o.shape); e.close()",
+        ],
+        cwd=pkg,
+        env=dict(env, PYTHONPATH=os.pathsep.join([str(pkg / "src"), ROOT])),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert probe.stdout.strip() == "uint8 (64, 64, 3)", probe.stdout + probe.stderr
+    tests = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests"],
+        cwd=pkg,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert tests.returncode == 0, tests.stdout + tests.stderr
+    assert "4 passed" in tests.stdout

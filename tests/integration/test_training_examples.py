@@ -77,3 +77,30 @@ def test_sb3_ppo_on_a_package_of_your_own(tmp_path, scene_package):
     again = _run("train_sb3.py", [*args, "--eval-only"], tmp_path, [scene_package])
     assert again.returncode == 0, again.stderr[-3000:]
     assert again.stdout.splitlines()[-1] == out.stdout.splitlines()[-1]  # the saved model, evaluated alike
+
+
+@pytest.mark.parametrize(("obs_mode", "network"), [("pixels", "CnnPolicy"), ("state_pixels", "MultiInputPolicy")])
+def test_sb3_ppo_on_the_camera_cartpole(tmp_path, obs_mode, network):
+    pytest.importorskip("stable_baselines3")
+    kwargs = f'{{"obs_mode": "{obs_mode}", "image_size": 36}}'  # SB3's CNN takes 36x36 and larger
+    args = ["--steps", "64", "--n-steps", "32", "--num-envs", "2", "--eval-episodes", "1", "--save", "model.zip"]
+    out = _run("train_sb3.py", [*args, "--env-kwargs", kwargs], tmp_path, [])
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.startswith(f"{network} for observations")
+    assert "trained SB3 PPO on remoteenv/CartPole-v0 for 64 steps" in out.stdout
+    assert "evaluation (1 episodes, deterministic)" in out.stdout
+
+
+@pytest.mark.parametrize("obs_mode", ["pixels", "state_pixels"])
+def test_torch_ppo_on_the_camera_cartpole(tmp_path, obs_mode):
+    kwargs = f'{{"obs_mode": "{obs_mode}", "image_size": 36}}'
+    args = ["--budget", "128", "--num-envs", "2", "--rollout-steps", "64", "--eval-episodes", "1"]
+    out = _run("train_ppo.py", [*args, "--env-kwargs", kwargs, "--save", "cam.pt"], tmp_path, [])
+    assert out.returncode == 1, out.stderr[-3000:]  # 128 steps do not reach CartPole's target
+    assert "did NOT reach the target 475" in out.stdout
+    first = [line for line in out.stdout.splitlines() if line.startswith("evaluation")]
+    assert first, out.stdout
+    # The saved policy carries its env kwargs and its CNN: evaluated again alike.
+    again = _run("train_ppo.py", ["--eval-only", "--save", "cam.pt", "--eval-episodes", "1"], tmp_path, [])
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert [line for line in again.stdout.splitlines() if line.startswith("evaluation")] == first

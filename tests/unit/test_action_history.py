@@ -115,12 +115,88 @@ class MultiDiscreteActions(gym.Env):
 
 
 def test_unsupported_spaces_and_k_are_refused_clearly():
-    with pytest.raises(TypeError, match="Box observation spaces.*FlattenObservation"):
+    with pytest.raises(TypeError, match="Box and Dict observation spaces.*FlattenObservation"):
         ActionHistory(gym.make("Blackjack-v1"), k=1)
     with pytest.raises(TypeError, match="Box and Discrete action spaces, got MultiDiscrete"):
         ActionHistory(MultiDiscreteActions(), k=1)
     with pytest.raises(ValueError, match="k >= 0"):
         ActionHistory(gym.make("CartPole-v1"), k=-1)
+
+
+class ImageObs(gym.Env):
+    """Two-action env whose observation is an 8x6 uint8 image filled with the step count."""
+
+    observation_space = gym.spaces.Box(0, 255, (8, 6, 3), dtype=np.uint8)
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return np.zeros((8, 6, 3), dtype=np.uint8), {}
+
+    def step(self, action):
+        self.t += 1
+        return np.full((8, 6, 3), self.t, dtype=np.uint8), 1.0, False, self.t >= 3, {}
+
+
+class DictObs(ImageObs):
+    observation_space = gym.spaces.Dict(
+        {"state": gym.spaces.Box(-1, 1, (2,), dtype=np.float32), "pixels": ImageObs.observation_space}
+    )
+
+    def reset(self, *, seed=None, options=None):
+        image, info = super().reset(seed=seed)
+        return {"state": np.zeros(2, dtype=np.float32), "pixels": image}, info
+
+    def step(self, action):
+        image, *rest = super().step(action)
+        return ({"state": np.full(2, 0.5, dtype=np.float32), "pixels": image}, *rest)
+
+
+@pytest.mark.parametrize("env_class", [ImageObs, DictObs])
+def test_images_and_dicts_keep_the_action_features_as_a_separate_input(env_class):
+    env = ActionHistory(env_class(), k=2, include_latency=True)
+    space = env.observation_space
+    assert isinstance(space, gym.spaces.Dict) and space["pixels"] == ImageObs.observation_space
+    assert space["history"] == gym.spaces.Box(0.0, np.array([1, 1, 1, 1, np.inf], dtype=np.float32), dtype=np.float32)
+    obs, _ = env.reset(seed=0)
+    assert space.contains(obs) and not obs["history"].any()
+    obs, *_ = env.step(1)
+    obs, *_ = env.step(0)
+    np.testing.assert_array_equal(obs["history"], [0, 1, 1, 0, 0])  # one-hot 1 then 0, latency 0
+    assert (obs["pixels"] == 2).all() and space.contains(obs)  # the image untouched, still uint8
+    if env_class is DictObs:
+        np.testing.assert_array_equal(obs["state"], [0.5, 0.5])
+
+
+def test_dicts_with_a_history_key_or_nested_entries_are_refused():
+    class Clash(DictObs):
+        observation_space = gym.spaces.Dict({"history": gym.spaces.Box(-1, 1, (2,))})
+
+    class Nested(DictObs):
+        observation_space = gym.spaces.Dict({"a": gym.spaces.Dict({"b": gym.spaces.Box(-1, 1, (2,))})})
+
+    with pytest.raises(TypeError, match="without a 'history' key"):
+        ActionHistory(Clash(), k=1)
+    with pytest.raises(TypeError, match=r"flatten the nested entries \['a'\]"):
+        ActionHistory(Nested(), k=1)
+
+
+def test_vector_history_beside_images_in_every_autoreset_mode():
+    for mode in (gym.vector.AutoresetMode.NEXT_STEP, gym.vector.AutoresetMode.SAME_STEP):
+        envs = ActionHistoryVector(gym.vector.SyncVectorEnv([DictObs, DictObs], autoreset_mode=mode), k=1)
+        obs, _ = envs.reset(seed=0)
+        assert envs.observation_space.contains(obs)
+        for _ in range(3):
+            obs, _, _, truncated, infos = envs.step(np.array([1, 0]))
+        assert truncated.all() and envs.observation_space.contains(obs)
+        if mode == gym.vector.AutoresetMode.SAME_STEP:
+            assert not obs["history"].any()  # the next episode's first observation
+            np.testing.assert_array_equal(infos["final_obs"][0]["history"], [0, 1])
+            assert (infos["final_obs"][1]["pixels"] == 3).all()
+        else:
+            np.testing.assert_array_equal(obs["history"], [[0, 1], [1, 0]])
+        envs.close()
 
 
 # --- vector env ---------------------------------------------------------------------------------

@@ -96,3 +96,24 @@ def test_offered_commands_from_the_list_or_the_stepping_mode():
     assert lock_step.offers("step_batch") and lock_step.offers("reset_batch") and not lock_step.offers("timing")
     with pytest.raises(ProtocolError, match="'commands' must be strings"):
         parse_handshake({**REPLY, "commands": ["reset", 5]})
+
+
+def test_the_world_cost_hint_is_read_and_bounded():
+    reply = copy.deepcopy(REPLY)
+    assert parse_handshake(reply).world_cost_s is None  # optional
+    reply["metadata"]["world_cost_s"] = 6e-4
+    assert parse_handshake(reply).world_cost_s == 6e-4
+    for bad in (-1.0, 1e9, True, "fast"):
+        reply["metadata"]["world_cost_s"] = bad
+        with pytest.raises(ProtocolError, match="world_cost_s"):
+            parse_handshake(reply)
+
+
+def test_costly_worlds_get_up_to_four_processes_per_cpu(monkeypatch):
+    from remoteenv.agent.vector import vector_layout
+
+    monkeypatch.setattr(vector_layout.os, "cpu_count", lambda: 2)
+    layout = vector_layout.default_envs_per_process
+    assert layout(8) == layout(8, 12e-6) == layout(8, 50e-6) == 8  # microseconds of physics: one process
+    assert layout(16) == 8
+    assert layout(8, 6e-4) == 1 and layout(16, 6e-4) == 2 and layout(64, 6e-4) == 8  # camera images: 8 processes

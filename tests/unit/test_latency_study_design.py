@@ -113,3 +113,22 @@ def test_the_study_files_are_written_whole_and_readable_as_any_file_the_user_mak
     assert json.loads(path.read_text()) == {"records": [1, 2]}
     assert stat.S_IMODE(path.stat().st_mode) == 0o644
     assert [p.name for p in tmp_path.iterdir()] == ["delay_effect.json"]
+
+
+def test_the_study_picks_the_policy_from_the_space_and_refuses_what_it_cannot_train():
+    from gymnasium import spaces
+
+    from remoteenv.latency_study.spaces import policy_for, space_problem
+
+    image = spaces.Box(0, 255, (64, 64, 3), dtype=np.uint8)
+    state = spaces.Box(-1, 1, (4,), dtype=np.float32)
+    assert policy_for(state) == "MlpPolicy" and policy_for(image) == "CnnPolicy"
+    assert policy_for(spaces.Dict({"state": state, "pixels": image})) == "MultiInputPolicy"
+    box, discrete = spaces.Box(-1, 1, (1,)), spaces.Discrete(2)
+    for ok in (state, image, spaces.Dict({"state": state, "pixels": image})):
+        assert space_problem(ok, box) is None and space_problem(ok, discrete) is None
+    assert "Box or Discrete action space" in space_problem(state, spaces.MultiDiscrete([2, 2]))
+    assert "flatten them into Boxes" in space_problem(spaces.Dict({"a": spaces.Tuple([state])}), box)
+    assert "rename that entry" in space_problem(spaces.Dict({"history": state}), box)
+    assert "smaller than the 36x36" in space_problem(spaces.Box(0, 255, (24, 24, 3), dtype=np.uint8), box)
+    assert "flat Dict" in space_problem(spaces.Tuple([state]), box)

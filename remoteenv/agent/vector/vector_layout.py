@@ -13,9 +13,27 @@ from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launch.sim_group import SimLayout
 from remoteenv.wire.handshake import Handshake
 
+#: A world that costs its sim more than this per tick (wall seconds on one
+#: thread, the handshake's ``world_cost_s``) is costly: camera rendering, not
+#: microseconds of physics (Reacher 11 us, the hexapod 50 us; CartPole's
+#: 64x64 camera 260-600 us measured).
+COSTLY_WORLD_S = 100e-6
 
-def default_envs_per_process(num_envs: int) -> int:
-    """K when ``envs_per_process`` is not given: at least 8 worlds per process,
+
+def default_envs_per_process(num_envs: int, world_cost_s: float | None = None) -> int:
+    """K when ``envs_per_process`` is not given.
+
+    Costly worlds (``world_cost_s`` above :data:`COSTLY_WORLD_S`, e.g. camera
+    observations: a process renders its worlds one after the other on one
+    CPU, while the physics of a batch runs on threads): up to four processes
+    per CPU, ``ceil(N / (4 * cpu_count))`` worlds each (8 worlds of 64x64
+    pixels on 2 CPUs: 8 processes of 1; 16: 8 of 2). Measured on the 2-CPU
+    machine under load from other jobs (three runs, 8 worlds of 64x64): the CPU
+    time per step hardly depends on K (rendering is 97% of a sim's step), so
+    the split that keeps every CPU rendering, and takes the larger share of a
+    contended machine, was fastest: K = 1 before K = 2, 4 and 8 in every run.
+
+    Otherwise at least 8 worlds per process,
     and no more processes than CPUs: ``max(8, ceil(N / cpu_count))``, capped at N.
 
     Every extra process costs a round trip per vector step (on a virtual
@@ -27,7 +45,10 @@ def default_envs_per_process(num_envs: int) -> int:
     fastest in two (K = 8 beat K = 16 by 1.15x); K = 1 was slowest at every
     N > 1.
     """
-    per_cpu = -(-num_envs // max(1, os.cpu_count() or 1))
+    cpus = max(1, os.cpu_count() or 1)
+    if world_cost_s is not None and world_cost_s > COSTLY_WORLD_S:
+        return max(1, -(-num_envs // (4 * cpus)))
+    per_cpu = -(-num_envs // cpus)
     return min(num_envs, max(8, per_cpu))
 
 
@@ -104,4 +125,4 @@ def check_sims(handshakes: Sequence[Handshake], slices: Sequence[tuple[int, int]
         )
 
 
-__all__ = ["check_sims", "default_envs_per_process", "plan_layout", "world_slices"]
+__all__ = ["COSTLY_WORLD_S", "check_sims", "default_envs_per_process", "plan_layout", "world_slices"]

@@ -12,6 +12,8 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 
 from remoteenv.sim.scene.batch_result import BatchResult
+from remoteenv.sim.scene.camera_rig import CameraRig
+from remoteenv.sim.scene.cameras import CameraObservation
 from remoteenv.sim.scene.model_file import model_file
 from remoteenv.sim.scene.obs_check import check_observation
 from remoteenv.sim.scene.per_world_hooks import post_each, prepare_each
@@ -34,6 +36,9 @@ class BaseEnv:
     model.opt.timestep`` seconds of simulated time. The sim runtime may also
     drive the pieces itself (real-time mode applies an action at the substep
     where it arrives), so subclasses must keep all per-step logic in these hooks.
+
+    Cameras (``cameras=``, a :class:`~remoteenv.sim.scene.cameras.CameraObservation`):
+    the hooks keep returning the state obs; :meth:`observe` adds the images (docs/cameras.md).
 
     Truncation (episode time limits) is the agent side's business
     (``gymnasium.make``'s ``max_episode_steps``); ``post_step`` reports only
@@ -80,6 +85,7 @@ class BaseEnv:
         render_mode: str | None = None,
         width: int = 480,
         height: int = 480,
+        cameras: CameraObservation | None = None,
     ) -> None:
         if frame_skip < 1:
             raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
@@ -91,8 +97,12 @@ class BaseEnv:
         self.model = mujoco.MjModel.from_xml_path(model_file(os.fspath(model_path), type(self).__name__))
         self._data = mujoco.MjData(self.model)
         self.frame_skip = int(frame_skip)
-        self.observation_space = observation_space
+        #: What the hooks return (the state); the observation adds the cameras' images to it.
+        self.state_space = observation_space
+        self.observation_space = observation_space if cameras is None else cameras.space(observation_space)
         self.action_space = action_space
+        #: The renderers of the declared cameras (None: no camera in the observation).
+        self.camera_rig = None if cameras is None else CameraRig(self.model, cameras, type(self).__name__)
         self.render_mode = render_mode
         self.width, self.height = int(width), int(height)
         self._renderer: mujoco.Renderer | None = None
@@ -209,7 +219,7 @@ class BaseEnv:
         mujoco.mj_resetData(self.model, self._data)
         obs, info = unpack_reset(self.reset_model(options), scene=type(self).__name__)
         self._check_obs(obs, "reset_model")
-        return obs, info
+        return self.observe(obs), info
 
     def finish_tick(self, action: Any) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
         """:meth:`post_step`, its result checked: four values, a scalar reward,
@@ -219,11 +229,19 @@ class BaseEnv:
             self.post_step(action), scene=type(self).__name__, hook="post_step", finite=self.check_finite
         )
         self._check_obs(result[0], "post_step")
-        return result
+        if self.camera_rig is None:
+            return result
+        return (self.observe(result[0]), *result[1:])
+
+    def observe(self, state: Any) -> Any:
+        """The observation now from the hooks' state obs: ``state``, or with cameras composed with their images."""
+        rig = self.camera_rig
+        return state if rig is None else rig.observation.compose(state, rig.pixels(self.data))
 
     def _check_obs(self, obs: Any, hook: str) -> None:
         scene = type(self).__name__
-        check_observation(self.observation_space, obs, scene=scene, hook=hook, bounds=self.check_obs_bounds)
+        space = self.observation_space if self.camera_rig is None else self.state_space
+        check_observation(space, obs, scene=scene, hook=hook, bounds=self.check_obs_bounds)
         if self.check_finite:
             check_finite_obs(obs, scene=scene, hook=hook)
 
@@ -265,7 +283,9 @@ class BaseEnv:
         return self._renderer.render().copy()
 
     def close(self) -> None:
-        """Release the renderer. Called once when the sim process stops."""
+        """Release the renderers. Called once when the sim process stops."""
+        if self.camera_rig is not None:
+            self.camera_rig.close()
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None

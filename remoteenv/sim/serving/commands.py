@@ -17,6 +17,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.scene.world_cost import world_cost
 from remoteenv.sim.stepping.stepping import Stepping
 from remoteenv.sim.transport.channels import Channel
 from remoteenv.sim.transport.checks import (
@@ -99,10 +100,18 @@ class Commands:
                 "dt": float(env.dt),
                 "timestep": float(env.model.opt.timestep),
                 "frame_skip": env.frame_skip,
+                "world_cost_s": self._world_cost(),
             },
             "stepping": self._worlds[0].describe(),
             "commands": list(self.advertised),
         }
+
+    def _world_cost(self) -> float:
+        """World 0's cost per tick (:func:`~remoteenv.sim.scene.world_cost.world_cost`), measured once."""
+        cost = getattr(self, "_cost", None)
+        if cost is None:
+            cost = self._cost = world_cost(self.envs[0])
+        return cost
 
     def reset(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
         world = world_index(msg, len(self.envs))

@@ -162,10 +162,12 @@ class BatchCommands:
                 stepped = [j for j in range(n) if ops[j] != OP_RESET]
                 picked = actions[stepped]
                 stepped_worlds = [worlds[j] for j in stepped]
-            batch = self.stepper.step(stepped_worlds, picked)
+            # A plain step answered through the region renders camera images straight into it.
+            lane = self.lane
+            rows = lane.obs_rows(n) if all_step and lane is not None and (seq or shared) else None
+            batch = self.stepper.step(stepped_worlds, picked, rows)
             resets = not all_step or OP_STEP_RESET in ops or (OP_STEP_AUTORESET in ops and batch.terminated.any())
             if not resets:
-                lane = self.lane
                 if seq and lane is not None:
                     done, reply = lane.answer(seq, batch)
                     if done:

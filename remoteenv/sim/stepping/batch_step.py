@@ -22,6 +22,7 @@ import numpy as np
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.scene.batch_result import BatchResult
+from remoteenv.sim.scene.camera_rig import observe_worlds
 from remoteenv.sim.scene.step_check import check_batch
 from remoteenv.sim.stepping.batch_physics import PhysicsThreads, default_threads
 from remoteenv.sim.stepping.batch_worlds import BatchedWorlds, StackedWorlds, available, batch_state
@@ -68,9 +69,12 @@ class WorldsStepper:
         #: Every world, with the batch's state (the common request: built once).
         self._every = StackedWorlds(self.envs, batch_state(self.batched, None)) if self.batched is not None else None
 
-    def step(self, worlds: Sequence[int], actions: Any) -> BatchResult:
+    def step(self, worlds: Sequence[int], actions: Any, obs_out: np.ndarray | None = None) -> BatchResult:
         """One tick of worlds ``worlds`` (indices, in order) with ``actions[j]``
-        for ``worlds[j]`` (checked and stacked, see :meth:`BaseEnv.prepare_steps`)."""
+        for ``worlds[j]`` (checked and stacked, see :meth:`BaseEnv.prepare_steps`).
+        ``obs_out``: where camera images alone (one camera, no state) may be
+        rendered in place, e.g. the shared region's rows (see
+        :func:`~remoteenv.sim.scene.camera_rig.observe_worlds`)."""
         every = list(worlds) == self._all
         batched = self.batched
         if batched is not None:
@@ -101,6 +105,8 @@ class WorldsStepper:
             finite=env.check_finite,
         )
         self._check_obs(result.obs)
+        if env.camera_rig is not None:
+            result.obs = observe_worlds(envs, result.obs, obs_out)
         return result
 
     def _check_obs(self, obs: Any) -> None:

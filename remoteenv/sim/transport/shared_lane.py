@@ -205,15 +205,24 @@ class SharedLane:
             return False, {"shared": True, "final": [], "info_layout": layout}
         return True, ({"region": True} if doorbell.reply(seq, self._info_version) else None)
 
+    def obs_rows(self, n: int) -> np.ndarray | None:
+        """The region's observation rows ``0 .. n-1``, where a step may write its
+        observations directly (camera images rendered in place: no copy); None
+        before the region exists."""
+        arrays = self._arrays
+        return None if arrays is None or not 0 < n <= len(arrays.obs) else arrays.obs[:n]
+
     def _put_arrays(self, batch: BatchResult) -> bool:
         arrays = self._arrays
         obs = batch.obs
         if arrays is None or not isinstance(obs, np.ndarray):
             return False
         n = len(batch.reward)
-        if obs.dtype != arrays.obs.dtype or obs.shape != arrays.obs[:n].shape:
+        rows = arrays.obs[:n]
+        if obs.dtype != rows.dtype or obs.shape != rows.shape:
             return False
-        arrays.obs[:n] = obs
+        if obs.ctypes.data != rows.ctypes.data:  # not written in place (see obs_rows)
+            rows[...] = obs
         arrays.reward[:n] = batch.reward
         arrays.terminated[:n] = batch.terminated
         arrays.truncated[:n] = False

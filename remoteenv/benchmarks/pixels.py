@@ -1,0 +1,233 @@
+"""``python -m remoteenv bench --pixels``: camera observations in vector envs.
+
+Agent side; it launches sims. The camera CartPole (``obs_mode="pixels"``,
+uint8 images rendered by MuJoCo's offscreen renderer, without MSAA and
+shadows) stepped as ``RemoteVectorEnv`` (its default layout, and the splits
+given with ``--pixels-k``) next to Gymnasium's ``AsyncVectorEnv`` and
+``SyncVectorEnv`` of the same task written as an in-process env
+(:mod:`remoteenv.benchmarks.in_process`: the same MJCF, hooks and renderer
+settings), at each ``--pixels-cases`` (image side x worlds; default 64x8,
+84x8, 64x16). Per case the contenders are built, then timed in
+``--pixels-rounds`` alternating rounds of ``--pixels-duration`` s, so load
+that comes and goes hits them alike; medians and ratios are printed, and the
+layout the default chose. ``--hog`` runs CPU hogs beside it; ``--json PATH``
+also writes the results. First it prints the milliseconds per 64x64 frame at
+each render quality (:mod:`remoteenv.benchmarks.render_cost`). It measures
+and prints; it asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import os
+import platform
+import statistics
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from remoteenv.benchmarks.anchors import CpuHog
+from remoteenv.benchmarks.batched import Contender
+from remoteenv.benchmarks.in_process import make_in_process
+from remoteenv.benchmarks.render_cost import format_cost, render_cost
+from remoteenv.benchmarks.report import emit, progress_log
+
+REMOTE_ID = "remoteenv/CartPole-v0"
+#: (image side, worlds) measured by default; the first is the one with targets.
+DEFAULT_CASES = "64x8,84x8,64x16"
+#: (ratio, numerator, denominator, target at the first case)
+TARGETS = [
+    ("RemoteVectorEnv / AsyncVectorEnv", "RemoteVectorEnv", "AsyncVectorEnv", 1.5),
+    ("RemoteVectorEnv / SyncVectorEnv", "RemoteVectorEnv", "SyncVectorEnv", 1.2),
+]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("pixels benchmark (--pixels)")
+    g.add_argument(
+        "--pixels-cases",
+        default=DEFAULT_CASES,
+        help=f"comma-separated SIDExWORLDS cases (default {DEFAULT_CASES}; targets at the first)",
+    )
+    g.add_argument("--pixels-duration", type=float, default=1.0, help="seconds per contender per round (default 1)")
+    g.add_argument("--pixels-rounds", type=int, default=3, help="alternating rounds; medians shown (default 3)")
+    g.add_argument(
+        "--pixels-k",
+        default="",
+        help="also time RemoteVectorEnv with these envs_per_process, comma-separated (default: only the default layout)",
+    )
+
+
+def parse_cases(text: str) -> list[tuple[int, int]]:
+    """``"64x8,84x8"`` -> ``[(64, 8), (84, 8)]``; exits with a message on anything else."""
+    cases = []
+    for part in text.split(","):
+        side, _, worlds = part.strip().partition("x")
+        try:
+            case = (int(side), int(worlds))
+        except ValueError:
+            raise SystemExit(f"--pixels-cases must be SIDExWORLDS items like 64x8, got {part!r}") from None
+        if min(case) < 1:
+            raise SystemExit(f"--pixels-cases needs positive sides and worlds, got {part!r}")
+        cases.append(case)
+    return cases
+
+
+def _actions(n: int) -> list[np.ndarray]:
+    rng = np.random.default_rng(0)
+    return [rng.integers(0, 2, size=n) for _ in range(64)]
+
+
+def _contender(name: str, env: Any) -> Contender:
+    n = env.num_envs
+    actions = _actions(n)
+    env.reset(seed=0)
+    return Contender(name, n, env, lambda i: env.step(actions[i & 63]), n)
+
+
+def contenders(side: int, n: int, ks: list[int]) -> list[Contender]:
+    """The contenders of one case (built; the caller closes them)."""
+    import remoteenv  # noqa: F401  (registers the ids)
+
+    kwargs: dict[str, Any] = {"obs_mode": "pixels", "image_size": side}
+    limit = gym.spec(REMOTE_ID).max_episode_steps
+    make = functools.partial(make_in_process, "cartpole", limit, **kwargs)
+    built = []
+    try:
+        built.append(_contender("SyncVectorEnv", gym.vector.SyncVectorEnv([make] * n)))
+        # spawn: a forked worker would inherit this process's EGL state (the render
+        # cost and SyncVectorEnv's renderers) and hang in its first render.
+        built.append(_contender("AsyncVectorEnv", gym.vector.AsyncVectorEnv([make] * n, context="spawn")))
+        remote = gym.make_vec(REMOTE_ID, num_envs=n, vectorization_mode="vector_entry_point", **kwargs)
+        built.append(_contender("RemoteVectorEnv", remote))
+        for k in ks:
+            env = gym.make_vec(
+                REMOTE_ID, num_envs=n, vectorization_mode="vector_entry_point", envs_per_process=k, **kwargs
+            )
+            built.append(_contender(f"RemoteVectorEnv K={k}", env))
+    except BaseException:
+        for c in built:
+            c.close()
+        raise
+    return built
+
+
+def measure(
+    cases: list[tuple[int, int]],
+    duration: float,
+    rounds: int,
+    hog: int,
+    ks: list[int],
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Every case's contenders in alternating rounds; ``{"render_cost_ms", "rows", "ratios", ...}``."""
+    log("render cost (this process, no sims):")
+    costs = render_cost(64, rounds=3, frames=5)
+    log(format_cost(costs, 64))
+    rows: list[dict[str, Any]] = []
+    with CpuHog(hog) as hogs:
+        for side, n in cases:
+            log(f"{side}x{side} pixels, N={n}: building ...")
+            built = contenders(side, n, ks)
+            try:
+                remote = next(c for c in built if c.name == "RemoteVectorEnv")
+                k = int(remote.env.envs_per_process)
+                for c in built:
+                    c.measure(min(0.2, duration), hogs.pids)  # warm-up
+                    c.rates.clear()
+                    c.cpu_us.clear()
+                for r in range(rounds):
+                    for c in built:
+                        c.measure(duration, hogs.pids)
+                    log(f"  round {r + 1}: " + ", ".join(f"{c.name} {c.rates[-1]:.0f}" for c in built))
+                for c in built:
+                    rows.append(
+                        {
+                            "side": side,
+                            "num_envs": n,
+                            "name": c.name,
+                            "envs_per_process": k if c.name == "RemoteVectorEnv" else None,
+                            "steps_per_s": statistics.median(c.rates),
+                            "rates": c.rates,
+                            "cpu_us_per_step": statistics.median(c.cpu_us),
+                        }
+                    )
+            finally:
+                for c in built:
+                    c.close()
+    return {
+        "machine": {
+            "cpus": os.cpu_count(),
+            "platform": platform.platform(),
+            "python": platform.python_version(),
+            "load_avg_at_end": list(os.getloadavg()),
+            "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS"),
+        },
+        "duration_s": duration,
+        "rounds": rounds,
+        "hogs": hog,
+        "render_cost_ms": costs,
+        "rows": rows,
+        "ratios": ratios(rows, cases[0] if cases else None),
+    }
+
+
+def ratios(rows: list[dict[str, Any]], targeted: tuple[int, int] | None) -> list[dict[str, Any]]:
+    """RemoteVectorEnv over Async and Sync per case (targets at ``targeted``)."""
+
+    def rate(side: int, n: int, name: str) -> float | None:
+        return next((r["steps_per_s"] for r in rows if (r["side"], r["num_envs"], r["name"]) == (side, n, name)), None)
+
+    out = []
+    for side, n in sorted({(r["side"], r["num_envs"]) for r in rows}, key=lambda c: (c[1], c[0])):
+        for what, num, den, target in TARGETS:
+            a, b = rate(side, n, num), rate(side, n, den)
+            if a and b:
+                out.append(
+                    {
+                        "case": f"{side}x{side} N={n}",
+                        "ratio": what,
+                        "value": a / b,
+                        "target": target if (side, n) == targeted else None,
+                    }
+                )
+    return out
+
+
+def format_table(result: dict[str, Any]) -> str:
+    lines = [format_cost(result["render_cost_ms"], 64), ""]
+    lines.append(f"{'case':14s} {'contender':24s} {'K':>3s} {'steps/s':>9s} {'CPU us/step':>12s}")
+    for r in result["rows"]:
+        k = "" if r["envs_per_process"] is None else str(r["envs_per_process"])
+        case = f"{r['side']}x{r['side']} N={r['num_envs']}"
+        lines.append(f"{case:14s} {r['name']:24s} {k:>3s} {r['steps_per_s']:9.0f} {r['cpu_us_per_step']:12.0f}")
+    lines.append("")
+    lines.append(f"{'case':14s} {'ratio':36s} {'value':>6s} {'target':>9s}")
+    for r in result["ratios"]:
+        target = "" if r["target"] is None else f">={r['target']:.1f} {'ok' if r['value'] >= r['target'] else 'MISS'}"
+        lines.append(f"{r['case']:14s} {r['ratio']:36s} {r['value']:6.2f} {target:>9s}")
+    m = result["machine"]
+    lines.append("")
+    lines.append(
+        f"machine: {m['cpus']} CPUs, {m['platform']}; load average at end {m['load_avg_at_end'][0]:.2f}; "
+        f"{result['rounds']} rounds x {result['duration_s']:g} s per contender; CPU hogs: {result['hogs']}; "
+        f"LP_NUM_THREADS in this process: {m['LP_NUM_THREADS'] or 'unset'}"
+    )
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    cases = parse_cases(args.pixels_cases)
+    ks = [int(k) for k in args.pixels_k.split(",") if k.strip()] if args.pixels_k else []
+    if args.pixels_duration <= 0 or args.pixels_rounds < 1 or args.hog < 0 or any(k < 1 for k in ks):
+        raise SystemExit("--pixels-duration must be > 0 s, --pixels-rounds >= 1, --hog >= 0, --pixels-k >= 1")
+    log = progress_log(args.json)
+    result = measure(cases, args.pixels_duration, args.pixels_rounds, args.hog, ks, log=log)
+    emit(result, args.json, format_table)
+    return 0
+
+
+__all__ = ["measure", "parse_cases", "ratios"]
