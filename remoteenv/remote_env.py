@@ -48,6 +48,9 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
         render_mode: ``"rgb_array"`` renders offscreen in the sim process.
         real_time: run the sim on a paced wall clock (see docs/real-time.md).
         real_time_factor: simulated seconds per wall-clock second.
+        real_time_mode: with ``real_time``, the regime: ``"elastic"`` (default:
+            an action takes effect at the next physics substep) or
+            ``"fixed_step"`` (rtgym's: at the next control-tick boundary).
         action_delay: lock-step; an action takes effect this many ticks later:
             an int, or a :mod:`remoteenv.delays` spec in ticks (e.g.
             ``Uniform(0, 3)``), drawn per step from a stream seeded by
@@ -128,6 +131,7 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
         *,
         real_time: bool = False,
         real_time_factor: float = 1.0,
+        real_time_mode: str = "elastic",
         action_delay: int | DelaySpec = 0,
         obs_delay: int | DelaySpec = 0,
         link_delay: float | DelaySpec | None = None,
@@ -178,6 +182,7 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
             render_mode=render_mode,
             real_time=real_time,
             real_time_factor=real_time_factor,
+            real_time_mode=real_time_mode,
             action_delay=action_delay,
             obs_delay=obs_delay,
             link_delay=link_delay,

@@ -72,8 +72,8 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         max_episode_steps: truncate an episode after this many steps (what
             ``TimeLimit`` does for single envs; ``make_vec`` passes the spec's).
         render_mode: ``"rgb_array"``: :meth:`render` returns one frame per world.
-        real_time, real_time_factor, action_delay, obs_delay, link_delay, action_delivery,
-        obs_delivery, delayed_rewards, transport, timeout,
+        real_time, real_time_factor, real_time_mode, action_delay, obs_delay, link_delay,
+            action_delivery, obs_delivery, delayed_rewards, transport, timeout,
         startup_timeout, call_timeouts, bind_host, curve: as for
             :class:`remoteenv.OpenAIRemoteEnv`; ``timeout`` (or the call's entry
             in ``call_timeouts``) bounds the wait for all replies of one vector call;
@@ -126,6 +126,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         render_mode: str | None = None,
         real_time: bool = False,
         real_time_factor: float = 1.0,
+        real_time_mode: str = "elastic",
         action_delay: int | DelaySpec = 0,
         obs_delay: int | DelaySpec = 0,
         link_delay: float | DelaySpec | None = None,
@@ -184,6 +185,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
             render_mode=render_mode,
             real_time=real_time,
             real_time_factor=real_time_factor,
+            real_time_mode=real_time_mode,
             action_delay=action_delay,
             obs_delay=obs_delay,
             link_delay=link_delay,

@@ -25,6 +25,7 @@ from remoteenv.cli.arguments import (
     positive_factor,
     positive_int,
 )
+from remoteenv.wire.real_time_modes import ELASTIC, REAL_TIME_MODES
 
 _WATCH_S = 0.2
 
@@ -59,6 +60,7 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--curve", action="store_true", help="encrypt with ZMQ CURVE even on loopback")
     p.add_argument("--real-time", action="store_true", help="run the sims on a paced wall clock")
+    p.add_argument("--real-time-mode", choices=REAL_TIME_MODES, default=ELASTIC, help="with --real-time: the regime")
     p.add_argument(
         "--real-time-factor",
         type=positive_factor,
@@ -118,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
             transport=args.transport,
             real_time=args.real_time,
             real_time_factor=args.real_time_factor,
+            real_time_mode=args.real_time_mode,
             action_delay=args.action_delay,
             bind_host=args.bind_host,
             curve=True if args.curve else None,

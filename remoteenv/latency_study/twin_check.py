@@ -1,12 +1,18 @@
 """The study's real-time check: its trained policies run in real time with a
-think time, and in lock-step replaying the latencies each action had
-(:mod:`remoteenv.latency_twin`); the two return distributions are compared.
+think time, each episode is replayed in its exact twin
+(:mod:`remoteenv.latency_twin`), and every episode is reported identical or
+with the first step at which it differs.
 
 Agent side. Which policies: the delay-unaware ones trained without delay
 (``plain``, constant 0) and the ones trained with the actions in flight at
 the smallest non-zero constant delay (``history``), one per seed. A policy
 whose file is missing (a resumed study) is trained again first: lock-step
 training repeats from its seed.
+
+Returns are reported twice, on separate lines, and their scales differ: a
+real-time step sums the rewards of every tick it lasted (a slow agent's
+step spans several ticks), while the lock-step return (the same policy in
+its training env, same seeds and step cap) counts one tick per step.
 """
 
 from __future__ import annotations
@@ -15,8 +21,10 @@ import os
 from collections.abc import Callable
 from typing import Any
 
+import gymnasium as gym
+
 from remoteenv.latency_study.design import Cell, StudyConfig
-from remoteenv.latency_study.training import TrainedPolicy, policy_path, train
+from remoteenv.latency_study.training import TrainedPolicy, evaluate, make_eval_env, policy_path, train
 from remoteenv.wrappers import ActionHistory
 
 #: Think time before each real-time action: uniform in this range, in control ticks.
@@ -44,6 +52,15 @@ def load_or_train(config: StudyConfig, cell: Cell, policy_dir: str) -> TrainedPo
     return TrainedPolicy.load(path)
 
 
+def lock_step_returns(config: StudyConfig, cell: Cell, policy: TrainedPolicy, episodes: int, seed: int) -> list[float]:
+    """``policy``'s returns in its lock-step eval env, episode ``e`` from ``seed + e``, at most ``MAX_STEPS`` steps."""
+    env = gym.wrappers.TimeLimit(make_eval_env(config, cell), MAX_STEPS)
+    try:
+        return evaluate(env, policy, episodes, seed)
+    finally:
+        env.close()
+
+
 def run_twin_check(
     config: StudyConfig,
     policy_dir: str,
@@ -52,37 +69,59 @@ def run_twin_check(
     max_steps: int = MAX_STEPS,
     progress: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
-    """Compare real time and its lock-step replay for each of :func:`checked_cells`'
-    policies; the map written to ``rt_replay.json``."""
-    from remoteenv.latency_twin import compare_real_time_and_replay, compare_returns
+    """Run each of :func:`checked_cells`' policies in real time, replay every
+    episode in its exact twin and compare step by step; the map written to
+    ``rt_replay.json``: per policy the comparison
+    (:func:`~remoteenv.latency_twin.compare_real_time_and_replay`) and
+    ``lock_step_returns``; ``identical``/``total``/``steps`` over all."""
+    from remoteenv.latency_twin import compare_real_time_and_replay
 
+    say = progress or (lambda _line: None)
     results = []
     for i, cell in enumerate(checked_cells(config)):
         policy = load_or_train(config, cell, policy_dir)
         k = cell.history_length
         wrap = (lambda env, k=k: ActionHistory(env, k)) if k else None
+        seed = config.eval_seed + 1000 * i
         result = compare_real_time_and_replay(
             policy,
             config.env_id,
             config.env_kwargs,
             think_ticks=think_ticks,
             episodes=episodes,
-            seed=config.eval_seed + 1000 * i,
+            seed=seed,
             max_episode_steps=max_steps,
             wrap=wrap,
         )
-        results.append({"variant": cell.variant, "trained_delay": cell.delay, "seed": cell.seed, **result})
-        if progress is not None:
-            c = result["comparison"]
-            progress(
-                f"{cell.label()}: real time {c['real_time_mean']:.1f}, replay {c['replay_mean']:.1f}, {c['verdict']}"
-            )
-    pairs = [(a, b) for r in results for a, b in zip(r["real_time"]["returns"], r["replay"]["returns"])]
+        lock = lock_step_returns(config, cell, policy, episodes, seed)
+        results.append(
+            {
+                "variant": cell.variant,
+                "trained_delay": cell.delay,
+                "seed": cell.seed,
+                **result,
+                "lock_step_returns": lock,
+            }
+        )
+        say(f"{cell.label()}: {result['identical']} of {result['total']} episodes identical in the exact twin")
+        for e, row in enumerate(result["episodes"]):
+            diff = row["first_difference"]
+            say(f"  episode {e}: " + ("identical" if diff is None else f"first differs at step {diff['step']}"))
+        say(f"  real-time returns: {_returns(result['real_time']['returns'])}")
+        say(f"  lock-step returns: {_returns(lock)}")
+        say(
+            f"  (scales differ: a real-time step sums the ticks it lasted; lock-step counts one tick per step, {max_steps} at most)"
+        )
     return {
-        "pooled": compare_returns([a for a, _ in pairs], [b for _, b in pairs]) if len(pairs) >= 2 else None,
         "think_ticks": list(think_ticks),
         "max_steps": max_steps,
         "episodes_per_policy": episodes,
         "policies": results,
-        "all_equivalent": all(r["comparison"]["verdict"] == "equivalent" for r in results),
+        "identical": sum(r["identical"] for r in results),
+        "total": sum(r["total"] for r in results),
+        "steps": sum(r["steps"] for r in results),
     }
+
+
+def _returns(values: list[float]) -> str:
+    return ", ".join(f"{v:g}" for v in values)

@@ -1,93 +1,20 @@
-"""Recording a real-time run's latencies as its twin's traces (see :mod:`remoteenv.latency_twin`)."""
+"""Recording a real-time run for its twins (see :mod:`remoteenv.latency_twin`): the
+substep at which each action took effect (the exact twin), the latencies (the
+rounded trace twin), and a fingerprint of every observation."""
 
 from __future__ import annotations
 
+import math
 import os
-from dataclasses import dataclass, field
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
-import numpy as np
 
-from remoteenv.latency_twin.trace import ROUNDINGS, twin_latency, twin_values, write_trace_file
-from remoteenv.wire.delays.delays import Trace
-
-
-@dataclass
-class RecordedEpisode:
-    """One real-time episode, as its twin needs it and as it went.
-
-    Attributes:
-        seed: the seed of this episode's reset, or of the last seeded reset
-            before it (None: never seeded).
-        resets_after_seed: unseeded resets from that seeded reset up to and
-            including this episode's (0 when this episode's reset had the
-            seed). The twin repeats them to reach the same scene RNG state
-            (the scene must draw from its RNG only when it resets, as the
-            shipped scenes do).
-        ticks_elapsed: each step's ``info["ticks_elapsed"]``.
-        latency_ticks: each step's ``info["latency_ticks"]`` (None when the
-            action never took effect).
-        rewards: each step's reward (summed over its ticks by the sim).
-        terminated, truncated: how the episode ended (both False if a reset
-            cut it short).
-        rounding: the default of :meth:`values` and :meth:`trace`.
-    """
-
-    seed: int | None
-    resets_after_seed: int
-    ticks_elapsed: list[int] = field(default_factory=list)
-    latency_ticks: list[float | None] = field(default_factory=list)
-    rewards: list[float] = field(default_factory=list)
-    terminated: bool = False
-    truncated: bool = False
-    rounding: str = "nearest"
-
-    @property
-    def steps(self) -> int:
-        """Real-time steps (decisions) of the episode."""
-        return len(self.ticks_elapsed)
-
-    @property
-    def ticks(self) -> int:
-        """Control ticks the episode ran: the length of its trace."""
-        return int(sum(self.ticks_elapsed))
-
-    @property
-    def episode_return(self) -> float:
-        return float(sum(self.rewards))
-
-    def values(self, rounding: str | None = None) -> list[int]:
-        """The twin's trace values (:func:`~remoteenv.latency_twin.twin_values`)."""
-        return twin_values(self.ticks_elapsed, self.latency_ticks, rounding or self.rounding)
-
-    def trace(self, rounding: str | None = None) -> Trace:
-        """The twin's action delay: ``Trace(values)`` in ticks."""
-        return Trace(self.values(rounding))
-
-    def summary(self, rounding: str | None = None) -> dict[str, Any]:
-        """Plain figures of the episode (JSON-able); latencies in ticks."""
-        rounding = rounding or self.rounding
-        pairs = [(t, v) for t, v in zip(self.ticks_elapsed, self.latency_ticks) if v is not None]
-        real = np.array([v for _, v in pairs], dtype=np.float64)
-        twin = np.array([twin_latency(t, v, rounding) for t, v in pairs], dtype=np.float64)
-        return {
-            "seed": self.seed,
-            "resets_after_seed": self.resets_after_seed,
-            "steps": self.steps,
-            "ticks": self.ticks,
-            "return": self.episode_return,
-            "terminated": self.terminated,
-            "truncated": self.truncated,
-            "late_steps": int(sum(t > 1 for t in self.ticks_elapsed)),
-            "unapplied_steps": int(sum(v is None for v in self.latency_ticks)),
-            "mean_latency_ticks": float(real.mean()) if real.size else None,
-            "max_latency_ticks": float(real.max()) if real.size else None,
-            "rounding": rounding,
-            "mean_twin_latency_ticks": float(twin.mean()) if twin.size else None,
-            # How much later (positive) or earlier the twin applies each action, on average.
-            "mean_twin_shift_ticks": float((twin - real).mean()) if real.size else None,
-        }
+from remoteenv.agent.launch.restart import INFO_RESTARTED
+from remoteenv.latency_twin.digest import obs_digest
+from remoteenv.latency_twin.episode import RecordedEpisode
+from remoteenv.latency_twin.recording_file import save_recording
+from remoteenv.latency_twin.trace import ROUNDINGS, write_trace_file
 
 
 class EpisodeLog:
@@ -101,32 +28,73 @@ class EpisodeLog:
             after an episode ended).
     """
 
-    def __init__(self, rounding: str = "nearest") -> None:
+    def __init__(self, rounding: str = "nearest", mode: str = "elastic") -> None:
         if rounding not in ROUNDINGS:
             raise ValueError(f"rounding must be one of {ROUNDINGS}, got {rounding!r}")
         self.rounding = rounding
+        self.mode = mode
         self.episodes: list[RecordedEpisode] = []
         self.current: RecordedEpisode | None = None
         self._seed: int | None = None
         self._since_seed = 0
+        self._tainted: str | None = None  # why resets since the last seeded one cannot be repeated
 
-    def start(self, seed: int | None) -> None:
-        """A reset, with its seed (None: unseeded); an episode in progress is kept, cut short."""
+    def start(self, seed: int | None, obs: Any = None, info: dict[str, Any] | None = None, options: Any = None) -> None:
+        """A reset, with its seed (None: unseeded), observation, info and
+        options; an episode in progress is kept, cut short. A reset with
+        options, or an unseeded one on a restarted sim, is named unreplayable."""
         if self.current is not None and self.current.steps:
             self.episodes.append(self.current)
         if seed is not None:
-            self._seed, self._since_seed = int(seed), 0
+            self._seed, self._since_seed, self._tainted = int(seed), 0, None
         elif self.current is not None or self.episodes:
             self._since_seed += 1
-        self.current = RecordedEpisode(self._seed, self._since_seed, rounding=self.rounding)
+        if (info or {}).get(INFO_RESTARTED) and seed is None:
+            self._tainted = "an unseeded reset on a restarted sim (its scene RNG state was lost with the old process)"
+        ep = RecordedEpisode(self._seed, self._since_seed, rounding=self.rounding, mode=self.mode)
+        ep.unreplayable = self._tainted
+        if options:
+            ep.unreplayable = "a reset with options (the twin resets with the recorded seed only)"
+        ep.obs_digests.append(obs_digest(obs))
+        self.current = ep
 
-    def record(self, ticks_elapsed: int, latency_ticks: float | None, reward: float) -> None:
-        """One real-time step (``latency_ticks`` None: its action never took effect)."""
+    def record(
+        self,
+        ticks_elapsed: int,
+        latency_ticks: float | None,
+        reward: float,
+        replay_substep: int | None = None,
+        obs: Any = None,
+    ) -> None:
+        """One real-time step (``latency_ticks`` None: its action never took
+        effect; ``replay_substep``: see :attr:`RecordedEpisode.action_substeps`,
+        None if the sim did not report it, which makes the episode unreplayable)."""
         if self.current is None:
             raise RuntimeError("a real-time step outside an episode: call reset() first")
-        self.current.ticks_elapsed.append(int(ticks_elapsed))
-        self.current.latency_ticks.append(None if latency_ticks is None else float(latency_ticks))
-        self.current.rewards.append(float(reward))
+        ep = self.current
+        ep.ticks_elapsed.append(int(ticks_elapsed))
+        ep.latency_ticks.append(None if latency_ticks is None else float(latency_ticks))
+        ep.rewards.append(float(reward))
+        ep.obs_digests.append(obs_digest(obs))
+        if replay_substep is None:
+            ep.unreplayable = ep.unreplayable or "the sim's replies carry no substep (a server without exact replay)"
+        else:
+            ep.action_substeps.append(int(replay_substep))
+
+    def interrupt(self, why: str) -> None:
+        """The episode in progress cannot be replayed (``why``) and ends here, cut short."""
+        if self.current is not None:
+            self.current.unreplayable = self.current.unreplayable or why
+            self.episodes.append(self.current)
+            self.current = None
+
+    def record_info(self, info: dict[str, Any], reward: float, obs: Any) -> None:
+        """One real-time step from its reply's ``info`` (see :meth:`record`)."""
+        applied = info["action_sim_time"] is not None and info.get("latency_ticks") is not None
+        applied = applied and math.isfinite(float(info["latency_ticks"]))
+        substep = info.get("action_substep") if applied else info.get("substep")
+        latency = float(info["latency_ticks"]) if applied else None
+        self.record(int(info["ticks_elapsed"]), latency, reward, None if substep is None else int(substep), obs)
 
     def finish(self, terminated: bool, truncated: bool) -> None:
         """The episode in progress ended."""
@@ -143,15 +111,29 @@ def check_real_time(env: Any, who: str) -> None:
         raise ValueError(f"{who} records the latencies of a real-time run: make the env with real_time=True")
 
 
+def real_time_mode(env: Any) -> str:
+    """The regime an env's handshake names (``"elastic"`` when it names none)."""
+    handshake = getattr(getattr(env, "unwrapped", env), "handshake", None)
+    return getattr(handshake, "real_time_mode", None) or "elastic"
+
+
 class LatencyRecorder(gym.Wrapper):
-    """Records every real-time episode for its lock-step twin.
+    """Records every real-time episode for its twins.
 
     Wrap a ``real_time=True`` env (outside its ``TimeLimit``: ``gym.make``'s
-    env as it comes). Each step's ``info["ticks_elapsed"]``,
-    ``info["latency_ticks"]`` and ``info["action_sim_time"]`` are kept; an
-    episode is complete when it terminates or is truncated, or is cut short
-    by a reset. Nothing else changes: observations, rewards and infos pass
-    through.
+    env as it comes). Each step's ``info["action_substep"]`` (or
+    ``info["substep"]`` for an action that never took effect),
+    ``info["ticks_elapsed"]`` and ``info["latency_ticks"]``, its reward and a
+    fingerprint of its observation are kept; an episode is complete when it
+    terminates or is truncated, or is cut short by a reset. Nothing else
+    changes: observations, rewards and infos pass through.
+
+    What cannot be replayed is named in the episode
+    (:attr:`RecordedEpisode.unreplayable`) and the exact twin refuses it: a
+    step lost to a sim restart (``restart_on_failure``) or that raised, an
+    unseeded reset on a restarted sim, a reset with options. Pauses and an
+    emulated ``link_delay`` change only when actions arrive, which the
+    substeps record: they replay exactly.
 
     Args:
         env: the real-time env.
@@ -166,7 +148,7 @@ class LatencyRecorder(gym.Wrapper):
     def __init__(self, env: gym.Env, rounding: str = "nearest") -> None:
         super().__init__(env)
         check_real_time(env, "LatencyRecorder")
-        self.log = EpisodeLog(rounding)
+        self.log = EpisodeLog(rounding, real_time_mode(env))
 
     @property
     def episodes(self) -> list[RecordedEpisode]:
@@ -180,26 +162,41 @@ class LatencyRecorder(gym.Wrapper):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
-        self.log.start(seed)
+        self.log.start(seed, obs, info, options)
         return obs, info
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         if self.log.current is None:
             raise RuntimeError("LatencyRecorder.step outside an episode: call reset() first")
-        obs, reward, terminated, truncated, info = self.env.step(action)
+        try:
+            obs, reward, terminated, truncated, info = self.env.step(action)
+        except Exception as exc:
+            self.log.interrupt(f"step {self.log.current.steps + 1} raised {type(exc).__name__}")
+            raise
+        if info.get(INFO_RESTARTED):
+            self.log.interrupt(f"the sim was restarted at step {self.log.current.steps + 1}: the episode was lost")
+            return obs, reward, terminated, truncated, info
         if "ticks_elapsed" not in info or "action_sim_time" not in info:
             raise ValueError("this env's step info has no ticks_elapsed/action_sim_time: is it real_time=True?")
-        applied = info["action_sim_time"] is not None and info.get("latency_ticks") is not None
-        self.log.record(info["ticks_elapsed"], info["latency_ticks"] if applied else None, float(reward))
+        self.log.record_info(info, float(reward), obs)
         if terminated or truncated:
             self.log.finish(terminated, truncated)
         return obs, reward, terminated, truncated, info
 
     def save(self, path: str | os.PathLike[str], episode: int = -1) -> str:
-        """Write recorded episode ``episode`` (default the last) as a trace file
-        that ``remoteenv.delays.Trace(path)`` loads (see :func:`save_episode`); return its path."""
-        env_id = getattr(self.env.spec, "id", None) or type(self.env.unwrapped).__name__
-        return save_episode(self.episodes[episode], path, env_id)
+        """Write recorded episode ``episode`` (default the last) as a recording
+        file that :func:`~remoteenv.latency_twin.make_twin` replays exactly
+        (:func:`~remoteenv.latency_twin.recording_file.save_recording`); return its path."""
+        return save_recording(self.episodes[episode], path, self._env_id())
+
+    def save_trace(self, path: str | os.PathLike[str], episode: int = -1) -> str:
+        """Write recorded episode ``episode`` as a plain trace file for the
+        rounded lock-step twin (``remoteenv.delays.Trace(path)`` loads it; see
+        :func:`save_episode`); return its path."""
+        return save_episode(self.episodes[episode], path, self._env_id())
+
+    def _env_id(self) -> str:
+        return getattr(self.env.spec, "id", None) or type(self.env.unwrapped).__name__
 
 
 def save_episode(
@@ -223,4 +220,4 @@ def save_episode(
     return write_trace_file(path, rec.values(rounding), header)
 
 
-__all__ = ["EpisodeLog", "LatencyRecorder", "RecordedEpisode", "check_real_time", "save_episode"]
+__all__ = ["EpisodeLog", "LatencyRecorder", "RecordedEpisode", "check_real_time", "real_time_mode", "save_episode"]

@@ -1,4 +1,5 @@
-"""Replaying a recorded real-time episode in lock-step (see :mod:`remoteenv.latency_twin`)."""
+"""Making a recorded real-time episode's twin: the exact one, or the rounded lock-step one
+(see :mod:`remoteenv.latency_twin`)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,9 @@ from typing import Any, SupportsFloat
 
 import gymnasium as gym
 
+from remoteenv.latency_twin.episode import RecordedEpisode
+from remoteenv.latency_twin.exact_twin import ExactTwin, check_replayable
+from remoteenv.latency_twin.recording_file import is_recording, load_recording
 from remoteenv.latency_twin.trace import decision_ticks
 from remoteenv.wire.delays.delays import Trace
 
@@ -24,8 +28,9 @@ class LockStepTwin(gym.Wrapper):
     episode ends, and returns as a real-time reply does: the observation at
     the end of the last tick, the reward summed over the ticks, that tick's
     ``terminated`` and ``info``, with ``ticks_elapsed`` (ticks run),
-    ``latency_ticks`` (the twin's whole-tick latency of this step: the
-    countdown's first value, scheduled as lock-step reports it), ``latency_s``
+    ``latency_ticks`` (the twin's whole-tick latency of this step, the
+    countdown's first value, reported only once the action is in force by the
+    reply, as real time reports it: None when it is not), ``latency_s``
     and ``late`` (more than one tick, or the action not in force by the
     reply). The infos of the ticks of the last step are kept in
     :attr:`last_ticks`.
@@ -96,12 +101,13 @@ class LockStepTwin(gym.Wrapper):
                 break
         self._steps += 1
         ticks = len(self.last_ticks)
+        landed = first < ticks  # a latency is known once the action took effect, never before
         info = dict(info)
         info.update(
             ticks_elapsed=ticks,
-            latency_ticks=first,
-            latency_s=first * float(getattr(self.env.unwrapped, "dt", 0.0)),
-            late=ticks > 1 or first >= ticks,
+            latency_ticks=first if landed else None,
+            latency_s=first * float(getattr(self.env.unwrapped, "dt", 0.0)) if landed else None,
+            late=ticks > 1 or not landed,
             twin_beyond_recording=self._draws > len(self.trace.values),
         )
         if self.max_steps is not None and self._steps >= self.max_steps and not terminated:
@@ -111,20 +117,41 @@ class LockStepTwin(gym.Wrapper):
 
 def make_twin(
     env_id: str,
-    trace: Trace | Sequence[int] | str | os.PathLike[str],
+    trace: RecordedEpisode | Trace | Sequence[int] | str | os.PathLike[str],
     max_episode_steps: int | None = None,
     **kwargs: Any,
-) -> LockStepTwin:
-    """``LockStepTwin(gym.make(env_id, action_delay=trace, ...), trace, max_episode_steps)``.
+) -> ExactTwin | LockStepTwin:
+    """The twin of one recorded real-time episode.
 
-    ``trace``: a :class:`~remoteenv.delays.Trace`, its values, or a trace
-    file's path (as :meth:`LatencyRecorder.save
-    <remoteenv.latency_twin.LatencyRecorder.save>` writes it).
+    ``trace`` a :class:`~remoteenv.latency_twin.RecordedEpisode` or the path of
+    a recording file (as :meth:`LatencyRecorder.save
+    <remoteenv.latency_twin.LatencyRecorder.save>` writes it): the exact twin,
+    ``ExactTwin(gym.make(env_id, real_time=True,
+    real_time_mode=<the recording's>, max_episode_steps=...), episode)``; it
+    refuses an episode that cannot be replayed, saying why.
+
+    A :class:`~remoteenv.delays.Trace`, its values, or a plain trace file's
+    path (:meth:`LatencyRecorder.save_trace
+    <remoteenv.latency_twin.LatencyRecorder.save_trace>`): the rounded
+    lock-step twin, ``LockStepTwin(gym.make(env_id, action_delay=trace, ...),
+    trace, max_episode_steps)``; the lock-step env itself gets no time limit
+    (its steps are ticks).
+
     ``max_episode_steps``: the twin's limit in steps (decisions), as the
-    real-time run counted them; None: the env id's registered limit. The
-    lock-step env itself gets no time limit (its steps are ticks).
+    real-time run counted them; None: the env id's registered limit.
     ``kwargs`` go to ``gym.make`` (e.g. the scene's own, like ``continuous=True``).
     """
+    if isinstance(trace, (str, os.PathLike)) and is_recording(trace):
+        trace, _ = load_recording(trace)
+    if isinstance(trace, RecordedEpisode):
+        check_replayable(trace)  # before a sim starts
+        limit: dict[str, Any] = {} if max_episode_steps is None else {"max_episode_steps": max_episode_steps}
+        env = gym.make(env_id, real_time=True, real_time_mode=trace.mode, **limit, **kwargs)
+        try:
+            return ExactTwin(env, trace)
+        except BaseException:
+            env.close()
+            raise
     spec = trace if isinstance(trace, Trace) else Trace(trace)
     if max_episode_steps is None:
         max_episode_steps = gym.spec(env_id).max_episode_steps

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
-from remoteenv.latency_twin.recorder import EpisodeLog, RecordedEpisode, check_real_time
+from remoteenv.agent.launch.restart import INFO_RESTARTED
+from remoteenv.latency_twin.recorder import EpisodeLog, RecordedEpisode, check_real_time, real_time_mode
 
 
 def _world_value(infos: dict[str, Any], key: str, w: int) -> Any:
@@ -41,7 +41,7 @@ class LatencyRecorderVector(VectorWrapper):
         mode = AutoresetMode(env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP))
         if mode != AutoresetMode.NEXT_STEP:
             raise ValueError(f"LatencyRecorderVector needs the NEXT_STEP autoreset mode, got {mode}")
-        self.logs = [EpisodeLog(rounding) for _ in range(self.num_envs)]
+        self.logs = [EpisodeLog(rounding, real_time_mode(env)) for _ in range(self.num_envs)]
         self._restarting = np.zeros(self.num_envs, dtype=bool)
 
     @property
@@ -57,27 +57,35 @@ class LatencyRecorderVector(VectorWrapper):
         obs, infos = self.env.reset(seed=seed, options=options)  # type: ignore[arg-type]  # RemoteVectorEnv takes lists
         for w, log in enumerate(self.logs):
             if seed is None:
-                log.start(None)
+                world_seed = None
             elif isinstance(seed, (int, np.integer)):
-                log.start(int(seed) + w)
+                world_seed = int(seed) + w
             else:
-                log.start(seed[w])
+                world_seed = seed[w]
+            log.start(world_seed, obs[w], {INFO_RESTARTED: _world_value(infos, INFO_RESTARTED, w)}, options)
         self._restarting[:] = False
         return obs, infos
 
     def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
-        obs, rewards, terminated, truncated, infos = self.env.step(actions)
+        try:
+            obs, rewards, terminated, truncated, infos = self.env.step(actions)
+        except Exception as exc:
+            for log in self.logs:
+                log.interrupt(f"a vector step raised {type(exc).__name__}")
+            raise
         for w, log in enumerate(self.logs):
+            restarted = {INFO_RESTARTED: _world_value(infos, INFO_RESTARTED, w)}
             if self._restarting[w]:  # this step reset the world (its action was ignored)
-                log.start(None)
+                log.start(None, obs[w], restarted)
                 continue
-            ticks = _world_value(infos, "ticks_elapsed", w)
-            if ticks is None:
+            if restarted[INFO_RESTARTED]:
+                log.interrupt("the world's sim was restarted: the episode was lost")
+                continue
+            keys = ("ticks_elapsed", "latency_ticks", "action_sim_time", "action_substep", "substep")
+            info = {key: _world_value(infos, key, w) for key in keys}
+            if info["ticks_elapsed"] is None:
                 raise ValueError(f"world {w}'s step info has no ticks_elapsed: is the vector env real_time=True?")
-            latency = _world_value(infos, "latency_ticks", w)
-            applied = _world_value(infos, "action_sim_time", w) is not None and latency is not None
-            applied = applied and math.isfinite(float(latency))
-            log.record(int(ticks), float(latency) if applied else None, float(rewards[w]))
+            log.record_info(info, float(rewards[w]), obs[w])
             if terminated[w] or truncated[w]:
                 log.finish(bool(terminated[w]), bool(truncated[w]))
         self._restarting = np.logical_or(terminated, truncated)

@@ -293,6 +293,7 @@ class RayLauncher:
             render_mode=spec.render_mode,
             real_time=spec.real_time,
             real_time_factor=spec.real_time_factor,
+            real_time_mode=spec.real_time_mode,
             # Every delay (action, observation, link) travels in the actor's
             # construction and reaches the sim as a file on its node.
             delays=spec.delay_file_text(),

@@ -54,7 +54,8 @@ class SimSpec:
         worlds: MuJoCo worlds the sim hosts.
         seed: seed of the sim's first world (world w gets seed + w), or None.
         env_kwargs: JSON-able keyword arguments of the scene's env class.
-        render_mode, real_time, real_time_factor: as for :class:`remoteenv.Launcher`.
+        render_mode, real_time, real_time_factor: as for :class:`remoteenv.Launcher`;
+            real_time_mode: as for :class:`~remoteenv.agent.launch.sim_group.LaunchSpec`.
         delays: the text of the sim's delay file (every delay spec's wire form,
             :meth:`remoteenv.agent.launch.sim_group.LaunchSpec.delay_file_text`), None
             without delays; the actor writes it next to its sim.
@@ -70,6 +71,7 @@ class SimSpec:
     render_mode: str | None = None
     real_time: bool = False
     real_time_factor: float = 1.0
+    real_time_mode: str = "elastic"
     delays: str | None = None
     extra_args: tuple[str, ...] = ()
     startup_timeout: float = 60.0
@@ -226,6 +228,7 @@ class SimActor:
             render_mode=spec.render_mode,
             real_time=spec.real_time,
             real_time_factor=spec.real_time_factor,
+            real_time_mode=spec.real_time_mode,
             delay_file=write_sim_delay_file(self.workdir, instance, spec.delays),
             curve_files=(names["curve_secret"], names["curve_clients"]),
             allow_remote=not is_loopback(address),

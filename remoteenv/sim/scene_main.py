@@ -18,6 +18,7 @@ from remoteenv.wire.delays.delay_file import read_delay_file
 from remoteenv.wire.delays.delays import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
 from remoteenv.wire.errors import EXIT_SCENE_ARGS, SCENE_ARGS_MARKER, ProtocolError, short_repr
 from remoteenv.wire.files.keys import read_key, read_keys
+from remoteenv.wire.real_time_modes import ELASTIC, REAL_TIME_MODES
 
 
 def _delay_argument(text: str, unit: str) -> DelaySpec:
@@ -91,6 +92,7 @@ def scene_argument_parser(description: str | None = None) -> argparse.ArgumentPa
     p.add_argument(
         "--real-time-factor", type=float, default=1.0, help="simulated seconds per wall-clock second in real-time mode"
     )
+    p.add_argument("--real-time-mode", choices=REAL_TIME_MODES, default=ELASTIC, help="the real-time regime")
     p.add_argument(
         "--action-delay",
         type=tick_delay_argument,
@@ -205,6 +207,7 @@ def run_scene(
         ready_file=args.ready_file,
         real_time=args.real_time,
         real_time_factor=args.real_time_factor,
+        real_time_mode=args.real_time_mode,
         action_delay=args.action_delay,
         obs_delay=args.obs_delay,
         link_delay=args.link_delay,

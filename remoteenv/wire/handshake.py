@@ -27,6 +27,7 @@ from gymnasium import spaces
 from remoteenv.wire.errors import ProtocolError, short_repr
 from remoteenv.wire.frame_limits import MAX_MESSAGE_BYTES, MAX_WORLDS
 from remoteenv.wire.protocol import PROTOCOL_VERSION
+from remoteenv.wire.real_time_modes import ELASTIC, REAL_TIME_MODES
 from remoteenv.wire.spaces import space_from_wire, value_nbytes
 
 #: ``stepping["mode"]`` of a sim that advances only when asked.
@@ -78,6 +79,8 @@ class Handshake:
     obs_delay: int = 0
     #: Real time: simulated seconds per wall-clock second (None in lock-step).
     real_time_factor: float | None = None
+    #: Real time: the regime (``"elastic"`` or ``"fixed_step"``; None in lock-step).
+    real_time_mode: str | None = None
     #: Every command the server answers, if its reply lists them.
     commands: frozenset[str] | None = None
     #: The reply map as received.
@@ -144,6 +147,16 @@ def _space(reply: Mapping[str, Any], key: str) -> spaces.Space:
         raise ProtocolError(f"handshake {key!r} is a malformed space: {exc}") from None
 
 
+def _real_time_mode(stepping: Mapping[str, Any]) -> str | None:
+    """The regime of a real-time handshake (a server that does not say runs the elastic one)."""
+    if stepping.get("mode") != REAL_TIME:
+        return None
+    mode = _typed(stepping, "real_time_mode", str, "stepping ") or ELASTIC
+    if mode not in REAL_TIME_MODES:
+        raise ProtocolError(f"handshake stepping 'real_time_mode' is unknown: {short_repr(mode)}")
+    return mode
+
+
 def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_VERSION) -> Handshake:
     """Check a ``handshake`` reply and parse it; :class:`ProtocolError` names what is wrong."""
     if not isinstance(reply, Mapping):
@@ -188,6 +201,7 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
         action_delay=_typed(stepping, "action_delay", int, "stepping ") or 0,
         obs_delay=_typed(stepping, "obs_delay", int, "stepping ") or 0,
         real_time_factor=None if rtf is None else float(rtf),
+        real_time_mode=_real_time_mode(stepping),
         commands=None if commands is None else frozenset(commands),
         raw=reply,
     )

@@ -116,10 +116,20 @@ beyond a constant action delay, ``obs_delay`` (the largest, ticks),
 :mod:`remoteenv.wire.delays.delays`) and, with a delay and delivery rules or
 delayed rewards other than the default, ``channel`` (see
 :mod:`remoteenv.wire.delays.channel_rules`); in real time ``real_time_factor`` and, with an
-emulated link, ``link_delay_spec``.
+emulated link, ``link_delay_spec``, and ``real_time_mode`` (``"elastic"``
+or ``"fixed_step"``, see :mod:`remoteenv.wire.real_time_modes`; a server
+that does not say runs ``"elastic"``).
 
 ``reset`` ``{"world": int, "seed": int | nil, "options": map | nil}`` ->
-``{"obs", "info"}``.
+``{"obs", "info"}``. In real time, options holding the key
+``"remoteenv_replay"`` (a map ``{"mode": str, "action_substeps": [int,
+...]}``, at most 100,000 non-decreasing ints) make the world replay a
+recorded episode without its clock: the key is removed before the scene
+sees the options, and each ``step`` of the episode is answered at once, its
+action taking effect at the next listed substep (counted from the reset),
+as it would have on the clock (:mod:`remoteenv.wire.real_time_modes`,
+:mod:`remoteenv.sim.stepping.real_time_replay`). A schedule of another
+regime, a malformed one, or a step beyond it is a ``protocol`` error.
 
 ``step`` ``{"world": int, "action"}`` -> ``{"obs", "reward": float,
 "terminated": bool, "truncated": bool, "info": map}`` (and ``"types"``, see

@@ -1,9 +1,7 @@
-"""A real-time run and its lock-step twin, with real sims: the recorder
-writes a loadable trace, and the twin's ticks follow it exactly.
-
-Only the mechanics are asserted. Whether the two return distributions match
-is what examples/real_time_twin.py measures; under machine load a real-time
-run may differ, which is no failure of the twin.
+"""A real-time run and its twins, with real sims: the recorder writes a
+loadable plain trace and the rounded lock-step twin's ticks follow it
+exactly; the example replays its recordings in the exact twin, identical in
+every episode (tests/integration/test_exact_twin.py tests the exact twin itself).
 """
 
 from __future__ import annotations
@@ -19,7 +17,7 @@ import numpy as np
 import remoteenv  # noqa: F401
 from remoteenv.controllers import cartpole_continuous
 from remoteenv.delays import Trace
-from remoteenv.latency_twin import LatencyRecorder, LatencyRecorderVector, decision_ticks, make_twin
+from remoteenv.latency_twin import LatencyRecorder, LatencyRecorderVector, decision_ticks, load_recording, make_twin
 
 ENV_ID = "remoteenv/CartPole-v0"
 EXAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "examples", "real_time_twin.py")
@@ -56,8 +54,8 @@ def test_the_twin_replays_the_recorded_ticks_exactly(tmp_path):
     recorder, actions, real_infos = record_real_time(seed=3)
     (episode,) = recorder.episodes
     assert episode.steps == len(actions) and episode.truncated  # the LQR balances at these latencies
-    path = recorder.save(tmp_path / "episode.trace.txt")
-    trace = Trace(path)  # a plain trace file
+    path = recorder.save_trace(tmp_path / "episode.trace.txt")
+    trace = Trace(path)  # a plain trace file (save() writes the exact twin's recording)
     assert trace == episode.trace() and len(trace.values) == episode.ticks
     assert decision_ticks(trace.values) == episode.ticks_elapsed == [i["ticks_elapsed"] for i in real_infos]
 
@@ -106,16 +104,17 @@ def test_the_example_runs_and_writes_its_comparison(tmp_path):
     spec.loader.exec_module(example)
     out = tmp_path / "twin.json"
     argv = ["--episodes", "2", "--max-steps", "8", "--think", "0,2", "--json", str(out)]
-    example.main([*argv, "--trace-dir", str(tmp_path / "traces")])
+    example.main([*argv, "--recording-dir", str(tmp_path / "recordings")])
     report = json.loads(out.read_text())
-    for policy in ("lqr", "predictor"):
-        for rounding in ("nearest", "floor"):
-            result = report["results"][policy][rounding]
-            assert len(result["real_time"]["returns"]) == len(result["replay"]["returns"]) == 2
-            assert result["comparison"]["verdict"] in ("equivalent", "different", "inconclusive")
-            assert result["traces"]["values"] == sum(result["real_time"]["ticks"])
-        for e in range(2):
-            assert Trace(str(tmp_path / "traces" / policy / f"episode-{e}.trace.txt")).values
+    # The exact twin: every episode of both controllers in both regimes is identical.
+    assert report["identical"] == report["total"] == 8 and report["steps"] == 8 * 8
+    for mode in ("elastic", "fixed_step"):
+        for policy in ("lqr", "predictor"):
+            rows = report["results"][mode][policy]
+            assert [row["first_difference"] for row in rows] == [None, None]
+            assert [row["twin_return"] for row in rows] == [row["return"] for row in rows]
+            for e in range(2):
+                assert load_recording(tmp_path / "recordings" / mode / policy / f"episode-{e}.json")[0].steps == 8
 
 
 def test_each_world_of_a_real_time_vector_env_is_recorded_and_its_twin_starts_where_it_did():

@@ -19,6 +19,8 @@ from remoteenv.latency_twin import (
     LockStepTwin,
     compare_returns,
     decision_ticks,
+    load_recording,
+    make_twin,
     twin_latency,
     twin_values,
 )
@@ -121,8 +123,14 @@ def test_the_recorder_keeps_each_episode_with_the_seed_that_reproduces_its_start
     summary = first.summary()
     assert summary["unapplied_steps"] == 1 and summary["late_steps"] == 2
     assert summary["mean_latency_ticks"] == pytest.approx(0.95) and summary["mean_twin_latency_ticks"] == 1.0
-    path = rec.save(tmp_path / "ep.txt", 0)
+    path = rec.save_trace(tmp_path / "ep.txt", 0)  # the plain trace: save() now writes a recording
     assert Trace(path) == first.trace()
+    loaded, env_id = load_recording(rec.save(tmp_path / "ep.json", 0))
+    assert loaded == first and env_id == "RealTimeStandIn"
+    # This stand-in reports no substeps, so the exact twin refuses the episode, saying why (before any sim starts).
+    assert "no substep" in str(first.unreplayable)
+    with pytest.raises(ValueError, match="cannot be replayed exactly: .*no substep"):
+        make_twin("remoteenv/CartPole-v0", tmp_path / "ep.json")
     with pytest.raises(RuntimeError, match="reset"):
         LatencyRecorder(RealTimeStandIn([(1, 0.5)], 1)).step(np.zeros(1, np.float32))
 
@@ -179,6 +187,8 @@ def test_an_episode_that_ends_mid_hold_ends_the_step():
     twin.reset(seed=0)
     _, reward, terminated, truncated, info = twin.step(np.zeros(1, np.float32))
     assert (reward, terminated, truncated, info["ticks_elapsed"], info["late"]) == (2.0, True, False, 2, True)
+    # The action was due at tick 4 and never landed: its latency is not known, so none is reported.
+    assert info["latency_ticks"] is None and info["latency_s"] is None
 
 
 def test_the_comparison_tells_equivalent_different_and_inconclusive_apart():

@@ -42,6 +42,7 @@ _LAUNCH_DEFAULTS: dict[str, Any] = {
     "startup_timeout": 60.0,
     "real_time": False,
     "real_time_factor": 1.0,
+    "real_time_mode": "elastic",
     "action_delay": 0,
 }
 
@@ -58,7 +59,7 @@ class Launcher:
     Args:
         scene: path of the scene script; None to start later with :meth:`start`.
         num_instances, seed, worlds_per_instance, env_kwargs, render_mode,
-        startup_timeout, real_time, real_time_factor, action_delay: the launch
+        startup_timeout, real_time, real_time_factor, real_time_mode, action_delay: the launch
             (see :class:`~remoteenv.agent.launch.sim_group.LaunchSpec`); only with ``scene``.
         transport: ``"ipc"`` (default): each sim binds an ipc endpoint in the
             private dir; ``"tcp"``: 127.0.0.1 with an OS-assigned port;
@@ -97,6 +98,7 @@ class Launcher:
         startup_timeout: float = 60.0,
         real_time: bool = False,
         real_time_factor: float = 1.0,
+        real_time_mode: str = "elastic",
         action_delay: int = 0,
         extra_args: Sequence[str] = (),
         bind_host: str | None = None,
@@ -112,6 +114,7 @@ class Launcher:
             "startup_timeout": startup_timeout,
             "real_time": real_time,
             "real_time_factor": real_time_factor,
+            "real_time_mode": real_time_mode,
             "action_delay": action_delay,
         }
         spec = None
@@ -125,6 +128,7 @@ class Launcher:
                 render_mode=render_mode,
                 real_time=real_time,
                 real_time_factor=real_time_factor,
+                real_time_mode=real_time_mode,
                 action_delay=action_delay,
                 startup_timeout=startup_timeout,
             )

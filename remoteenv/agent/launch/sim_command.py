@@ -37,6 +37,7 @@ def scene_command(
     render_mode: str | None = None,
     real_time: bool = False,
     real_time_factor: float = 1.0,
+    real_time_mode: str = "elastic",
     delay_file: str | None = None,
     curve_files: tuple[str, str] | None = None,
     allow_remote: bool = False,
@@ -78,6 +79,8 @@ def scene_command(
         cmd += ["--render-mode", render_mode]
     if real_time:
         cmd += ["--real-time", "--real-time-factor", repr(float(real_time_factor))]
+        if real_time_mode != "elastic":
+            cmd += ["--real-time-mode", real_time_mode]
     if delay_file is not None:
         cmd += ["--delay-file", delay_file]
     return cmd + list(extra_args)

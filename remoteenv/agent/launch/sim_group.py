@@ -37,6 +37,7 @@ from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delay_file import delay_file_text
 from remoteenv.wire.delays.delays import SECONDS, TICKS, DelaySpec, as_delay
 from remoteenv.wire.files.keys import KeyPair
+from remoteenv.wire.real_time_modes import ELASTIC, check_real_time_mode
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,8 @@ class LaunchSpec:
         render_mode: passed to the scene's env.
         real_time: run each sim on a paced wall clock.
         real_time_factor: simulated seconds per wall-clock second.
+        real_time_mode: real time; the regime, ``"elastic"`` or ``"fixed_step"``
+            (:mod:`remoteenv.wire.real_time_modes`).
         action_delay: lock-step; an action takes effect this many ticks later
             (an int, or a :mod:`remoteenv.delays` spec in ticks).
         obs_delay: lock-step; observations arrive this many ticks late (the same).
@@ -73,6 +76,7 @@ class LaunchSpec:
     render_mode: str | None = None
     real_time: bool = False
     real_time_factor: float = 1.0
+    real_time_mode: str = ELASTIC
     action_delay: int | DelaySpec = 0
     obs_delay: int | DelaySpec = 0
     link_delay: float | DelaySpec | None = None
@@ -99,6 +103,9 @@ class LaunchSpec:
                 "action_delivery, obs_delivery and delayed_rewards are rules of lock-step's delays; "
                 "real time has none of them"
             )
+        check_real_time_mode(self.real_time_mode)
+        if self.real_time_mode != ELASTIC and not self.real_time:
+            raise ValueError(f"real_time_mode={self.real_time_mode!r} is a real-time regime: add real_time=True")
         if link_delayed and not self.real_time:
             raise ValueError(
                 "link_delay emulates a network in real time (real_time=True); in lock-step use action_delay/obs_delay"

@@ -83,6 +83,7 @@ def spawn_sim(
         render_mode=spec.render_mode,
         real_time=spec.real_time,
         real_time_factor=spec.real_time_factor,
+        real_time_mode=spec.real_time_mode,
         delay_file=write_sim_delay_file(workdir, instance, spec.delay_file_text()),
         curve_files=curve_files,
         allow_remote=allow_remote,

@@ -268,7 +268,7 @@ def open_session(
     ``scene`` in ``num_instances`` processes of ``worlds_per_instance`` worlds
     each, with ``startup_timeout`` and the ``launch`` options (the spec's other
     fields: ``seed``, ``env_kwargs``, ``render_mode``, ``real_time``,
-    ``real_time_factor``, ``action_delay``, ``obs_delay``, ``link_delay``).
+    ``real_time_factor``, ``real_time_mode``, ``action_delay``, ``obs_delay``, ``link_delay``).
     ``label`` and the other arguments are :class:`SimSession`'s.
     """
     spec = (

@@ -68,6 +68,7 @@ class RemoteControlledAgent:
         real_time, real_time_factor: run physics paced to the wall clock
             (:mod:`remoteenv.sim.stepping.real_time`); the factor is simulated seconds
             per wall-clock second.
+        real_time_mode: the real-time regime, ``"elastic"`` or ``"fixed_step"``.
         action_delay, obs_delay: lock-step only: delays (control ticks, an int
             or a spec) of actions and observations (:mod:`remoteenv.sim.stepping.lock_step`).
         channel: lock-step only: delivery rules and delayed rewards
@@ -100,6 +101,7 @@ class RemoteControlledAgent:
         ready_file: str | None = None,
         real_time: bool = False,
         real_time_factor: float = 1.0,
+        real_time_mode: str = "elastic",
         action_delay: DelaySpec | int = 0,
         obs_delay: DelaySpec | int = 0,
         link_delay: DelaySpec | float | None = None,
@@ -135,6 +137,7 @@ class RemoteControlledAgent:
             self._pipe,
             real_time=real_time,
             real_time_factor=real_time_factor,
+            real_time_mode=real_time_mode,
             action_delay=action_delay,
             obs_delay=obs_delay,
             link_delay=link_delay,

@@ -15,6 +15,7 @@ from remoteenv.sim.stepping.real_time import Clock, RealTimeStepping
 from remoteenv.sim.stepping.stepping import Stepping
 from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delays import DelaySpec
+from remoteenv.wire.real_time_modes import ELASTIC
 
 
 def stepping_and_commands(
@@ -23,6 +24,7 @@ def stepping_and_commands(
     *,
     real_time: bool,
     real_time_factor: float,
+    real_time_mode: str = ELASTIC,
     action_delay: DelaySpec | int,
     obs_delay: DelaySpec | int,
     link_delay: DelaySpec | float | None,
@@ -44,8 +46,12 @@ def stepping_and_commands(
             raise ValueError(
                 "delivery rules and delayed_rewards are lock-step's (action_delay/obs_delay), not real time's"
             )
-        real = RealTimeStepping(envs, real_time_factor=real_time_factor, clock=clock, link_delay=link_delay, seed=seed)
+        real = RealTimeStepping(
+            envs, real_time_factor, clock=clock, link_delay=link_delay, seed=seed, mode=real_time_mode
+        )
         return real, {"timing": real.timing, "pause": real.pause, "resume": real.resume}
+    if real_time_mode != ELASTIC:
+        raise ValueError(f"real_time_mode={real_time_mode!r} is a real-time regime: launch with real_time=True")
     if link_delay:
         raise ValueError("link_delay emulates a network in real time; in lock-step use action_delay/obs_delay")
     lock = LockStepping(envs, action_delay=action_delay, obs_delay=obs_delay, seed=seed, rules=channel)

@@ -19,11 +19,21 @@ Semantics:
   :meth:`~remoteenv.sim.scene.base_env.BaseEnv.default_action` is held.
 - Control ticks are ``frame_skip`` substeps, as in lock-step. The reply to a
   ``step`` is sent at the end of the first tick in which its action was in
-  force; its reward is the sum over all ticks since the previous reply; its
+  force (the ``"elastic"`` regime, the default); its reward is the sum over all ticks since the previous reply; its
   scene ``info`` is that of the last tick. When a tick terminates the
   episode, the world freezes there: nothing advances until the next reset,
   and a pending or later ``step`` is answered at once with ``terminated``.
 - Before the first reset, and while frozen, nothing advances.
+
+Fixed step (``real_time_mode="fixed_step"``, rtgym's regime): an action
+takes effect only at a control-tick boundary, the first one after it
+arrives (never boundary 0), and the reply is sent at that boundary, with the
+observation of that boundary: an agent that answers within a tick gets one
+tick per step and a latency of exactly one tick; one that overruns gets a
+longer step (``ticks_elapsed > 1``, ``late``). Everything else is as above.
+
+Replay: a reset whose options carry a replay schedule replays a recorded
+episode without the clock (see :mod:`remoteenv.sim.stepping.real_time_replay`).
 
 Emulated link: with ``link_delay`` (seconds: a number or a
 :class:`~remoteenv.wire.delays.delays.DelaySpec` with ``unit="s"``, e.g.
@@ -53,6 +63,11 @@ seconds unless noted):
 ``sim_time``          sim time of the returned observation.
 ``action_sim_time``   sim time the step's action took effect (None if the
                       episode terminated first).
+``substep``           physics substeps from the episode's reset to the
+                      returned observation (an int).
+``action_substep``    physics substeps from the reset to the one at which
+                      the step's action took effect (None if it never did):
+                      what an exact replay needs.
 ``ticks_elapsed``     control ticks since the previous observation.
 ``latency_s``         ``action_sim_time`` minus the sim time of the
                       observation the agent last received (None if never
@@ -82,6 +97,7 @@ from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.stepping.real_time_world import Clock, RealTimeStepper
 from remoteenv.sim.transport.channels import Channel, Outgoing
 from remoteenv.wire.delays.delays import DelaySpec
+from remoteenv.wire.real_time_modes import ELASTIC
 
 
 class RealTimeStepping:
@@ -94,6 +110,7 @@ class RealTimeStepping:
         link_delay: emulated extra link delay per action (wall seconds; see
             :class:`RealTimeStepper`); each world draws from its own stream.
         seed: launch seed of world 0 (world ``w``: ``seed + w``) for the link streams.
+        mode: the regime of every world, ``"elastic"`` or ``"fixed_step"``.
     """
 
     def __init__(
@@ -103,6 +120,7 @@ class RealTimeStepping:
         clock: Clock = time.monotonic,
         link_delay: DelaySpec | float | None = None,
         seed: int | None = None,
+        mode: str = ELASTIC,
     ) -> None:
         self.clock = clock
         self._worlds = [
@@ -112,6 +130,7 @@ class RealTimeStepping:
                 clock=clock,
                 link_delay=link_delay,
                 seed=None if seed is None else seed + w,
+                mode=mode,
             )
             for w, env in enumerate(envs)
         ]

@@ -12,34 +12,24 @@ import math
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.stepping.emulated_link import EmulatedLink
+from remoteenv.sim.stepping.real_time_replay import ReplayCursor
+from remoteenv.sim.stepping.real_time_reply import PendingStep, SinceReply
 from remoteenv.sim.transport.channels import Channel, Outgoing
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.wire.delays.delays import DelaySpec
-from remoteenv.wire.errors import SCENE
+from remoteenv.wire.errors import PROTOCOL, SCENE
 from remoteenv.wire.protocol import error_reply
+from remoteenv.wire.real_time_modes import ELASTIC, FIXED_STEP, check_real_time_mode, split_replay
 from remoteenv.wire.stats import RunningStats
 
 #: A clock: seconds, monotonic (``time.monotonic`` in a sim process).
 Clock = Callable[[], float]
 
 _IDLE, _READY, _RUNNING, _FROZEN, _FAILED = "idle", "ready", "running", "frozen", "failed"
-
-
-@dataclass
-class _PendingStep:
-    channel: Channel | None
-    reply_to: Any
-    seq: int
-    action: Any
-    arrived: float  # clock time when the request was handed over
-    link_delay: float = 0.0  # emulated link: wall seconds it is held back after arriving
-    applied_sim_time: float | None = None
-    apply_delay_s: float | None = None
 
 
 class RealTimeStepper:
@@ -53,6 +43,8 @@ class RealTimeStepper:
             number or a spec in seconds); None or 0: none.
         seed: the world's launch seed: seeds the link stream at the first
             reset when that reset brings no seed (None: OS entropy).
+        mode: the regime, ``"elastic"`` or ``"fixed_step"``
+            (:mod:`remoteenv.wire.real_time_modes`).
     """
 
     def __init__(
@@ -62,7 +54,9 @@ class RealTimeStepper:
         clock: Clock = time.monotonic,
         link_delay: DelaySpec | float | None = None,
         seed: int | None = None,
+        mode: str = ELASTIC,
     ) -> None:
+        self.mode = check_real_time_mode(mode)
         factor = float(real_time_factor)
         if not (math.isfinite(factor) and factor > 0):
             raise ValueError(f"real_time_factor must be a finite number > 0, got {real_time_factor!r}")
@@ -83,12 +77,8 @@ class RealTimeStepper:
         self._t0 = 0.0
         self._n = 0
         self._held: Any = None
-        self._pending: _PendingStep | None = None
-        self._reward = 0.0
-        self._ticks = 0
-        self._obs: Any = None
-        self._obs_time = 0.0
-        self._info: dict[str, Any] = {}
+        self._pending: PendingStep | None = None
+        self._since = SinceReply()
         self._failure = ""
         self._link = EmulatedLink(link_delay, seed)
         #: The emulated link delay's draws (None: no emulated link).
@@ -96,6 +86,7 @@ class RealTimeStepper:
         #: Emulated link delays drawn (wall seconds).
         self.link_delay = self._link.delays
         self._paused_at: float | None = None
+        self._replay: ReplayCursor | None = None
 
     # ------------------------------------------------------------ queries
 
@@ -118,12 +109,13 @@ class RealTimeStepper:
 
     def next_deadline(self) -> float | None:
         """Clock time at which the next substep boundary is due (None: nothing runs)."""
-        if self.state != _RUNNING or self._paused_at is not None:
+        if self.state != _RUNNING or self._paused_at is not None or self._replay is not None:
             return None
         return self._t0 + self._n * self.period
 
     def describe(self) -> dict[str, Any]:
         out: dict[str, Any] = {"mode": "real_time", "real_time_factor": self.factor, "action_delay": 0}
+        out["real_time_mode"] = self.mode
         self._link.describe(out)
         return out
 
@@ -148,17 +140,21 @@ class RealTimeStepper:
     # ------------------------------------------------------------ episode
 
     def reset(self, *, seed: int | None, options: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
-        """Synchronous reset; the clock starts with :meth:`start` once the reply is sent."""
+        """Synchronous reset; the clock starts with :meth:`start` once the reply is sent.
+
+        Options carrying a replay schedule put the world into replay for this
+        episode (:mod:`remoteenv.sim.stepping.real_time_replay`)."""
+        try:
+            options, schedule = split_replay(options, self.mode)
+        except ValueError as exc:
+            raise RequestError(PROTOCOL, str(exc)) from None
         obs, info = self.env.reset(seed=seed, options=options)
+        self._replay = None if schedule is None else ReplayCursor(schedule, self.env.frame_skip)
         self._link.reset(seed)
         self.state = _READY
         self._held = self.env.default_action()
         self._pending = None
-        self._reward = 0.0
-        self._ticks = 0
-        self._obs = obs
-        self._obs_time = float(self.env.data.time)
-        self._info = {}
+        self._since.start(obs, float(self.env.data.time))
         self._n = 0
         return obs, info
 
@@ -200,9 +196,11 @@ class RealTimeStepper:
         """
         if self.state == _FAILED:
             raise RequestError(SCENE, self._failure)
-        pending = _PendingStep(channel, reply_to, seq, action, self.clock())
+        pending = PendingStep(channel, reply_to, seq, action, self.clock())
         if self.state == _FROZEN:
             return self._reply(pending, terminated=True)
+        if self._replay is not None:
+            return self._replay_step(pending)
         pending.link_delay = self._link.draw()
         # A newer request supersedes one still pending: its sender gave up on it.
         self._pending = pending
@@ -229,19 +227,39 @@ class RealTimeStepper:
         At a tick end the tick is scored (and may end the episode); then a
         newly arrived action takes effect, and the next substep is computed.
         """
-        env = self.env
         deadline = self._t0 + self._n * self.period
         lateness = now - deadline
         self.pacing_error.add(lateness)
         if lateness > self.period:
             self.overruns += 1
+        return self._boundary(now)
+
+    def _replay_step(self, pending: PendingStep) -> dict[str, Any]:
+        """Replay: run boundaries until ``pending``'s reply, its action arriving
+        just before the substep the schedule names."""
+        assert self._replay is not None
+        if self.state != _RUNNING:
+            raise RequestError(PROTOCOL, "a replayed step before its reset's reply: reset first")
+        pending.apply_at = self._replay.next_substep(self._n)
+        self._pending = pending
+        while True:
+            try:
+                out = self._boundary(None)
+            except Exception as exc:  # the scene raised: stop as on the clock
+                self.fail(exc)
+                raise RequestError(SCENE, self._failure) from None
+            if out:
+                return out[0][2]
+
+    def _boundary(self, now: float | None) -> list[Outgoing]:
+        """Process substep boundary ``self._n`` at clock time ``now`` (None: replay,
+        where the pending action arrives at its scheduled substep)."""
+        env = self.env
         out: list[Outgoing] = []
         fs = env.frame_skip
         if self._n and self._n % fs == 0:
             obs, reward, terminated, info = env.finish_tick(self._held)
-            self._obs, self._info = obs, info
-            self._reward += float(reward)
-            self._ticks += 1
+            self._since.add_tick(obs, reward, info)
             pending = self._pending
             if pending is not None and (pending.applied_sim_time is not None or terminated):
                 self._pending = None
@@ -251,12 +269,17 @@ class RealTimeStepper:
                 self.state = _FROZEN
                 return out
         pending = self._pending
-        if pending is not None and pending.applied_sim_time is None and now >= pending.arrived + pending.link_delay:
+        if pending is not None and pending.applied_sim_time is None and self._arrived(pending, now):
             env.prepare_step(pending.action)
             self._held = pending.action
             pending.applied_sim_time = float(env.data.time)
-            pending.apply_delay_s = self.clock() - pending.arrived
-            self.apply_delay.add(pending.apply_delay_s)
+            pending.applied_substep = self._n
+            if now is not None:
+                pending.apply_delay_s = self.clock() - pending.arrived
+                self.apply_delay.add(pending.apply_delay_s)
+            if self.mode == FIXED_STEP:  # the step ends at the boundary where its action takes effect
+                self._pending = None
+                out.append((pending.channel, pending.reply_to, self._reply(pending, terminated=False)))
         elif self._n % fs == 0:
             env.prepare_step(self._held)
         env.substep()
@@ -264,37 +287,25 @@ class RealTimeStepper:
         self.substeps += 1
         return out
 
-    def _reply(self, pending: _PendingStep, *, terminated: bool) -> dict[str, Any]:
+    def _arrived(self, pending: PendingStep, now: float | None) -> bool:
+        """Whether ``pending``'s action may take effect at boundary ``self._n``
+        (fixed-step: only at a tick boundary after the episode's first tick)."""
+        if self.mode == FIXED_STEP and (self._n == 0 or self._n % self.env.frame_skip):
+            return False
+        if now is None:
+            return self._n >= pending.apply_at
+        return now >= pending.arrived + pending.link_delay
+
+    def _reply(self, pending: PendingStep, *, terminated: bool) -> dict[str, Any]:
         """The reply to ``pending``: the current observation and what accumulated since the last reply."""
-        dt = self.env.dt
-        sim_time = float(self.env.data.time)
-        applied = pending.applied_sim_time
-        latency = None if applied is None else applied - self._obs_time
-        info = dict(self._info)
-        info.update(
-            sim_time=sim_time,
-            action_sim_time=applied,
-            ticks_elapsed=self._ticks,
-            latency_s=latency,
-            latency_ticks=None if latency is None else latency / dt,
-            late=applied is None or self._ticks > 1,
-            apply_delay_s=pending.apply_delay_s,
-            link_delay_s=pending.link_delay,
-            pacing_overruns=self.overruns,
+        return self._since.reply(
+            pending,
+            terminated=terminated,
+            sim_time=float(self.env.data.time),
+            substep=self._n,
+            frame_skip=self.env.frame_skip,
+            overruns=self.overruns,
         )
-        reply = {
-            "seq": pending.seq,
-            "ok": True,
-            "obs": self._obs,
-            "reward": self._reward,
-            "terminated": terminated,
-            "truncated": False,
-            "info": info,
-        }
-        self._reward = 0.0
-        self._ticks = 0
-        self._obs_time = sim_time
-        return reply
 
 
 __all__ = ["Clock", "RealTimeStepper"]
