@@ -32,7 +32,7 @@ from remoteenv.cli.latency_sweep import int_list
 from remoteenv.cli.optional import require
 
 DEFAULT_ENV = "remoteenv/CartPole-v0"
-DEFAULT_RANDOM = "6:10,8:16,0:16"
+DEFAULT_RANDOM = "4:8,6:10,8:16,0:16"
 
 
 def random_models(text: str) -> list[str]:
@@ -65,9 +65,7 @@ def add_parser(sub: Any) -> None:
         default=None,
         help="JSON map for the env (default '{\"continuous\": true}' for the default env, else {})",
     )
-    p.add_argument(
-        "--delays", default="0,4,8,12", help="constant action delays in ticks; '' for none (default 0,4,8,12)"
-    )
+    p.add_argument("--delays", default="0,8,12", help="constant action delays in ticks; '' for none (default 0,8,12)")
     p.add_argument(
         "--random-delays",
         default=DEFAULT_RANDOM,
@@ -75,7 +73,7 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--seeds", default="0,1,2", help="training seeds (default 0,1,2)")
     p.add_argument(
-        "--steps", type=positive_int, default=300_000, help="environment steps per training run (default 300000)"
+        "--steps", type=positive_int, default=400_000, help="environment steps per training run (default 400000)"
     )
     p.add_argument("--eval-episodes", type=positive_int, default=10, help="evaluation episodes per policy (default 10)")
     p.add_argument(
@@ -98,8 +96,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--rt-episodes",
         type=positive_int,
-        default=10,
-        help="real-time episodes per policy in the twin check (default 10)",
+        default=5,
+        help="real-time episodes per policy in the twin check (default 5: 30 for 2 variants x 3 seeds)",
     )
     p.add_argument("--no-rt-replay", action="store_true", help="skip the real-time / exact twin replay check")
     p.set_defaults(run=run)

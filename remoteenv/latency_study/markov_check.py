@@ -34,7 +34,7 @@ from remoteenv.wire.delays.delay_line import LockStepDelays
 from remoteenv.wire.delays.in_force import delay_pmf, in_force_posterior
 
 #: The study's random models (``StudyConfig.random_delays``' default).
-MODELS = ("U(6,10)", "U(8,16)", "U(0,16)")
+MODELS = ("U(4,8)", "U(6,10)", "U(8,16)", "U(0,16)")
 #: Largest allowed |measured frequency - predicted probability| in any bin.
 TOLERANCE = 0.02
 #: Probability bins: [0, 0.1), [0.1, 0.2), ..., [0.9, 1].
