@@ -25,10 +25,18 @@ demo: install
 	$(PY) -m remoteenv demo reacher --episodes 3
 	$(PY) -m remoteenv demo hexapod --episodes 1
 
+# The unit, integration and Ray suites all run even when one fails; the target
+# fails if any did, naming which.
+PYTEST ?= $(VENV)/bin/pytest
+RAY_SUITE ?= tests/ray/run.sh
+
 test: install lint
-	$(VENV)/bin/pytest tests/unit
-	$(VENV)/bin/pytest tests/integration
-	tests/ray/run.sh
+	@failed=""; \
+	$(PYTEST) tests/unit || failed="$$failed unit"; \
+	$(PYTEST) tests/integration || failed="$$failed integration"; \
+	$(RAY_SUITE) || failed="$$failed ray"; \
+	if [ -n "$$failed" ]; then echo "make test: these suites failed:$$failed" >&2; exit 1; fi; \
+	echo "make test: the unit, integration and ray suites passed"
 
 # Ray and RLlib tests alone: a venv of their own (.venv-ray), a private network namespace.
 test-ray:

@@ -31,6 +31,20 @@ def non_negative_int(text: str) -> int:
     return value
 
 
+#: Seeds the wire carries: Gymnasium takes any integer >= 0, the wire's integers end below 2**64.
+MAX_SEED = 2**64 - 1
+
+
+def seed_int(text: str) -> int:
+    """A reset seed: an integer in ``0..2**64 - 1``."""
+    value = _int(text)
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(
+            f"must be an integer in 0..2**64-1 (a seed the wire carries), got {text[:80]!r}"
+        )
+    return value
+
+
 #: Longest timeout (seconds) a command takes: 11.5 days; beyond it the
 #: millisecond counts handed to ZeroMQ's poll would overflow sooner or later.
 MAX_SECONDS = 1e6

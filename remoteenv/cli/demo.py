@@ -22,7 +22,7 @@ from typing import Any
 import gymnasium as gym
 
 from remoteenv import SHIPPED_SCENES as SCENES
-from remoteenv.cli.arguments import non_negative_int, non_negative_number, positive_factor, positive_int
+from remoteenv.cli.arguments import non_negative_int, non_negative_number, positive_factor, positive_int, seed_int
 from remoteenv.cli.optional import require
 from remoteenv.remote_env import OpenAIRemoteEnv
 
@@ -58,7 +58,7 @@ def add_parser(sub: Any) -> None:
         help="show the sim in MuJoCo's viewer window (render_mode='human'; needs a display)",
     )
     p.add_argument("--episodes", type=positive_int, default=3, help="episodes to run (default 3)")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the first reset (default 0)")
+    p.add_argument("--seed", type=seed_int, default=0, help="seed of the first reset (default 0)")
     p.add_argument("--continuous", action="store_true", help="cartpole: Box(-1, 1) action instead of Discrete(2)")
     p.add_argument("--random", action="store_true", help="random actions instead of the controller")
     p.add_argument(
@@ -122,10 +122,11 @@ def script_policy(path: str | None) -> Policy | None:
     ``__main__`` block), or None if it defines none."""
     if path is None:
         return None
+    from remoteenv.wire.files.file_reads import read_text
+
     try:
-        with open(path, encoding="utf-8") as f:
-            tree = ast.parse(f.read(), filename=path)
-    except (OSError, SyntaxError):
+        tree = ast.parse(read_text(path, MAX_SCRIPT_BYTES, what="scene script"), filename=path)
+    except (OSError, SyntaxError, ValueError):
         return None
     if not any(isinstance(n, ast.FunctionDef) and n.name == "demo_policy" for n in tree.body):
         return None
@@ -195,15 +196,44 @@ def _make(target: str, max_steps: int | None, kwargs: dict[str, Any]) -> gym.Env
     if target in SCENES:
         return gym.make(SCENES[target], max_episode_steps=max_steps, **kwargs)
     if os.path.isfile(target):
+        check_scene_script(target)
         env: gym.Env = OpenAIRemoteEnv(target, **kwargs)
         return gym.wrappers.TimeLimit(env, max_steps or DEFAULT_MAX_STEPS)
     try:
         return gym.make(target, max_episode_steps=max_steps, **kwargs)
-    except gym.error.Error as exc:
+    except (gym.error.Error, ModuleNotFoundError) as exc:  # "module:id" whose module is not there
         raise SystemExit(
             f"demo: {target!r} is neither a shipped scene ({', '.join(sorted(SCENES))}), a scene "
             f"script nor a registered id ({exc}); {id_hint(target)}"
         ) from None
+
+
+#: Largest scene script the demo reads to check it.
+MAX_SCRIPT_BYTES = 4 << 20
+
+
+def check_scene_script(path: str) -> None:
+    """Exit with one line unless ``path`` is a Python file that serves a scene
+    (calls ``run_scene``), before any sim is started for it."""
+    from remoteenv.wire.files.file_reads import read_text
+
+    if not path.endswith(".py"):
+        raise SystemExit(f"demo: {path[:200]!r} is not a Python file; a scene script ends in .py")
+    try:
+        tree = ast.parse(read_text(path, MAX_SCRIPT_BYTES, what="scene script"), filename=path)
+    except (OSError, ValueError, SyntaxError) as exc:
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]
+        raise SystemExit(f"demo: cannot read {path[:200]!r} as a scene script: {first}") from None
+    calls = {
+        node.func.id if isinstance(node.func, ast.Name) else getattr(node.func, "attr", None)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Call)
+    }
+    if not calls & {"run_scene", "RemoteControlledAgent"}:
+        raise SystemExit(
+            f"demo: {path[:200]!r} is not a scene script: it never calls run_scene(YourEnv) "
+            "(see remoteenv.sim.run_scene, or python -m remoteenv new-scene)"
+        )
 
 
 def id_hint(target: str) -> str:

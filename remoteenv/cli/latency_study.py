@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
+import signal
 import tempfile
 from typing import Any
 
@@ -137,21 +139,51 @@ def _check_writable(folder: str) -> None:
         raise SystemExit(f"--out {folder!r} is not writable: {exc.strerror or exc}") from None
 
 
+def _check_resumable(json_path: str, config: Any) -> None:
+    """Refuse (one line, naming the file) a ``--resume`` file that is not an
+    earlier run of this study (see :func:`remoteenv.latency_study.results.load_records`)."""
+    from remoteenv.latency_study.results import load_records
+
+    try:
+        load_records(json_path, config)
+    except (OSError, ValueError) as exc:
+        raise SystemExit(f"latency-study --resume: {exc}") from None
+
+
 def run(args: argparse.Namespace) -> int:
     purpose = "python -m remoteenv latency-study"
     for module in ("torch", "stable_baselines3", "tqdm") + (() if args.no_plot else ("matplotlib",)):
         require(module, purpose)
-    from remoteenv.latency_study.references import reference_returns
-    from remoteenv.latency_study.results import markdown_table, plot, write_json
-    from remoteenv.latency_study.runner import run_study
-    from remoteenv.latency_study.twin_check import run_twin_check
-
     config = _config(args)
     _check_writable(args.out)
     if args.policies is not None:
         _check_writable(args.policies)
     json_path = os.path.join(args.out, "delay_effect.json")
-    with tempfile.TemporaryDirectory(prefix="remoteenv-study-policies-") as scratch:
+    if args.resume:
+        _check_resumable(json_path, config)  # now, not after the reference runs
+    # SIGTERM ends the study as Ctrl-C does (the scratch dir is removed on the
+    # way out); the dir reaper removes it even after a SIGKILL.
+    previous = signal.signal(signal.SIGTERM, _terminated)
+    try:
+        return _study(args, config, json_path)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _terminated(signum: int, frame: Any) -> None:
+    raise SystemExit(128 + signum)
+
+
+def _study(args: argparse.Namespace, config: Any, json_path: str) -> int:
+    from remoteenv.agent.launch.dir_reaper import forget_dir, watch_dir
+    from remoteenv.latency_study.references import reference_returns
+    from remoteenv.latency_study.results import markdown_table, plot, write_json
+    from remoteenv.latency_study.runner import run_study
+    from remoteenv.latency_study.twin_check import run_twin_check
+
+    scratch = tempfile.mkdtemp(prefix="remoteenv-study-policies-")
+    watch_dir(scratch)
+    try:
         policy_dir = args.policies or scratch
         references = reference_returns(config)
         data = run_study(
@@ -173,4 +205,7 @@ def run(args: argparse.Namespace) -> int:
                 f"wrote {os.path.join(args.out, 'rt_replay.json')}: real time vs its exact twin, "
                 f"{check['identical']} of {check['total']} episodes identical ({check['steps']} steps)"
             )
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+        forget_dir(scratch)
     return 0

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
 import os
 import time
@@ -38,8 +39,9 @@ from typing import Any
 
 import numpy as np
 
-from remoteenv.cli.arguments import json_map, non_negative_int, positive_int
+from remoteenv.cli.arguments import MAX_SEED, json_map, non_negative_int, positive_int
 from remoteenv.cli.optional import require
+from remoteenv.wire.files.file_reads import read_bytes
 
 #: Builtin controllers (functions of remoteenv.controllers) and the scene each suits.
 BUILTIN_POLICIES = {
@@ -48,6 +50,8 @@ BUILTIN_POLICIES = {
     "reacher_reach": "Reacher",
 }
 MODES = ("action_delay", "obs_delay", "real_time")
+#: Largest TorchScript --policy file read.
+MAX_POLICY_BYTES = 1 << 30
 CSV_FIELDS = (
     "delay",
     "seed",
@@ -90,13 +94,16 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(run=run)
 
 
-def int_list(text: str, what: str) -> list[int]:
+def int_list(text: str, what: str, maximum: int | None = None) -> list[int]:
+    """Comma-separated integers in ``0..maximum`` (one line naming ``what`` if not)."""
     try:
         values = [int(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise SystemExit(f"{what} must be comma-separated integers, got {text[:80]!r}") from None
     if not values or min(values) < 0:
         raise SystemExit(f"{what} must hold at least one integer >= 0, got {text[:80]!r}")
+    if maximum is not None and max(values) > maximum:
+        raise SystemExit(f"{what} must be integers in 0..{maximum}, got {str(max(values))[:40]}")
     return values
 
 
@@ -110,8 +117,12 @@ def load_policy(name: str) -> Policy:
     if not os.path.isfile(name):
         raise SystemExit(f"--policy {name[:200]!r} is neither a builtin ({', '.join(BUILTIN_POLICIES)}) nor a file")
     torch = require("torch", "a TorchScript --policy")
-
-    module = torch.jit.load(name, map_location="cpu")
+    try:
+        data = read_bytes(name, MAX_POLICY_BYTES, what="--policy")
+        module = torch.jit.load(io.BytesIO(data), map_location="cpu")
+    except (OSError, ValueError, RuntimeError) as exc:  # UnreadableFile is a ValueError; torch says RuntimeError
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]
+        raise SystemExit(f"--policy {name[:200]!r} is not a TorchScript file (torch.jit.save): {first}") from None
     module.eval()
 
     def policy(obs: np.ndarray) -> Any:
@@ -276,9 +287,32 @@ class SweepFiles:
         self._csv.close()
 
 
+def checked_env(args: argparse.Namespace, delay: int) -> Any:
+    """:func:`make_env`, its errors about the arguments (an unknown id, keyword
+    arguments the scene does not take, a scene that fails to start) one line."""
+    import gymnasium as gym
+
+    from remoteenv.agent.errors import RemoteEnvError
+
+    try:
+        return make_env(args, delay)
+    except (gym.error.Error, ModuleNotFoundError, RemoteEnvError, TypeError) as exc:
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:300]
+        raise SystemExit(f"latency-sweep: cannot make {args.env[:200]!r}: {first}") from None
+
+
 def run(args: argparse.Namespace) -> int:
-    delays = int_list(args.delays, "--delays")
-    seeds = int_list(args.seeds, "--seeds")
+    from remoteenv.delays import MAX_DELAY_TICKS
+
+    delays = int_list(args.delays, "--delays", MAX_DELAY_TICKS)
+    seeds = int_list(args.seeds, "--seeds", MAX_SEED)
+    if args.action_history > MAX_DELAY_TICKS:
+        raise SystemExit(f"--action-history must be within 0..{MAX_DELAY_TICKS} (the most actions in flight)")
+    if args.action_history and args.policy in BUILTIN_POLICIES:
+        raise SystemExit(
+            "--action-history changes the observation; the builtin controllers take the env's own: "
+            "use it with a TorchScript --policy"
+        )
     if args.episodes < 1:
         raise SystemExit("--episodes must be >= 1")
     if args.max_steps is not None and args.max_steps < 1:
@@ -290,13 +324,14 @@ def run(args: argparse.Namespace) -> int:
         require("matplotlib", "latency-sweep's plot (or pass --no-plot)")
     policy = load_policy(args.policy)
     files = SweepFiles(args.out)  # before the first sim starts
+    first_env = checked_env(args, delays[0])  # a bad id or keyword fails here, in one line
     config = {k: v for k, v in vars(args).items() if k != "run"}
     rows: list[dict[str, Any]] = []
     started = time.perf_counter()
     try:
         with progress(len(delays) * len(seeds) * args.episodes) as bar:
             for i, d in enumerate(delays):
-                env = make_env(args, d)
+                env = first_env if i == 0 else checked_env(args, d)
                 try:
                     think = d * float(env.unwrapped.dt) if args.mode == "real_time" else 0.0
                     for s in seeds:

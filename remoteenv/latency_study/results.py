@@ -33,6 +33,8 @@ from typing import Any
 import numpy as np
 
 from remoteenv.latency_study.design import KINDS, VARIANTS, StudyConfig
+from remoteenv.latency_study.resumed import BadRecord, check_records
+from remoteenv.wire.files.file_reads import read_json
 
 RecordKey = tuple[str, str, int | str, int]
 
@@ -65,16 +67,28 @@ def write_json(path: str, data: dict[str, Any]) -> None:
         raise
 
 
+#: Largest study file ``--resume`` reads (a full study's is well under 1 MiB).
+MAX_STUDY_FILE = 64 << 20
+
+
 def load_records(path: str, config: StudyConfig) -> list[dict[str, Any]]:
     """The records of an earlier run of the same configuration at ``path`` (none
-    if the file is missing); a different configuration is an error."""
-    if not os.path.exists(path):
+    if nothing is there), read through the bounded reader (a regular file,
+    opened without blocking, size and nesting bounded) and each checked
+    against ``config`` (:func:`remoteenv.latency_study.resumed.check_records`).
+
+    Raises ``ValueError`` naming ``path`` for another configuration, a file
+    that is not a study file or a record this study could not have written,
+    and ``OSError`` if it cannot be opened."""
+    if not os.path.lexists(path):
         return []
-    with open(path) as f:
-        data = json.load(f)
+    data = read_json(path, MAX_STUDY_FILE, what="study file")
     if not isinstance(data, dict) or data.get("config") != config.to_json():
         raise ValueError(f"{path} holds a study with another configuration; choose another --out or drop --resume")
-    return list(data.get("records", []))
+    try:
+        return list(check_records(data.get("records", []), config))
+    except BadRecord as exc:
+        raise ValueError(f"{path} is refused: {exc}; remove it or choose another --out") from None
 
 
 def _mean_of(values: list[Any]) -> float | None:

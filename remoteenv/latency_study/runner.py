@@ -70,6 +70,20 @@ def _run_cell(config: StudyConfig, cell: Cell, policy_dir: str | None) -> dict[s
     return run_cell(config, cell, policy_dir)
 
 
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """End ``pool``'s worker processes now (SIGTERM; each one's sims and dirs
+    follow it out) and drop the cells not started."""
+    terminate = getattr(pool, "terminate_workers", None)  # Python 3.14+
+    if terminate is not None:
+        terminate()
+        return
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown drops them
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+
+
 def run_study(
     config: StudyConfig,
     json_path: str,
@@ -126,12 +140,16 @@ def run_study(
         else:
             context = multiprocessing.get_context("spawn")
             with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-                futures = {pool.submit(_run_cell, config, cell, policy_dir): cell for cell in todo}
-                for future in as_completed(futures):
-                    record = future.result()
-                    finished(record)
-                    bar.set_postfix_str(f"{futures[future].label()}: {record['mean_return']:.0f}")
-                    bar.update(1)
+                try:
+                    futures = {pool.submit(_run_cell, config, cell, policy_dir): cell for cell in todo}
+                    for future in as_completed(futures):
+                        record = future.result()
+                        finished(record)
+                        bar.set_postfix_str(f"{futures[future].label()}: {record['mean_return']:.0f}")
+                        bar.update(1)
+                except BaseException:  # Ctrl-C, SIGTERM, a failed cell: the running cells stop too
+                    _stop_workers(pool)
+                    raise
     data["wall_s"] = earlier_s + time.perf_counter() - started
     data["segments"] = segments + [time.perf_counter() - started]
     data["host"]["load_average_end"] = list(os.getloadavg())

@@ -11,6 +11,7 @@ floating-point determinism on the host).
 
 from __future__ import annotations
 
+import io
 import os
 import time
 from collections.abc import Callable
@@ -20,8 +21,11 @@ import gymnasium as gym
 import numpy as np
 
 from remoteenv.latency_study.design import Cell, StudyConfig
+from remoteenv.wire.files.file_reads import read_bytes
 from remoteenv.wrappers import ActionHistory, ActionHistoryVector
 
+#: Largest saved policy file read back (an SB3 zip of an MLP policy is well under 1 MiB).
+MAX_POLICY_BYTES = 256 << 20
 #: Training curve resolution: one point per this many environment steps.
 CURVE_EVERY = 10_000
 #: Episodes averaged into one point of the training curve.
@@ -62,10 +66,12 @@ class TrainedPolicy:
     def load(cls, path: str) -> TrainedPolicy:
         from stable_baselines3 import PPO
 
-        model = PPO.load(path + ".zip", device="cpu")
+        # Through the bounded reader (regular files, no blocking open, a size bound).
+        model = PPO.load(io.BytesIO(read_bytes(path + ".zip", MAX_POLICY_BYTES, what="policy")), device="cpu")
         stats = None
         if os.path.exists(path + ".npz"):
-            with np.load(path + ".npz") as f:
+            data = read_bytes(path + ".npz", MAX_POLICY_BYTES, what="policy statistics")
+            with np.load(io.BytesIO(data), allow_pickle=False) as f:
                 stats = {k: np.array(f[k]) for k in ("mean", "var", "clip", "epsilon")}
         return cls(model, stats)
 

@@ -16,6 +16,9 @@ from remoteenv.wire.errors import ProtocolError, short_repr
 from remoteenv.wire.frame_limits import MAX_MESSAGE_BYTES, FrameTooLarge
 
 _EXT_NDARRAY = 1
+_EXT_BIG_INT = 2
+#: Longest integer extension type 2 carries: 512 bits.
+MAX_BIG_INT_BYTES = 64
 
 #: The only dtypes that may appear on the wire.
 ARRAY_DTYPES = frozenset(
@@ -86,6 +89,25 @@ def _default(obj: Any) -> Any:
     if isinstance(obj, int):  # msgpack hands over the ints it cannot hold
         raise ValueError(f"integer {short_repr(obj)} is outside the wire's range [-2**63, 2**64)")
     raise TypeError(f"cannot send a {type(obj).__name__} on the wire: {short_repr(obj)}")
+
+
+def _default_big(obj: Any) -> Any:
+    """:func:`_default`, and an int beyond msgpack's range as extension type 2 (replies only)."""
+    if isinstance(obj, int) and not isinstance(obj, bool):
+        size = ((obj if obj >= 0 else ~obj).bit_length() + 8) // 8  # two's complement, room for the sign bit
+        if size > MAX_BIG_INT_BYTES:
+            raise ValueError(f"integer {short_repr(obj)} has more than {8 * MAX_BIG_INT_BYTES} bits")
+        return msgpack.ExtType(_EXT_BIG_INT, obj.to_bytes(size, "big", signed=True))
+    return _default(obj)
+
+
+def _ext_hook_big(code: int, data: bytes) -> Any:
+    """:func:`_ext_hook`, and extension type 2's integers (replies only)."""
+    if code == _EXT_BIG_INT:
+        if not 0 < len(data) <= MAX_BIG_INT_BYTES:
+            raise ProtocolError(f"an integer of {len(data)} bytes (1..{MAX_BIG_INT_BYTES} allowed)")
+        return int.from_bytes(data, "big", signed=True)
+    return _ext_hook(code, data)
 
 
 def _ext_hook(code: int, data: bytes) -> Any:

@@ -293,6 +293,12 @@ scalars says which in an optional ``"types"`` map, ``{"reward": dtype,
 client can give them back their type (see :mod:`remoteenv.wire.scalar_types`;
 a client may ignore it).
 
+An integer outside msgpack's range ``[-2**63, 2**64)`` travels in a reply
+(never in a request) as msgpack extension type 2: its two's-complement
+big-endian bytes, 1 to :data:`~remoteenv.wire.arrays.MAX_BIG_INT_BYTES` of them
+(Gymnasium's ``np_random_seed`` is a 128-bit integer). Requests keep the
+range: a client refuses to send a larger integer and a sim refuses type 2.
+
 Spaces (Box, Discrete, MultiDiscrete, MultiBinary, Dict, Tuple) travel as maps,
 see :mod:`remoteenv.wire.spaces`.
 """
@@ -305,7 +311,7 @@ from typing import Any
 
 import msgpack
 
-from remoteenv.wire.arrays import ARRAY_DTYPES, _default, _ext_hook, wire_dtype
+from remoteenv.wire.arrays import ARRAY_DTYPES, _default, _default_big, _ext_hook, _ext_hook_big, wire_dtype
 from remoteenv.wire.errors import ProtocolError, short_repr
 from remoteenv.wire.frame_limits import (
     MAX_ERROR_CHARS,
@@ -334,16 +340,16 @@ OP_STEP_RESET = 3
 OPS = (OP_STEP, OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET)
 
 
-def pack(obj: Any) -> bytes:
+def pack(obj: Any, big_ints: bool = False) -> bytes:
     """Encode one message (a map) as msgpack bytes.
 
     Raises :class:`FrameTooLarge` for a frame above :data:`MAX_MESSAGE_BYTES`
     (an oversize array is refused before it is copied), ``ValueError`` for an
-    integer outside msgpack's range and ``TypeError`` for a value the wire
-    cannot carry.
+    integer outside msgpack's range (with ``big_ints``, a reply's, outside
+    extension type 2's) and ``TypeError`` for a value the wire cannot carry.
     """
     try:
-        frame: bytes = msgpack.packb(obj, default=_default, use_bin_type=True)
+        frame: bytes = msgpack.packb(obj, default=_default_big if big_ints else _default, use_bin_type=True)
     except OverflowError:
         raise ValueError("an integer is outside the wire's range [-2**63, 2**64)") from None
     if len(frame) > MAX_MESSAGE_BYTES:
@@ -351,11 +357,12 @@ def pack(obj: Any) -> bytes:
     return frame
 
 
-def unpack(frame: bytes, max_items: int | None = None, max_values: int | None = None) -> Any:
+def unpack(frame: bytes, max_items: int | None = None, max_values: int | None = None, big_ints: bool = False) -> Any:
     """Decode one frame. Raises :class:`ProtocolError` for anything off-spec.
 
     ``max_items`` caps the entries of every array and map, ``max_values`` the
-    values of the whole frame (both checked before any value is built).
+    values of the whole frame (both checked before any value is built);
+    ``big_ints`` (a reply) takes extension type 2's integers.
     """
     if len(frame) > MAX_MESSAGE_BYTES:
         raise FrameTooLarge(len(frame))
@@ -363,7 +370,8 @@ def unpack(frame: bytes, max_items: int | None = None, max_values: int | None = 
         raise ProtocolError(f"a frame of {len(frame)} bytes holds more than {max_values} msgpack values")
     limits = {} if max_items is None else {"max_array_len": max_items, "max_map_len": max_items}
     try:
-        return msgpack.unpackb(frame, raw=False, ext_hook=_ext_hook, strict_map_key=True, use_list=True, **limits)
+        hook = _ext_hook_big if big_ints else _ext_hook
+        return msgpack.unpackb(frame, raw=False, ext_hook=hook, strict_map_key=True, use_list=True, **limits)
     except ProtocolError:
         raise
     except Exception as exc:  # msgpack raises several types for bad input

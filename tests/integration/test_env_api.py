@@ -312,3 +312,12 @@ def test_package_imported_from_the_checkout_finds_its_scenes():
     assert module_file == os.path.join(root, "remoteenv", "__init__.py")
     assert scenes_file == os.path.join(root, "scenes", "__init__.py")
     assert ids == "['remoteenv/CartPole-v0', 'remoteenv/Hexapod-v0', 'remoteenv/Reacher-v0']" and registered == "True"
+
+
+def test_a_scene_that_raises_in_init_fails_to_launch_with_its_own_exception_first():
+    """Issue 28, item 6: the scene's exception was the last line of a 1,500-character message."""
+    with pytest.raises(remoteenv.LaunchError) as caught:
+        remoteenv.OpenAIRemoteEnv(os.path.join(HERE, "scenes", "raising_scene.py"), fail_init=True)
+    first, _, rest = str(caught.value).partition("\n")
+    assert first.endswith("failed to start: ValueError: the pole length must be positive, got -1"), first
+    assert "Traceback (most recent call last)" in rest and "exited with code 1" in rest

@@ -4,13 +4,18 @@ few thousand steps learn nothing): docs/latency.md reports the full run."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
+import os
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
+
+from remoteenv.latency_study.design import cells
 
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("matplotlib")
@@ -135,3 +140,87 @@ def test_the_trained_policy_normalises_observations_as_vec_normalize_did(tmp_pat
     policy = TrainedPolicy(model=None, obs_stats=stats)
     np.testing.assert_allclose(policy.normalize(obs), venv.normalize_obs(obs), rtol=1e-6)
     venv.close()
+
+
+@pytest.mark.parametrize("bad", ["fifo", "1e308"])
+def test_a_resume_file_that_fails_its_checks_is_refused_in_one_line_and_nothing_is_published(tmp_path, bad):
+    """Issue 28, item 2: a FIFO no longer hangs ``--resume``, and records claiming
+    every cell done with returns CartPole cannot give never become the table."""
+    out = tmp_path / "study"
+    out.mkdir()
+    path = out / "delay_effect.json"
+    args = ["--random-delays", "", "--delays", "0", "--seeds", "0", "--steps", "256", "--eval-episodes", "1"]
+    if bad == "fifo":
+        os.mkfifo(path)
+    else:
+        from remoteenv.cli.latency_study import _config, add_parser  # the study's own configuration
+
+        parser = argparse.ArgumentParser()
+        add_parser(parser.add_subparsers())
+        config = _config(parser.parse_args(["latency-study", *args]))
+        records = [
+            {"variant": c.variant, "kind": c.kind, "delay": c.delay, "seed": c.seed, "mean_return": 1e308}
+            | {"returns": [1e308], "history_length": c.history_length, "include_alpha": c.include_alpha}
+            | {"steps": 256, "train_s": 1.0, "train_return": 1e308, "curve": []}
+            for c in cells(config)
+        ]
+        path.write_text(json.dumps({"config": config.to_json(), "records": records}))
+    done = subprocess.run(
+        [sys.executable, "-m", "remoteenv", "latency-study", "--out", str(out), "--resume", "--no-plot", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode != 0 and len(lines) == 1 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    assert str(path) in lines[0]
+    assert not (out / "delay_effect.md").exists()
+
+
+def _descendants(root: int) -> set[int]:
+    parents: dict[int, int] = {}
+    for entry in os.listdir("/proc"):
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                parents[int(entry)] = int(f.read().rsplit(")", 1)[1].split()[1])
+        except (OSError, ValueError, IndexError):
+            continue
+    found, frontier = set(), {root}
+    while frontier:
+        frontier = {pid for pid, parent in parents.items() if parent in frontier} - found
+        found |= frontier
+    return found
+
+
+def test_a_sigtermed_study_leaves_no_dir_and_no_process(tmp_path, pid_alive):
+    """Issue 28, item 6: SIGTERM while the workers train leaves no
+    ``remoteenv-study-policies-*`` dir (nor any private dir) and no process."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    log = tmp_path / "stderr"
+    cmd = [sys.executable, "-m", "remoteenv", "latency-study", "--out", str(tmp_path / "study"), "--no-plot"]
+    cmd += ["--random-delays", "", "--delays", "0", "--seeds", "0", "--steps", "100000", "--workers", "2"]
+    with open(log, "w") as err:
+        study = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, env={**os.environ, "TMPDIR": str(tmp)})
+    left: set[int] = set()
+    try:
+        deadline = time.monotonic() + 120
+        while "delay study" not in log.read_text() and study.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert list(tmp.glob("remoteenv-study-policies-*")), f"no scratch dir: {log.read_text()[-2000:]}"
+        time.sleep(2.0)  # the workers are training
+        left = _descendants(study.pid)
+        study.terminate()
+        assert study.wait(timeout=60) != 0
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and (list(tmp.glob("remoteenv-*")) or any(pid_alive(p) for p in left)):
+            time.sleep(0.1)
+        assert not list(tmp.glob("remoteenv-*")), sorted(os.listdir(tmp))
+        assert not [p for p in left if pid_alive(p)]
+    finally:
+        if study.poll() is None:
+            study.kill()
+            study.wait()
+        for pid in left:
+            if pid_alive(pid):
+                os.kill(pid, 9)

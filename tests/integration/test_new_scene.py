@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -132,7 +133,21 @@ def test_the_readme_installs_remoteenv_first(tmp_path):
     write_package("ball_plate", tmp_path / "p")
     readme = (tmp_path / "p" / "README.md").read_text()
     assert "installs the package (and remoteenv)" not in readme
-    assert readme.index("pip install /path/to/remoteenv") < readme.index("pip install -e .")
+    assert readme.index("pip install /path/to/remoteenv") < readme.index('pip install -e ".[test]"')
+
+
+def test_the_package_recipe_installs_pytest_and_runs_that_one(tmp_path):
+    """Issue 28, item 6: the recipe ran the system's pytest, which could not import gymnasium."""
+    write_package("ball_plate", tmp_path / "p")
+    readme = (tmp_path / "p" / "README.md").read_text()
+    guide = (Path(__file__).resolve().parents[2] / "docs" / "env-package.md").read_text()
+    assert 'pip install -e ".[test]"' in readme and 'pip install -e "my_arm[test]"' in guide
+    for text in (readme, guide):
+        commands = [line.split("#")[0].strip() for line in text.splitlines()]
+        assert any("python -m pytest" in c for c in commands)
+        assert not any(c == "pytest" or c.startswith("pytest ") or "&& pytest" in c for c in commands)
+    pyproject = (tmp_path / "p" / "pyproject.toml").read_text()
+    assert 'test = ["pytest' in pyproject  # the extra the recipe names
 
 
 @pytest.mark.parametrize("name", ["remoteenv", "numpy", "os", "json", "gymnasium"])

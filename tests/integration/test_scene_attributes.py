@@ -178,3 +178,31 @@ def test_seeds_and_frames_as_sync_vector_env_gives_them():
         assert unrendered.call("render") == (None, None)  # as SyncVectorEnv without a render mode
     finally:
         unrendered.close()
+
+
+def test_unseeded_np_random_seed_is_each_worlds_as_sync_vector_env_gives_it(vec_pair):
+    """Issue 28, item 6: before any seeded reset, Gymnasium's seed is a random
+    128-bit integer, beyond msgpack's range; it used to fail to cross the wire."""
+    remote, sync = vec_pair
+    for env in (remote, sync):
+        seeds = env.get_attr("np_random_seed")
+        assert len(seeds) == 3 and all(type(s) is int and 0 <= s < 2**128 for s in seeds), seeds
+        assert len(set(seeds)) == 3 and max(seeds) >= 2**64  # 128-bit draws: at least one past the old range
+        env.reset()  # no seed: the streams go on, the seeds stay
+        assert env.get_attr("np_random_seed") == seeds
+
+
+def test_the_model_and_data_say_they_live_in_the_sim(vec_pair):
+    """Issue 28, item 6: a bare AttributeError gave no word of where they are."""
+    remote, _ = vec_pair
+    single = gym.make(ID)
+    try:
+        for env, reach in ((single.unwrapped, "get_scene_attr"), (remote.unwrapped, "get_attr")):
+            for name in ("model", "data"):
+                with pytest.raises(AttributeError, match=f"MuJoCo {name} lives in the sim process.*{reach}.*call"):
+                    getattr(env, name)
+                assert not hasattr(env, name)
+        with pytest.raises(AttributeError, match="no attribute 'no_such_thing'"):
+            single.unwrapped.no_such_thing  # noqa: B018
+    finally:
+        single.close()

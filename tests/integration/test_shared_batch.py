@@ -96,3 +96,52 @@ def test_a_loud_doorbell_gives_the_same_results(monkeypatch):
     plain = _trajectory("remoteenv/CartPole-v0", 4, 60, 2, "NextStep")
     assert loud[-1] == ("lanes", [True, True]) and plain[-1] == ("lanes", [False, False])
     assert_same(loud[:-1], plain[:-1], "trajectory")
+
+
+def _tamper(arrays, how: str) -> None:
+    """One write into a mapped region, as any process that can open it could make."""
+    import os
+
+    header = arrays.header
+    if how == "huge-request-seq":
+        header[doorbell.REQ_SEQ] = 2**62
+    elif how == "huge-reply-seq":
+        header[doorbell.REP_SEQ] = 2**62
+    elif how == "random-header":
+        header.view(np.uint8)[:] = np.frombuffer(os.urandom(header.nbytes), dtype=np.uint8)
+    else:
+        region = arrays._region
+        region[:] = os.urandom(len(region))
+
+
+@pytest.mark.parametrize("how", ["huge-request-seq", "huge-reply-seq", "random-header", "random-region"])
+def test_a_tampered_region_is_dropped_and_the_env_keeps_stepping(how):
+    """Issue 28, item 3: one write into the region used to wedge the env for good
+    (every later step timed out). Now the side that finds the header off drops
+    the region, the steps take msgpack, and the trajectory is the one an
+    untouched env gives (no step served twice, none lost)."""
+    n, k = 4, 2
+    make = dict(num_envs=n, vectorization_mode="vector_entry_point", envs_per_process=k)
+    tampered = gym.make_vec("remoteenv/CartPole-v0", **make)
+    reference = gym.make_vec("remoteenv/CartPole-v0", **make)
+    rng = np.random.default_rng(5)
+    try:
+        assert_same(tampered.reset(seed=11), reference.reset(seed=11), "reset")
+        for step in range(30):
+            if step == 5:
+                lanes = tampered._requests.lanes._lanes
+                regions = [arrays for _, arrays in lanes.values()]
+                assert all(a is not None and a.header is not None for a in regions)
+                _tamper(regions[0], how)
+            actions = rng.integers(0, 2, size=n)
+            if step == 5:
+                with pytest.warns(RuntimeWarning, match="tampered with"):
+                    got = tampered.step(actions)
+            else:
+                got = tampered.step(actions)
+            assert_same(got, reference.step(actions), f"step {step}")
+        lanes = tampered._requests.lanes._lanes
+        assert [arrays is not None for _, arrays in lanes.values()] == [False, True]  # the untouched one stays
+    finally:
+        tampered.close()
+        reference.close()

@@ -23,7 +23,7 @@ if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ] || [ "$0" -nt "$
     echo "tests/ray: setting up $VENV" >&2
     python3 -m venv "$VENV"
     "$VENV/bin/pip" install -qq torch==2.13.0
-    "$VENV/bin/pip" install -qq "ray[default,rllib]==2.60.0"
+    "$VENV/bin/pip" install -qq "ray[default,rllib]>=2.60.0,<3"
     # remoteenv's runtime and test dependencies, as pyproject.toml lists them.
     mapfile -t DEPS < <(python3 - "$ROOT/pyproject.toml" <<'EOF'
 import sys, tomllib
@@ -47,6 +47,8 @@ cd "$ROOT"
 export PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}"
 export MUJOCO_GL=${MUJOCO_GL:-egl}
 export RAY_USAGE_STATS_ENABLED=0
+# Without Ray in this venv the suite fails (tests/ray/conftest.py) instead of collecting nothing.
+export REMOTEENV_RAY_SUITE=1
 # Ray's cluster utility leaves a multiprocessing listener socket in the temp
 # dir when its nodes stop; the tests get a temp dir of their own, removed at the end.
 TEST_TMP=$(mktemp -d "${TMPDIR:-/tmp}/rt-XXXXXX")

@@ -121,3 +121,56 @@ def test_launch_info_content_is_checked_before_anything_connects(tmp_path, doc, 
     path.write_text(json.dumps(doc))
     with pytest.raises(LaunchError, match=message):
         read_launch_info(path)
+
+
+def test_a_trace_npy_whose_header_claims_10_to_the_12_values_is_refused_before_allocating(tmp_path):
+    """Issue 28, item 4: ``np.load`` allocated what the header claimed (a raw MemoryError)."""
+    import io
+
+    import numpy as np
+
+    from remoteenv.delays import Trace
+
+    buffer = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buffer, {"descr": "<i8", "fortran_order": False, "shape": (10**12,)})
+    path = tmp_path / "trace.npy"
+    path.write_bytes(buffer.getvalue() + b"\0" * 64)
+    with pytest.raises(ValueError, match="header says shape"):
+        Trace(str(path))
+    np.save(tmp_path / "short.npy", np.arange(10))
+    data = (tmp_path / "short.npy").read_bytes()
+    (tmp_path / "short.npy").write_bytes(data[:-16])  # the header says 10 values, 8 are there
+    with pytest.raises(ValueError, match="holds fewer"):
+        Trace(str(tmp_path / "short.npy"))
+    np.save(tmp_path / "fine.npy", np.arange(5))
+    assert Trace(str(tmp_path / "fine.npy")).values == (0, 1, 2, 3, 4)
+
+
+def test_a_sim_log_replaced_by_a_fifo_is_not_waited_on(tmp_path):
+    """A sim's log is read for its tail without blocking (a FIFO gives nothing)."""
+    from remoteenv.agent.launch.sim_process import SimProcess
+
+    os.mkfifo(tmp_path / "sim-0.log")
+
+    class Exited:
+        pid, returncode = 12345, 1
+
+        def poll(self):
+            return 1
+
+        def wait(self, timeout=None):
+            return 1
+
+    sim = SimProcess(instance=0, proc=Exited(), log_path=str(tmp_path / "sim-0.log"), ready_file="")
+    outcome = []
+    reader = threading.Thread(target=lambda: outcome.append(sim.stderr_tail()), daemon=True)
+    reader.start()
+    reader.join(10.0)
+    if reader.is_alive():
+        os.close(os.open(tmp_path / "sim-0.log", os.O_WRONLY | os.O_NONBLOCK))
+        reader.join(5.0)
+        pytest.fail("reading a FIFO as the sim's log blocked")
+    assert outcome == [""]
+    (tmp_path / "real.log").write_bytes(b"x" * 20000 + b"\nlast line\n")
+    sim.log_path = str(tmp_path / "real.log")
+    assert sim.stderr_tail(1) == "last line"

@@ -113,7 +113,12 @@ def test_resume_keeps_records_of_the_same_configuration_only(tmp_path):
     config = StudyConfig(delays=(0,), random_delays=(), seeds=(0,), steps=10)
     path = str(tmp_path / "delay_effect.json")
     assert load_records(path, config) == []
-    write_json(path, {"config": config.to_json(), "records": [_record("plain", "constant", 0, 0, 9.0)]})
+    record = {
+        **_record("plain", "constant", 0, 0, 9.0),
+        **{"returns": [9.0] * config.eval_episodes, "history_length": 0, "include_alpha": False},
+        **{"steps": 10, "train_s": 1.0, "train_return": 9.0, "curve": []},
+    }
+    write_json(path, {"config": config.to_json(), "records": [record]})
     assert load_records(path, config)[0]["mean_return"] == 9.0
     other = StudyConfig(delays=(0,), random_delays=(), seeds=(0,), steps=20)
     with pytest.raises(ValueError, match="another configuration"):

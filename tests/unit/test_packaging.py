@@ -42,3 +42,15 @@ def test_cartpole_registration_carries_cartpole_v1_threshold() -> None:
     import remoteenv  # noqa: F401
 
     assert gym.spec("remoteenv/CartPole-v0").reward_threshold == gym.spec("CartPole-v1").reward_threshold == 475.0
+
+
+def test_torchrl_and_ray_are_compatible_ranges_not_exact_pins():
+    """Issue 28, item 6: exact pins blocked every later release of either."""
+    from packaging.requirements import Requirement
+
+    with open(os.path.join(ROOT, "pyproject.toml"), "rb") as f:
+        extras = tomllib.load(f)["project"]["optional-dependencies"]
+    for extra, name in (("torchrl", "torchrl"), ("ray", "ray")):
+        (requirement,) = [Requirement(r) for r in extras[extra] if Requirement(r).name == name]
+        operators = sorted(spec.operator for spec in requirement.specifier)
+        assert operators == ["<", ">="], f"{extra}: {requirement} is not a lower bound and an upper one"

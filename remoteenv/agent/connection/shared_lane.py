@@ -182,7 +182,7 @@ class SharedLanes:
             return None
         arrays = self.get(p, conn, offered)
         bell = self._bells.get(p)
-        if arrays is None or bell is None or not _fits(arrays.actions, actions):
+        if arrays is None or bell is None or not _fits(arrays.actions, actions) or self._tampered(p, conn):
             return None
         n = len(actions)
         assert arrays.ops is not None and arrays.worlds is not None
@@ -200,7 +200,7 @@ class SharedLanes:
         if it has none, its lane is in use or they do not fit."""
         self._written.discard(p)
         arrays = self.get(p, conn, offered)
-        if arrays is None or p in self._pending or not _fits(arrays.actions, actions):
+        if arrays is None or p in self._pending or not _fits(arrays.actions, actions) or self._tampered(p, conn):
             return False
         arrays.actions[: len(actions)] = actions
         self._written.add(p)
@@ -268,6 +268,24 @@ class SharedLanes:
         if view is None or view.n != n or view.version != version:
             view = self._views[p] = RegionReply(arrays, version, infos[1], n)
         return view
+
+    def _tampered(self, p: int, conn: SimConnection) -> bool:
+        """Whether process ``p``'s region header is not what the two sides can
+        have written (:meth:`Doorbell.agent_tampered`): then the region is
+        dropped with a warning and its steps take the msgpack path for good."""
+        bell = self._bells.get(p)
+        why = None if bell is None else bell.agent_tampered()
+        if why is None:
+            return False
+        known = self._lanes.get(p)
+        if known is not None and known[1] is not None:
+            known[1].close()
+        self._lanes[p] = (conn, None)
+        self._bells.pop(p, None)
+        self._infos.pop(p, None)
+        self._views.pop(p, None)
+        _fall_back(conn, f"it was tampered with: {why}")
+        return True
 
     def _learn(self, p: int, conn: SimConnection, layout: Any) -> None:
         arrays = self._lanes[p][1]

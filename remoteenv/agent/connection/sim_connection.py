@@ -241,7 +241,7 @@ class SimConnection:
         """One received frame as a reply map (at most ``MAX_REPLY_VALUES`` values,
         counted before any is built); a ``protocol`` error naming ``what`` otherwise."""
         try:
-            reply = protocol.unpack(frame, max_values=protocol.MAX_REPLY_VALUES)
+            reply = protocol.unpack(frame, max_values=protocol.MAX_REPLY_VALUES, big_ints=True)
         except protocol.ProtocolError as exc:
             problem = str(exc)
         else:

@@ -23,6 +23,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from remoteenv.agent.connection.connection import SimConnection, connect_sim
+from remoteenv.agent.launch.dir_reaper import watch_dir
 from remoteenv.agent.launch.processes import pid_alive
 from remoteenv.agent.launch.sim_command import wait_ready
 from remoteenv.agent.launch.sim_group import LaunchSpec, SimLayout
@@ -178,6 +179,7 @@ class Launcher:
             raise FileNotFoundError(f"scene script {spec.scene!r} does not exist")
         self.spec = spec
         self._state = LaunchState(workdir=tempfile.mkdtemp(prefix="remoteenv-"))
+        watch_dir(self._state.workdir)  # removed even if this process is killed before any sim exists
         self._finalizer = weakref.finalize(self, stop_all, self._state)
         try:
             for i in range(spec.num_instances):

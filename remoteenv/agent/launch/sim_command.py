@@ -21,6 +21,10 @@ from typing import Any, Protocol
 from remoteenv.agent.errors import RemoteEnvError, SceneArgumentError
 from remoteenv.wire.delays.delay_file import write_delay_file
 from remoteenv.wire.errors import SCENE_ARGS_MARKER
+from remoteenv.wire.files.file_reads import UnreadableFile, read_json
+
+#: Largest ready file read (a sim writes its endpoint and pid: well under 1 KiB).
+READY_FILE_LIMIT = 64 << 10
 
 
 def scene_command(
@@ -125,6 +129,19 @@ class StartingSim(Protocol):
     def stderr_tail(self, lines: int = ...) -> str: ...
 
 
+def scene_exception(stderr: str) -> tuple[str, str] | None:
+    """The exception line (``ValueError: ...``) of the last Python traceback in
+    ``stderr`` and that traceback, or None if it holds none."""
+    lines = stderr.splitlines()
+    starts = [i for i, line in enumerate(lines) if line.startswith("Traceback (most recent call last):")]
+    if not starts:
+        return None
+    for line in lines[starts[-1] + 1 :]:
+        if line and not line[0].isspace():
+            return line[:500], "\n".join(lines[starts[-1] :])
+    return None
+
+
 def startup_failure(sim: StartingSim, what: str, why: str) -> RemoteEnvError:
     """The error for a sim that exited before reporting ready; ``why`` is its
     ``death()`` text, ``what`` names the scene. A
@@ -136,7 +153,14 @@ def startup_failure(sim: StartingSim, what: str, why: str) -> RemoteEnvError:
     if refused:
         reason = refused[-1].split(SCENE_ARGS_MARKER, 1)[1].strip()
         return SceneArgumentError(f"{reason} (sim instance {sim.instance} of {what})", instance=sim.instance)
-    text = f"sim instance {sim.instance} of {what} failed to start: {why}"
+    raised = scene_exception(sim.stderr_tail(lines=400))
+    if raised is not None:  # the scene's own exception first, then how the process ended and its traceback
+        ended = why.split("; last lines of its stderr:", 1)[0]
+        text = (
+            f"sim instance {sim.instance} of {what} failed to start: {raised[0]}\n{ended}; its traceback:\n{raised[1]}"
+        )
+    else:
+        text = f"sim instance {sim.instance} of {what} failed to start: {why}"
     if "exited with code 0" in why:
         text += (
             "\nIt exited without serving: did the script call run_scene(YourEnv) under "
@@ -157,12 +181,11 @@ def wait_ready(sim: StartingSim, timeout: float, what: str) -> None:
     delay = 0.001
     while True:
         try:
-            with open(sim.ready_file) as f:
-                info = json.load(f)
+            info = read_json(sim.ready_file, READY_FILE_LIMIT, what="ready file")
             sim.endpoint = str(info["endpoint"]).replace("tcp://0.0.0.0:", "tcp://127.0.0.1:")
             return
-        except (FileNotFoundError, json.JSONDecodeError, KeyError):
-            pass
+        except (FileNotFoundError, UnreadableFile, KeyError, TypeError):
+            pass  # not there yet, or half written: look again
         why = sim.death()
         if why is not None:
             raise startup_failure(sim, what, why)

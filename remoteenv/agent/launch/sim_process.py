@@ -14,6 +14,9 @@ import time
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from remoteenv.agent.launch.dir_reaper import forget_dir
+from remoteenv.wire.files.file_reads import read_tail
+
 _STDERR_TAIL_LINES = 20
 
 
@@ -68,12 +71,8 @@ class SimProcess:
     def stderr_tail(self, lines: int = _STDERR_TAIL_LINES) -> str:
         """The last ``lines`` lines the process wrote to stderr."""
         try:
-            with open(self.log_path, "rb") as f:
-                f.seek(0, os.SEEK_END)
-                size = f.tell()
-                f.seek(max(self.log_offset, size - 16384))
-                text = f.read().decode("utf-8", "replace")
-        except OSError:
+            text = read_tail(self.log_path, 16384, self.log_offset, what="sim log").decode("utf-8", "replace")
+        except (OSError, ValueError):  # gone, or not a regular file any more (UnreadableFile)
             return ""
         return "\n".join(text.splitlines()[-lines:])
 
@@ -142,6 +141,7 @@ def stop_all(state: LaunchState, grace: float = 2.0) -> None:
             kill_group(sim.proc.pid, signal.SIGKILL)
             sim.proc.wait()
     shutil.rmtree(state.workdir, ignore_errors=True)
+    forget_dir(state.workdir)
     for sim in state.sims:
         # Reap the group even if the sim exited by itself but left children (its orphan guard).
         kill_group(sim.proc.pid, signal.SIGKILL)

@@ -100,6 +100,11 @@ class SceneAttributes:
 
     _reach: SceneReach
 
+    if not TYPE_CHECKING:  # at run time only: type checkers keep flagging unknown names
+
+        def __getattr__(self, name: str) -> Any:
+            raise sim_side_attribute_error(self, name, "get_scene_attr(name) or call(method, ...)")
+
     def call(self, name: str, *args: Any, **kwargs: Any) -> Any:
         """Call the scene env's public method ``name`` in the sim and return its
         result (for a plain attribute and no arguments: its value), as
@@ -135,6 +140,23 @@ class SceneAttributes:
             if force:
                 setattr(self, name, value)
             return force
+
+
+#: Attributes of a MuJoCo env that live in the sim process only (the scene's
+#: ``MjModel`` and ``MjData``): asking the agent-side env for one says so.
+SIM_SIDE_NAMES = frozenset({"model", "data"})
+
+
+def sim_side_attribute_error(env: Any, name: str, reach: str) -> AttributeError:
+    """The ``AttributeError`` for ``env.<name>``, which the env lacks: for the
+    sim-side names (:data:`SIM_SIDE_NAMES`) it says where they live and how to reach the scene."""
+    if name in SIM_SIDE_NAMES:
+        return AttributeError(
+            f"{type(env).__name__} has no {name!r}: the scene's MuJoCo {name} lives in the sim process, "
+            f"not in this one. Reach the scene with {reach}, e.g. a scene method that returns "
+            "what you need as numbers or arrays"
+        )
+    return AttributeError(f"{type(env).__name__!r} object has no attribute {name!r}")
 
 
 #: Names a vector env answers itself, as each of its worlds' single env would
@@ -174,6 +196,11 @@ class VectorAttributes:
     render_mode: str | None
     slices: list[tuple[int, int]]
     _reach: SceneReach
+
+    if not TYPE_CHECKING:  # at run time only: type checkers keep flagging unknown names
+
+        def __getattr__(self, name: str) -> Any:
+            raise sim_side_attribute_error(self, name, "get_attr(name) or call(method, ...) (one result per world)")
 
     def render_world(self, i: int) -> Any:
         """World ``i``'s frame (None unless ``render_mode="rgb_array"``); ``call("render")`` gives every world's."""

@@ -24,6 +24,10 @@ import os
 from collections.abc import Iterable
 
 from remoteenv.agent.errors import SceneArgumentError
+from remoteenv.wire.files.file_reads import read_text
+
+#: Largest scene script whose source is read for its keywords.
+MAX_SCRIPT_BYTES = 4 << 20
 
 
 @functools.lru_cache(maxsize=64)
@@ -31,9 +35,8 @@ def _accepted(path: str, mtime_ns: int) -> tuple[str, frozenset[str]] | None:
     """``(callable's name, keyword names it takes)`` from the script's source, or
     None when the source does not tell (or takes any keyword)."""
     try:
-        with open(path, encoding="utf-8") as f:
-            tree = ast.parse(f.read(), filename=path)
-    except (OSError, SyntaxError, ValueError):
+        tree = ast.parse(read_text(path, MAX_SCRIPT_BYTES, what="scene script"), filename=path)
+    except (OSError, SyntaxError, ValueError):  # UnreadableFile is a ValueError
         return None
     factory = None
     for node in ast.walk(tree):

@@ -95,7 +95,7 @@ class AttributeCommands:
 
     def _sendable(self, value: Any, what: str, env: BaseEnv) -> Any:
         try:
-            protocol.pack(value)
+            protocol.pack(value, big_ints=True)
         except (TypeError, ValueError, OverflowError) as exc:
             raise RequestError(
                 UNSENDABLE,

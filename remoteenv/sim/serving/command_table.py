@@ -95,7 +95,7 @@ def build_table(
 def pack_reply(reply: dict[str, Any]) -> bytes:
     """Encode a reply; one that cannot go on the wire becomes a typed error (never raises)."""
     try:
-        return protocol.pack(reply)
+        return protocol.pack(reply, big_ints=True)
     except protocol.FrameTooLarge as exc:
         seq = reply.get("seq", -1)
         return protocol.pack(

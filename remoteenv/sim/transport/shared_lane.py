@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import sys
 from typing import Any
 
 import numpy as np
@@ -75,6 +76,8 @@ class SharedLane:
         self.served = 0
         self._info_version = 0
         self._info_signature: tuple[tuple[str, str, bool], ...] | None = None
+        #: Why the region is no longer used (its header was tampered with), or None.
+        self.tampered: str | None = None
 
     @property
     def offered(self) -> bool:
@@ -101,7 +104,34 @@ class SharedLane:
     def settle(self) -> int:
         """The sim is about to block: stop watching the region (a request posted
         from now on comes with its frame); a request that came meanwhile (0: none)."""
-        return 0 if self.doorbell is None else self.doorbell.sim_sleeps(self.served)
+        if self.doorbell is None or self._found_tampered():
+            return 0
+        return self.doorbell.sim_sleeps(self.served)
+
+    def _found_tampered(self) -> bool:
+        """Whether the header is not what the two sides can have written: then
+        the region is dropped (poisoned for the agent to see, see
+        :mod:`remoteenv.wire.shared_memory.doorbell`) and every later step takes the pipe."""
+        doorbell = self.doorbell
+        if doorbell is None:
+            return self.tampered is not None
+        why = doorbell.sim_tampered(self.served)
+        if why is None:
+            return False
+        doorbell.poison()
+        self.doorbell = None
+        self.tampered = why
+        print(
+            f"remoteenv sim: the shared-memory region was tampered with ({why}); it is no longer used, "
+            "batched steps take the pipe",
+            file=sys.stderr,
+            flush=True,
+        )
+        return True
+
+    def _refuse_tampered(self) -> None:
+        if self._found_tampered():
+            raise RequestError(STATE, f"the shared-memory region was tampered with ({self.tampered}) and is not used")
 
     # ------------------------------------------------------------ requests
 
@@ -110,6 +140,7 @@ class SharedLane:
         arrays = self._arrays
         if arrays is None or not isinstance(channel, PipeChannel):
             raise RequestError(STATE, "a 'shared' step_batch needs the region of shared_batch, over the local pipe")
+        self._refuse_tampered()
         if not 0 < n <= len(arrays.actions):
             raise RequestError(PROTOCOL, f"a 'shared' step_batch covers 1..{len(arrays.actions)} worlds, got {n}")
         return arrays.actions[:n].copy()
@@ -118,6 +149,7 @@ class SharedLane:
         """The request ``seq`` posted in the region: ``(ops, worlds, n)`` (copies,
         ops checked; worlds as listed, None for ``0 .. n-1``), or None if it was
         served already (its frame came after the watch found it: nothing to answer)."""
+        self._refuse_tampered()
         arrays, doorbell = self._arrays, self.doorbell
         if arrays is None or doorbell is None or not isinstance(channel, PipeChannel):
             raise RequestError(STATE, "a region step_batch needs the region of shared_batch, over the local pipe")
@@ -143,7 +175,7 @@ class SharedLane:
         """Put a plain step's arrays in the region and return the reply's other
         fields; None if the obs batch does not fit the layout (then the caller
         answers the usual way)."""
-        if not self._put_arrays(batch):
+        if self.tampered is not None or not self._put_arrays(batch):
             return None
         return {"shared": True, "info": info, "final": []}
 
@@ -155,7 +187,8 @@ class SharedLane:
         ``info``; a new ``info_layout`` is announced when the infos are columns
         the region can hold next time), ``(False, None)`` the usual way."""
         arrays, doorbell = self._arrays, self.doorbell
-        assert arrays is not None and doorbell is not None
+        if arrays is None or doorbell is None or self._found_tampered():
+            return False, None
         if not self._put_arrays(batch):
             return False, None
         columns = self._columns(batch)

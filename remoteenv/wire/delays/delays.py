@@ -311,9 +311,7 @@ def _read_trace_file(path: str, unit: str) -> tuple[Delay, ...]:
     try:
         # Never blocking, regular files only, bounded (a FIFO or /dev/zero is refused).
         if path.endswith(".npy"):
-            data = np.load(
-                io.BytesIO(read_bytes(path, limit + _NPY_HEADER_BYTES, what="trace file")), allow_pickle=False
-            )
+            data = _load_npy(read_bytes(path, limit + _NPY_HEADER_BYTES, what="trace file"), what)
         else:
             text = read_text(path, limit, what="trace file")
             data = parse_json(text, what=what) if path.endswith(".json") else _parse_text(text)
@@ -333,6 +331,31 @@ def _read_trace_file(path: str, unit: str) -> tuple[Delay, ...]:
     elif not isinstance(data, list):
         raise ValueError(f"{what} must hold a list of delays, got {type(data).__name__}")
     return _delay_values(data, unit, what)
+
+
+def _load_npy(data: bytes, what: str) -> np.ndarray:
+    """The array of the ``.npy`` bytes ``data``, its header checked first: one
+    dimension of at most :data:`MAX_VALUES` numbers, all of them present (a
+    header may claim any size; ``np.load`` would allocate it before reading)."""
+    from numpy.lib import format as npy
+
+    buffer = io.BytesIO(data)
+    version = npy.read_magic(buffer)
+    if version == (1, 0):
+        shape, _fortran, dtype = npy.read_array_header_1_0(buffer)
+    elif version == (2, 0):
+        shape, _fortran, dtype = npy.read_array_header_2_0(buffer)
+    else:
+        raise ValueError(f".npy format version {version} is not read here (1.0 and 2.0 are)")
+    if len(shape) != 1 or not 1 <= shape[0] <= MAX_VALUES or dtype.kind not in "iuf":
+        raise ValueError(
+            f"it must hold a one-dimensional numeric array of 1..{MAX_VALUES} delays; "
+            f"its header says shape {short_repr(shape)} and dtype {dtype}"
+        )
+    if len(data) - buffer.tell() < shape[0] * dtype.itemsize:
+        raise ValueError(f"its header says {shape[0]} values, the file holds fewer")
+    buffer.seek(0)
+    return np.load(buffer, allow_pickle=False)
 
 
 def _parse_text(text: str) -> list[Delay]:

@@ -61,6 +61,30 @@ def read_bytes(path: str | os.PathLike[str], limit: int, *, what: str = "file", 
         os.close(fd)
 
 
+def read_tail(path: str | os.PathLike[str], limit: int, start: int = 0, *, what: str = "file") -> bytes:
+    """The last ``limit`` bytes of the regular file ``path`` from byte ``start``
+    on (a log that keeps growing: its end is what matters). Opened as
+    :func:`read_bytes` opens, so a FIFO or device is refused
+    (:class:`UnreadableFile`), never waited on; ``OSError`` if it cannot be opened."""
+    path = os.fspath(path)
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise UnreadableFile(f"{what} {path} is not a regular file (a FIFO, device or directory cannot be read)")
+        os.lseek(fd, max(start, info.st_size - limit), os.SEEK_SET)
+        chunks, total = [], 0
+        while total < limit:
+            chunk = os.read(fd, limit - total)
+            if not chunk:
+                break
+            chunks.append(chunk)
+            total += len(chunk)
+        return b"".join(chunks)
+    finally:
+        os.close(fd)
+
+
 def read_text(path: str | os.PathLike[str], limit: int, *, what: str = "file", follow: bool = True) -> str:
     """:func:`read_bytes` decoded as UTF-8 (:class:`UnreadableFile` if it is not)."""
     data = read_bytes(path, limit, what=what, follow=follow)
@@ -122,4 +146,4 @@ def _max_depth(text: str, stop: int) -> int:
 _SPECIAL = re.compile(r'["\\\[\]{}]')
 
 
-__all__ = ["MAX_JSON_DEPTH", "UnreadableFile", "parse_json", "read_bytes", "read_json", "read_text"]
+__all__ = ["MAX_JSON_DEPTH", "UnreadableFile", "parse_json", "read_bytes", "read_json", "read_tail", "read_text"]

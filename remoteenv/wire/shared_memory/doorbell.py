@@ -43,6 +43,15 @@ reply then also goes as its frame, and the reader waits for the frame (the
 kernel's socket locks order the region's accesses, as for the plain region).
 A loud side never sets its ``*_WATCHING`` word, so a silent peer always
 sends it frames too: the two ends need not agree on :data:`SILENT`.
+
+Tampering. Each side checks the header against what both sides can have
+written (:meth:`Doorbell.agent_tampered`, :meth:`Doorbell.sim_tampered`):
+its own words hold what it last wrote, the peer's hold values the protocol
+allows (flags 0 or 1, a reply only to a request that was posted, a request
+``seq`` no further than :data:`MAX_SEQ_GAP` past the last one served). A
+side that finds the header otherwise stops using the region (the sim writes
+:data:`POISONED` into ``REP_SEQ`` so that the agent sees it too) and both
+go back to plain frames on the pipe.
 """
 
 from __future__ import annotations
@@ -55,6 +64,11 @@ import numpy as np
 
 REQ_SEQ, REQ_N, REQ_NAMED, AGENT_WATCHING = 0, 1, 2, 3
 REP_SEQ, REP_INFO, SIM_WATCHING = 8, 9, 10
+#: ``REP_SEQ`` of a region the sim stopped using: it found the header tampered with.
+POISONED = -1
+#: Furthest a posted request's ``seq`` may lie past the last one the sim served
+#: (the agent's other requests in between also take sequence numbers).
+MAX_SEQ_GAP = 1 << 20
 
 #: Whether this processor keeps stores and loads in order (total store order),
 #: so that a sequence word read from shared memory can vouch for the data
@@ -85,6 +99,9 @@ class Doorbell:
         self.silent = SILENT if silent is None else bool(silent)
         #: The value this side's ``*_WATCHING`` word takes while it is awake (0 when loud).
         self._watching = 1 if self.silent else 0
+        # What each side last wrote into its sequence words (as found when this view was made).
+        self._posted = int(self._words[REQ_SEQ])
+        self._replied = (int(self._words[REP_SEQ]), int(self._words[REP_INFO]))
 
     def word(self, index: int) -> int:
         return int(self._words[index])
@@ -100,10 +117,27 @@ class Doorbell:
         words[AGENT_WATCHING] = self._watching
         fence()
         words[REQ_SEQ] = seq
+        self._posted = seq
         if not self.silent:
             return True
         fence()
         return not words[SIM_WATCHING]
+
+    def agent_tampered(self) -> str | None:
+        """Agent side, between requests: why the header is not what the two
+        sides can have written (None if it is)."""
+        words = self._words
+        if words[REP_SEQ] == POISONED:
+            return "the sim found it tampered with"
+        if words[REQ_SEQ] != self._posted:
+            return f"its request sequence word holds {int(words[REQ_SEQ])}, not the {self._posted} posted last"
+        if not 0 <= words[REP_SEQ] <= self._posted:
+            return f"its reply sequence word holds {int(words[REP_SEQ])}, beyond the last request posted"
+        if words[AGENT_WATCHING] not in (0, 1) or words[SIM_WATCHING] not in (0, 1):
+            return "its watching flags hold values other than 0 and 1"
+        if words[REP_INFO] < 0:
+            return f"its info layout word holds {int(words[REP_INFO])}"
+        return None
 
     def answered(self, seq: int) -> bool:
         """Whether the region holds the reply to ``seq`` (then its blocks may be read)."""
@@ -129,14 +163,37 @@ class Doorbell:
     # ------------------------------------------------------------ sim side
 
     def posted(self, served: int) -> int:
-        """``seq`` of a request posted since ``served`` (0: none), its blocks readable."""
+        """``seq`` of a request posted since ``served`` (0: none), its blocks
+        readable. A ``seq`` further than :data:`MAX_SEQ_GAP` past ``served`` is no
+        request the agent can have posted: see :meth:`sim_tampered`."""
         if not self.silent:
             return 0
         seq = self._words[REQ_SEQ]
-        if seq > served:  # seq numbers increase: an older one is not a request
+        if served < seq <= served + MAX_SEQ_GAP:  # seq numbers increase: an older one is not a request
             fence()
             return int(seq)
         return 0
+
+    def sim_tampered(self, served: int) -> str | None:
+        """Sim side: why the header is not what the two sides can have written
+        (None if it is); ``served`` is the last request taken from the region."""
+        words = self._words
+        if (words[REP_SEQ], words[REP_INFO]) != self._replied:
+            return f"its reply words hold {int(words[REP_SEQ])}, {int(words[REP_INFO])}, not what this sim wrote"
+        seq = words[REQ_SEQ]
+        if seq < 0 or seq > served + MAX_SEQ_GAP:
+            return f"its request sequence word holds {int(seq)}, no request the agent can have posted"
+        if words[AGENT_WATCHING] not in (0, 1) or words[SIM_WATCHING] not in (0, 1):
+            return "its watching flags hold values other than 0 and 1"
+        if not 0 <= words[REQ_N] <= 1 << 16 or words[REQ_NAMED] not in (0, 1):
+            return "its request size words hold values no request has"
+        return None
+
+    def poison(self) -> None:
+        """Sim side: stop using the region; the agent sees :data:`POISONED` and stops too."""
+        words = self._words
+        words[SIM_WATCHING] = 0
+        words[REP_SEQ] = POISONED
 
     def request(self) -> tuple[int, int, int]:
         """``(REQ_SEQ, REQ_N, REQ_NAMED)`` as they are now (after the request's frame)."""
@@ -168,6 +225,7 @@ class Doorbell:
         words[REP_INFO] = info_version
         fence()
         words[REP_SEQ] = seq
+        self._replied = (seq, info_version)
         if not self.silent:
             return True
         fence()
@@ -176,6 +234,8 @@ class Doorbell:
 
 __all__ = [
     "AGENT_WATCHING",
+    "MAX_SEQ_GAP",
+    "POISONED",
     "REP_INFO",
     "REP_SEQ",
     "REQ_N",

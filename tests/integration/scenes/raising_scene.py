@@ -1,11 +1,14 @@
-"""Test scene: continuous CartPole whose step raises for the action 0.5."""
+"""Test scene: continuous CartPole whose step raises for the action 0.5 (and
+whose ``__init__`` raises with ``fail_init=True``)."""
 
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
 from remoteenv.sim import run_scene
 
 
 class RaisingCartPole(CartPoleEnv):
-    def __init__(self, **kwargs):
+    def __init__(self, fail_init=False, **kwargs):
+        if fail_init:
+            raise ValueError("the pole length must be positive, got -1")
         kwargs["continuous"] = True
         super().__init__(**kwargs)
 

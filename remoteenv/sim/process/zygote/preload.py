@@ -23,6 +23,11 @@ import site
 import sys
 import sysconfig
 
+from remoteenv.wire.files.file_reads import read_text
+
+#: Largest scene script whose imports are read.
+MAX_SCRIPT_BYTES = 4 << 20
+
 #: Modules every sim imports before its handshake (a scene's own come on top).
 BASE_MODULES = (
     "numpy",
@@ -44,9 +49,8 @@ def scene_imports(path: str) -> list[str]:
     order: ``import a.b`` gives ``a.b``; ``from a import b`` gives ``a`` and
     ``a.b`` (``b`` may be a submodule). Empty if the file cannot be read or parsed."""
     try:
-        with open(path, encoding="utf-8") as f:
-            tree = ast.parse(f.read(), filename=path)
-    except (OSError, SyntaxError, ValueError):
+        tree = ast.parse(read_text(path, MAX_SCRIPT_BYTES, what="scene script"), filename=path)
+    except (OSError, SyntaxError, ValueError):  # UnreadableFile is a ValueError
         return []
     names: list[str] = []
     for node in tree.body:

@@ -20,6 +20,7 @@ import socket
 import sys
 import threading
 from dataclasses import dataclass
+from typing import Protocol
 
 from remoteenv.sim.process.orphan import adopt_agent_pidfd
 from remoteenv.sim.process.zygote.child import become_sim, run_script
@@ -49,12 +50,15 @@ class ZygoteServer:
     Raises ``RuntimeError`` if ``agent_pid`` is not our parent any more (it
     died before we could watch it)."""
 
-    def __init__(self, control: socket.socket, agent_pid: int) -> None:
+    def __init__(self, control: socket.socket, agent_pid: int, agent_pidfd: int | None = None) -> None:
         self.control = control
-        try:
-            self.agent_pidfd = os.pidfd_open(agent_pid)
-        except OSError:
-            raise RuntimeError(f"the agent (pid {agent_pid}) is gone") from None
+        if agent_pidfd is not None:
+            self.agent_pidfd = agent_pidfd
+        else:
+            try:
+                self.agent_pidfd = os.pidfd_open(agent_pid)
+            except OSError:
+                raise RuntimeError(f"the agent (pid {agent_pid}) is gone") from None
         if os.getppid() != agent_pid:  # checked after opening: the pidfd cannot name another process
             os.close(self.agent_pidfd)
             raise RuntimeError(f"the agent (pid {agent_pid}) is gone")
@@ -206,8 +210,21 @@ def thread_count() -> int:
     return threading.active_count()
 
 
-def main(argv: list[str]) -> int:
-    """The zygote: preload, say ready, serve; in a forked child, run the scene script."""
+class AgentWatch(Protocol):
+    """What :mod:`start` watches the agent with while the zygote imports."""
+
+    #: A pidfd of the agent (the server keeps it).
+    pidfd: int
+
+    def stop(self) -> None: ...
+
+
+def main(argv: list[str], watch: AgentWatch | None = None) -> int:
+    """The zygote: preload, say ready, serve; in a forked child, run the scene script.
+
+    ``watch`` (started by the script before any import) ends this process if
+    the agent exits during the imports; the server takes over its pidfd of
+    the agent and stops it before serving."""
     parser = argparse.ArgumentParser(description="remoteenv zygote (started by the launcher)")
     parser.add_argument("--agent-pid", type=int, required=True)
     parser.add_argument("--control-fd", type=int, required=True)
@@ -218,11 +235,13 @@ def main(argv: list[str]) -> int:
     raise_fd_limit()  # two descriptors per live child
     failed = preload(BASE_MODULES)
     try:
-        server = ZygoteServer(control, args.agent_pid)
+        server = ZygoteServer(control, args.agent_pid, None if watch is None else watch.pidfd)
     except RuntimeError:
         return 0
     for scene in args.scene:
         failed += server.preload_scene(os.path.realpath(scene))
+    if watch is not None:
+        watch.stop()  # the server watches the agent from here on; it forks with no other thread
     try:
         send_message(control, {"kind": "ready", "pid": os.getpid(), "failed": failed})
     except OSError:

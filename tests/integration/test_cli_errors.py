@@ -1,0 +1,67 @@
+"""Issue 28, item 4: every bad argument gives a clear error, never a traceback.
+
+Each case runs ``python -m remoteenv ...`` and checks the exit status, that
+stderr holds no traceback, and that its last line (the error; argparse puts
+its usage above its own errors) names what is wrong."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+SWEEP = ["latency-sweep", "remoteenv/CartPole-v0", "--policy", "cartpole_discrete", "--no-plot", "--episodes", "1"]
+HUGE = str(2**70)
+
+
+@pytest.fixture
+def files(tmp_path):
+    (tmp_path / "plain.py").write_text("x = 1\n")
+    (tmp_path / "notes.txt").write_text("hello\n")
+    (tmp_path / "policy.pt").write_bytes(b"not a TorchScript archive\n")
+    return tmp_path
+
+
+CASES = {
+    "sweep-delays-99999": (SWEEP + ["--delays", "99999"], "--delays"),
+    "sweep-delays-2**70": (SWEEP + ["--delays", HUGE], "--delays"),
+    "sweep-seeds-2**70": (SWEEP + ["--delays", "0", "--seeds", HUGE], "--seeds"),
+    "sweep-action-history-10**7": (SWEEP + ["--delays", "0", "--action-history", str(10**7)], "--action-history"),
+    "sweep-env-kwargs": (SWEEP + ["--delays", "0", "--env-kwargs", '{"bogus": 1}'], "bogus"),
+    "sweep-policy-not-torchscript": (
+        ["latency-sweep", "remoteenv/CartPole-v0", "--policy", "{tmp}/policy.pt", "--no-plot", "--delays", "0"],
+        "not a TorchScript file",
+    ),
+    "sweep-unknown-id": (
+        ["latency-sweep", "nosuch/Id-v0", "--policy", "cartpole_discrete", "--no-plot", "--delays", "0"],
+        "nosuch/Id-v0",
+    ),
+    "demo-non-scene": (["demo", "{tmp}/plain.py"], "not a scene script"),
+    "demo-non-python": (["demo", "{tmp}/notes.txt"], "not a Python file"),
+    "demo-no-such-module": (["demo", "nosuchmodule:id"], "nosuchmodule"),
+    "demo-seed-2**70": (["demo", "cartpole", "--seed", HUGE], "--seed"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_a_bad_argument_is_one_clear_line_not_a_traceback(files, case):
+    argv, expected = CASES[case]
+    argv = [a.replace("{tmp}", str(files)) for a in argv]
+    if "latency-sweep" in argv:
+        argv += ["--out", str(files / "out")]
+    done = subprocess.run(
+        [sys.executable, "-m", "remoteenv", *argv],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "MUJOCO_GL": "egl"},
+        cwd=files,
+    )
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode != 0, done.stdout[-1000:]
+    assert "Traceback" not in done.stderr, done.stderr[-3000:]
+    assert lines and expected in lines[-1], done.stderr[-3000:]
+    if not lines[-1].startswith("python -m remoteenv"):  # argparse's own errors come under its usage
+        assert len(lines) == 1, done.stderr[-3000:]

@@ -1,0 +1,48 @@
+"""Issue 28, item 5: ``make test`` runs the unit, integration and Ray suites
+even when one fails, and fails if any did, naming which. The Makefile runs
+from a copy in a temporary folder with stand-in suites (scripts that log
+their call) and install/lint skipped (``make -o``): nothing real is built or run."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+SUITE = """#!/bin/sh
+echo "$0 $*" >> "{log}"
+case "$*" in *{failing}*) exit 1;; esac
+exit 0
+"""
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="make is not installed")
+@pytest.mark.parametrize("failing", ["unit", "integration", "ray", "none"])
+def test_make_test_runs_every_suite_and_names_the_ones_that_failed(tmp_path, failing):
+    log = tmp_path / "log"
+    venv_bin = tmp_path / "venv" / "bin"
+    venv_bin.mkdir(parents=True)
+    for script in (venv_bin / "pytest", tmp_path / "ray-suite"):
+        script.write_text(SUITE.format(log=log, failing="tests/" + failing if failing != "ray" else "ray"))
+        script.chmod(0o755)
+    shutil.copy(ROOT / "Makefile", tmp_path / "Makefile")
+    done = subprocess.run(
+        ["make", "-C", str(tmp_path), "-o", "install", "-o", "lint", "test"]
+        + [f"VENV={tmp_path / 'venv'}", f"RAY_SUITE={tmp_path / 'ray-suite'} ray"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={k: v for k, v in os.environ.items() if not k.startswith("MAKE")},
+    )
+    ran = log.read_text().splitlines()
+    assert [line.split()[-1] for line in ran] == ["tests/unit", "tests/integration", "ray"], ran
+    if failing == "none":
+        assert done.returncode == 0, done.stderr
+    else:
+        assert done.returncode != 0
+        assert f"these suites failed: {failing}" in done.stderr, done.stderr
