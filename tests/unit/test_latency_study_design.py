@@ -142,3 +142,16 @@ def test_the_study_files_are_written_whole_and_readable_as_any_file_the_user_mak
     assert json.loads(path.read_text()) == {"records": [1, 2]}
     assert stat.S_IMODE(path.stat().st_mode) == 0o644
     assert [p.name for p in tmp_path.iterdir()] == ["delay_effect.json"]
+
+
+def test_a_resumed_study_adds_its_wall_time_to_the_finished_segments_before_it(tmp_path):
+    from remoteenv.latency_study.runner import _earlier_segments
+
+    path = str(tmp_path / "delay_effect.json")
+    assert _earlier_segments(path) == []
+    write_json(path, {"wall_s": None, "records": []})  # cut off before its end: no wall time to add
+    assert _earlier_segments(path) == []
+    write_json(path, {"wall_s": 120.0, "records": []})  # written before segments were kept
+    assert _earlier_segments(path) == [120.0]
+    write_json(path, {"wall_s": 150.0, "segments": [120.0, 30.0], "records": []})
+    assert _earlier_segments(path) == [120.0, 30.0]
