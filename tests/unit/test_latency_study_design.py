@@ -155,3 +155,12 @@ def test_a_resumed_study_adds_its_wall_time_to_the_finished_segments_before_it(t
     assert _earlier_segments(path) == [120.0]
     write_json(path, {"wall_s": 150.0, "segments": [120.0, 30.0], "records": []})
     assert _earlier_segments(path) == [120.0, 30.0]
+
+
+def test_the_command_line_names_random_models_low_high():
+    from remoteenv.cli.latency_study import random_models
+
+    assert random_models("6:10, 0:16") == ["U(6,10)", "U(0,16)"]
+    for bad in ("6-10", "10:6", "6:10:2", "a:b"):
+        with pytest.raises(SystemExit):
+            random_models(bad)
