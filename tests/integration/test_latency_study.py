@@ -86,6 +86,8 @@ def test_a_reduced_study_writes_every_record_the_table_the_figure_and_the_twin_c
         ("history", 2),
         ("history", 2),
     ]
+    assert [p["seed"] for p in twin["policies"]] == [0, 1, 0, 1]  # the training seeds
+    assert len({p["episode_seed"] for p in twin["policies"]}) == 4
     for p in twin["policies"]:
         assert len(p["real_time"]["returns"]) == len(p["lock_step_returns"]) == 2
         assert p["replay"] == p["real_time"]  # the exact twin repeats every episode
