@@ -198,7 +198,7 @@ def plot(records: list[dict[str, Any]], path: str, title: str, references: dict[
     import matplotlib.pyplot as plt
 
     kinds = [k for k in KINDS if any(r["kind"] == k for r in records)]
-    fig, axes = plt.subplots(1, len(kinds), figsize=(5.6 * len(kinds), 4.0), squeeze=False, sharey=True)
+    fig, axes = plt.subplots(1, len(kinds), figsize=(5.6 * len(kinds), 4.8), squeeze=False, sharey=True)
     colors = {"plain": "tab:red", "history": "tab:blue"}
     labels = {
         "constant": {"plain": "plain (observation only)", "history": "history (+ actions in flight)"},
@@ -243,7 +243,7 @@ def plot(records: list[dict[str, Any]], path: str, title: str, references: dict[
         ax.set_ylim(bottom=0)
         ax.set_xlabel("action delay k (ticks)" if kind == "constant" else "action delay model (ticks, newest-due)")
         ax.set_title("constant delay" if kind == "constant" else "random delay", fontsize=10)
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("evaluation return (per seed; mean ± std)")
     fig.suptitle(title, fontsize=10)
