@@ -2,14 +2,16 @@
 flight keep its return as the action delay grows, where a delay-unaware one
 collapses?
 
-For every delay (constant ``k`` ticks, and ``Uniform(0, k)``), every variant
+For every delay (constant ``k`` ticks, and random models ``U(low,high)``:
+each action's delay uniform on ``low .. high`` ticks), every variant
 (``plain``: the observation only; ``history``: the observation followed by the
-last ``k`` actions sent, plus the last step's latency under random delays)
-and every seed, it trains Stable-Baselines3 PPO in lock-step (so every run
-repeats from its seed; the policy follows the observation: an MLP for values,
-a CNN for an image, multi-input for a Dict, the actions in flight a separate
-input beside images) and evaluates the deterministic policy at the delay it
-was trained under. Then it runs trained policies in real time with a think
+actions in flight, plus under random delays the action in force and its age
+alpha) and every seed, it trains Stable-Baselines3 PPO in lock-step (so every
+run repeats from its seed; the policy follows the observation: an MLP for
+values, a CNN for an image, multi-input for a Dict, the actions in flight a
+separate input beside images) and evaluates the deterministic policy at the
+delay it was trained under, beside fixed reference controllers. Then it runs
+trained policies in real time with a think
 time, records the latency every action had, replays the recordings in
 lock-step, and compares the two return distributions.
 
@@ -35,6 +37,25 @@ from remoteenv.cli.latency_sweep import int_list
 from remoteenv.cli.optional import require
 
 DEFAULT_ENV = "remoteenv/CartPole-v0"
+DEFAULT_RANDOM = "4:8,6:10,8:16,0:16"
+
+
+def random_models(text: str) -> list[str]:
+    """``"6:10,0:16"`` -> ``["U(6,10)", "U(0,16)"]`` (the study's model names)."""
+    from remoteenv.latency_study.design import random_model, random_name
+
+    names = []
+    for part in text.split(","):
+        bounds = part.strip().split(":")
+        if len(bounds) != 2 or not all(b.strip().isdigit() for b in bounds):
+            raise SystemExit(f"--random-delays: {part.strip()!r:.40} is not low:high in whole ticks (e.g. 6:10)")
+        name = random_name(int(bounds[0]), int(bounds[1]))
+        try:
+            random_model(name)
+        except ValueError as exc:
+            raise SystemExit(f"--random-delays: {exc}") from None
+        names.append(name)
+    return names
 
 
 def add_parser(sub: Any) -> None:
@@ -49,17 +70,15 @@ def add_parser(sub: Any) -> None:
         default=None,
         help="JSON map for the env (default '{\"continuous\": true}' for the default env, else {})",
     )
-    p.add_argument(
-        "--delays", default="0,4,8,12", help="constant action delays in ticks; '' for none (default 0,4,8,12)"
-    )
+    p.add_argument("--delays", default="0,8,12", help="constant action delays in ticks; '' for none (default 0,8,12)")
     p.add_argument(
         "--random-delays",
-        default="8,16,24",
-        help="k of the Uniform(0, k) delays in ticks; '' for none (default 8,16,24)",
+        default=DEFAULT_RANDOM,
+        help=f"random action delays as low:high in ticks (Uniform(low, high)); '' for none (default {DEFAULT_RANDOM})",
     )
     p.add_argument("--seeds", default="0,1,2", help="training seeds (default 0,1,2)")
     p.add_argument(
-        "--steps", type=positive_int, default=300_000, help="environment steps per training run (default 300000)"
+        "--steps", type=positive_int, default=400_000, help="environment steps per training run (default 400000)"
     )
     p.add_argument("--eval-episodes", type=positive_int, default=10, help="evaluation episodes per policy (default 10)")
     p.add_argument(
@@ -82,8 +101,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--rt-episodes",
         type=positive_int,
-        default=10,
-        help="real-time episodes per policy in the twin check (default 10)",
+        default=5,
+        help="real-time episodes per policy in the twin check (default 5: 30 for 2 variants x 3 seeds)",
     )
     p.add_argument("--no-rt-replay", action="store_true", help="skip the real-time / exact twin replay check")
     p.set_defaults(run=run)
@@ -97,7 +116,7 @@ def _config(args: argparse.Namespace) -> Any:
     else:
         kwargs = json_map(args.env_kwargs, "--env-kwargs")
     delays = int_list(args.delays, "--delays") if args.delays.strip() else []
-    random_delays = int_list(args.random_delays, "--random-delays") if args.random_delays.strip() else []
+    random_delays = random_models(args.random_delays) if args.random_delays.strip() else []
     try:
         return StudyConfig(
             env_id=args.env,

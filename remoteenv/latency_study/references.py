@@ -8,7 +8,14 @@ evaluation episodes and delays as the trained policies,
 - ``predictor`` (:class:`remoteenv.controllers.CartpolePredictor`): the same
   gains applied to the state predicted through the ``k`` actions in flight
   (``ActionHistory(env, k)``), under the constant delays, where the history
-  holds exactly the actions that will act.
+  holds exactly the actions that will act;
+- ``expected-state predictor`` (:class:`remoteenv.controllers.CartpoleExpectedPredictor`)
+  under each random model: it sees what the history + alpha policy sees
+  (``ActionHistory(env, high + 1, include_alpha=True)``), rolls the model
+  through the expected actions in force (their posterior given the buffer
+  and alpha) for the stationary mean age of the action in force, and applies
+  :data:`remoteenv.controllers.CARTPOLE_SOFT_GAINS` (the same for every
+  model): what the information the policy has allows.
 
 No training: seconds per delay. Other envs (and CartPole observed through
 its camera) get no references.
@@ -20,7 +27,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from remoteenv.latency_study.design import StudyConfig
+from remoteenv.latency_study.design import StudyConfig, random_model
 from remoteenv.latency_study.training import evaluate
 from remoteenv.wrappers import ActionHistory
 
@@ -36,10 +43,16 @@ def has_references(config: StudyConfig) -> bool:
     )
 
 
-def _mean_return(config: StudyConfig, policy: Any, action_delay: Any, history: int) -> float:
+#: Names of the reference controllers (the delay-unaware one's contains "LQR").
+LQR = "LQR (delay-unaware)"
+PREDICTOR = "predictor (model + actions in flight)"
+EXPECTED = "expected-state predictor (buffer + alpha)"
+
+
+def _mean_return(config: StudyConfig, policy: Any, action_delay: Any, history: int, alpha: bool = False) -> float:
     env: gym.Env = gym.make(config.env_id, action_delay=action_delay, **config.env_kwargs)
     if history:
-        env = ActionHistory(env, history)
+        env = ActionHistory(env, history, include_alpha=alpha)
     try:
         returns = evaluate(env, policy, config.eval_episodes, config.eval_seed)
     finally:
@@ -48,19 +61,29 @@ def _mean_return(config: StudyConfig, policy: Any, action_delay: Any, history: i
 
 
 def reference_returns(config: StudyConfig) -> dict[str, Any] | None:
-    """``{"constant": {name: {delay: mean return}}, "uniform": {...}}`` for the
-    study's delays (JSON keys are strings), or None for envs without references."""
+    """``{"constant": {name: {delay: mean return}}, "random": {...}, "gains":
+    {name: gains}}`` for the study's delays (JSON keys are strings: ``"8"``,
+    ``"U(6,10)"``), or None for envs without references."""
     if not has_references(config):
         return None
-    from remoteenv.controllers import CartpolePredictor, cartpole_continuous
-    from remoteenv.delays import Uniform
+    from remoteenv.controllers import (
+        CARTPOLE_GAINS,
+        CARTPOLE_SOFT_GAINS,
+        CartpoleExpectedPredictor,
+        CartpolePredictor,
+        cartpole_continuous,
+    )
 
     predictor = CartpolePredictor()
-    constant: dict[str, dict[str, float]] = {"LQR (delay-unaware)": {}, "predictor (model + actions in flight)": {}}
+    constant: dict[str, dict[str, float]] = {LQR: {}, PREDICTOR: {}}
     for k in config.delays:
-        constant["LQR (delay-unaware)"][str(k)] = _mean_return(config, cartpole_continuous, k, 0)
-        constant["predictor (model + actions in flight)"][str(k)] = _mean_return(config, predictor, k, k)
-    uniform: dict[str, dict[str, float]] = {"LQR (delay-unaware)": {}}
-    for k in config.random_delays:
-        uniform["LQR (delay-unaware)"][str(k)] = _mean_return(config, cartpole_continuous, Uniform(0, k), 0)
-    return {"constant": constant, "uniform": uniform}
+        constant[LQR][str(k)] = _mean_return(config, cartpole_continuous, k, 0)
+        constant[PREDICTOR][str(k)] = _mean_return(config, predictor, k, k)
+    random: dict[str, dict[str, float]] = {LQR: {}, EXPECTED: {}}
+    for name in config.random_delays:
+        spec = random_model(name)
+        random[LQR][name] = _mean_return(config, cartpole_continuous, spec, 0)
+        expected = CartpoleExpectedPredictor(spec)
+        random[EXPECTED][name] = _mean_return(config, expected, spec, int(spec.high) + 1, alpha=True)
+    gains = {LQR: CARTPOLE_GAINS.tolist(), PREDICTOR: CARTPOLE_GAINS.tolist(), EXPECTED: CARTPOLE_SOFT_GAINS.tolist()}
+    return {"constant": constant, "random": random, "gains": gains}

@@ -4,12 +4,20 @@ Markdown table and the figure (agent side; the figure needs matplotlib).
 ``delay_effect.json`` is one map::
 
     {"config": {...StudyConfig...}, "wall_s": float or null, "host": {...},
+     "references": {"constant": {name: {delay: return}}, "random": {...},
+                    "gains": {name: [4 gains]}} or null,
      "records": [{"variant", "kind", "delay", "seed", "mean_return",
                   "returns", "history_length", "include_alpha", "steps",
+                  "mean_age_ticks", "dropped_fraction",
                   "train_s", "train_return", "curve"}, ...]}
 
-``mean_return`` is the mean of ``returns``: the deterministic policy's
-episode returns at the delay it was trained under. The file is rewritten
+``delay`` names the delay model: the int ``k`` (``kind="constant"``) or a
+name like ``"U(6,10)"`` (``kind="random"``). ``mean_return`` is the mean of
+``returns``: the deterministic policy's episode returns at the delay it was
+trained under; ``mean_age_ticks`` and ``dropped_fraction`` are what the
+delays did during those episodes (``env.unwrapped.latency_stats``: the mean
+age of the action in force, and the fraction of actions that never acted;
+null without delay). The file is rewritten
 after every finished cell (write to a temporary file, then rename), so an
 interrupted study keeps what it finished and ``--resume`` continues it.
 """
@@ -28,11 +36,17 @@ from remoteenv.latency_study.design import KINDS, VARIANTS, StudyConfig
 from remoteenv.latency_study.resumed import BadRecord, check_records
 from remoteenv.wire.files.file_reads import read_json
 
-RecordKey = tuple[str, str, int, int]
+RecordKey = tuple[str, str, int | str, int]
 
 
 def record_key(record: dict[str, Any]) -> RecordKey:
-    return (str(record["variant"]), str(record["kind"]), int(record["delay"]), int(record["seed"]))
+    delay = record["delay"]
+    return (
+        str(record["variant"]),
+        str(record["kind"]),
+        delay if isinstance(delay, str) else int(delay),
+        int(record["seed"]),
+    )
 
 
 def write_json(path: str, data: dict[str, Any]) -> None:
@@ -77,17 +91,33 @@ def load_records(path: str, config: StudyConfig) -> list[dict[str, Any]]:
         raise ValueError(f"{path} is refused: {exc}; remove it or choose another --out") from None
 
 
+def _mean_of(values: list[Any]) -> float | None:
+    real = [float(v) for v in values if v is not None]
+    return float(np.mean(real)) if real else None
+
+
 def summarize(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per (kind, delay, variant): the seeds' mean returns, their mean, std, min and max."""
-    groups: dict[tuple[str, int, str], list[float]] = {}
+    """Per (kind, delay, variant), in the order the records first name them
+    within each kind (constant delays by size): the seeds' mean returns,
+    their mean, std, min and max, and the delays' measured mean age and
+    dropped fraction (means over the seeds; None if not measured)."""
+    groups: dict[tuple[str, int | str, str], list[dict[str, Any]]] = {}
     for r in records:
-        groups.setdefault((r["kind"], int(r["delay"]), r["variant"]), []).append(float(r["mean_return"]))
+        groups.setdefault((r["kind"], r["delay"], r["variant"]), []).append(r)
     order = {k: i for i, k in enumerate(KINDS)}
     vorder = {v: i for i, v in enumerate(VARIANTS)}
+    first = {key[:2]: i for i, key in reversed(list(enumerate(groups)))}
+
+    def sort_key(key: tuple[str, int | str, str]) -> tuple[int, float, int]:
+        kind, delay, variant = key
+        position = float(delay) if kind == "constant" else float(first[key[:2]])
+        return (order.get(kind, len(order)), position, vorder.get(variant, len(vorder)))
+
     out = []
-    for (kind, delay, variant), values in sorted(
-        groups.items(), key=lambda g: (order[g[0][0]], g[0][1], vorder[g[0][2]])
-    ):
+    for key in sorted(groups, key=sort_key):
+        kind, delay, variant = key
+        group = groups[key]
+        values = [float(r["mean_return"]) for r in group]
         out.append(
             {
                 "kind": kind,
@@ -99,30 +129,49 @@ def summarize(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
                 "min": float(np.min(values)),
                 "max": float(np.max(values)),
                 "seed_means": values,
+                "mean_age_ticks": _mean_of([r.get("mean_age_ticks") for r in group]),
+                "dropped_fraction": _mean_of([r.get("dropped_fraction") for r in group]),
             }
         )
     return out
 
 
-def delay_label(kind: str, delay: int) -> str:
-    return f"Uniform(0, {delay})" if kind == "uniform" else f"{delay}"
+def delay_label(kind: str, delay: int | str) -> str:
+    """How a table names a delay model: ``8`` or ``U(6,10)``."""
+    return str(delay)
 
 
-def markdown_table(
-    records: Iterable[dict[str, Any]], references: dict[str, dict[str, dict[str, float]]] | None = None
-) -> str:
-    """Rows: delay model; columns: each variant's mean over seeds (min–max) and
-    the per-seed returns, then each reference controller's return (– where it
-    was not run)."""
+def _reference_names(references: dict[str, Any] | None) -> list[str]:
+    names: list[str] = []
+    for kind in KINDS:
+        names += [n for n in (references or {}).get(kind, {}) if n not in names]
+    return names
+
+
+def _format(value: float | None, spec: str) -> str:
+    return "–" if value is None else format(value, spec)
+
+
+def markdown_table(records: Iterable[dict[str, Any]], references: dict[str, Any] | None = None) -> str:
+    """Rows: delay model; columns: the measured mean age of the action in
+    force and the fraction of actions that never acted (means over the
+    row's runs), each variant's mean over seeds (min–max) and the per-seed
+    returns, then each reference controller's return (– where it was not run)."""
     summary = summarize(records)
-    rows: dict[tuple[str, int], dict[str, dict[str, Any]]] = {}
+    rows: dict[tuple[str, int | str], dict[str, dict[str, Any]]] = {}
     for s in summary:
         rows.setdefault((s["kind"], s["delay"]), {})[s["variant"]] = s
-    names = list(dict.fromkeys(name for by_name in (references or {}).values() for name in by_name))
-    head = "| action delay (ticks) | plain: mean (min–max) | plain: per seed | history: mean (min–max) | history: per seed |"
-    lines = [head + "".join(f" {name} |" for name in names), "|---|---|---|---|---|" + "---|" * len(names)]
+    names = _reference_names(references)
+    head = (
+        "| action delay (ticks) | mean age of the action in force (ticks) | actions never acted |"
+        " plain: mean (min–max) | plain: per seed | history: mean (min–max) | history: per seed |"
+    )
+    lines = [head + "".join(f" {name} |" for name in names), "|---|---|---|---|---|---|---|" + "---|" * len(names)]
     for (kind, delay), by_variant in rows.items():
-        cells = [delay_label(kind, delay)]
+        groups = list(by_variant.values())
+        age = _mean_of([g["mean_age_ticks"] for g in groups])
+        dropped = _mean_of([g["dropped_fraction"] for g in groups])
+        cells = [delay_label(kind, delay), _format(age, ".2f"), _format(dropped, ".2f")]
         for variant in VARIANTS:
             group = by_variant.get(variant)
             if group is None:
@@ -132,38 +181,39 @@ def markdown_table(
             cells.append(", ".join(f"{v:.0f}" for v in group["seed_means"]))
         for name in names:
             value = (references or {}).get(kind, {}).get(name, {}).get(str(delay))
-            cells.append("–" if value is None else f"{value:.0f}")
+            cells.append(_format(value, ".0f"))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
-def plot(
-    records: list[dict[str, Any]],
-    path: str,
-    title: str,
-    references: dict[str, dict[str, dict[str, float]]] | None = None,
-) -> None:
-    """One panel per delay model: each seed's mean return as a point, the mean
-    over seeds with ± one standard deviation, per variant; and the reference
-    controllers' returns (``{kind: {name: {delay: return}}}``, see
-    :mod:`remoteenv.latency_study.references`) as grey lines."""
+def plot(records: list[dict[str, Any]], path: str, title: str, references: dict[str, Any] | None = None) -> None:
+    """One panel per kind of delay model: each seed's mean return as a point,
+    the mean over seeds with ± one standard deviation, per variant; and the
+    reference controllers' returns (``{kind: {name: {delay: return}}}``, see
+    :mod:`remoteenv.latency_study.references`) as grey lines. Constant delays
+    on a tick axis; random models side by side, in the study's order."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     kinds = [k for k in KINDS if any(r["kind"] == k for r in records)]
-    fig, axes = plt.subplots(1, len(kinds), figsize=(5.2 * len(kinds), 3.8), squeeze=False, sharey=True)
+    fig, axes = plt.subplots(1, len(kinds), figsize=(5.6 * len(kinds), 4.8), squeeze=False, sharey=True)
     colors = {"plain": "tab:red", "history": "tab:blue"}
-    labels = {"plain": "plain (observation only)", "history": "history (+ actions in flight)"}
+    labels = {
+        "constant": {"plain": "plain (observation only)", "history": "history (+ actions in flight)"},
+        "random": {"plain": "plain (observation only)", "history": "history (+ action buffer + alpha)"},
+    }
     summary = summarize(records)
     for ax, kind in zip(axes[0], kinds):
+        models = list(dict.fromkeys(s["delay"] for s in summary if s["kind"] == kind))
+        where = {m: (float(m) if kind == "constant" else float(i)) for i, m in enumerate(models)}
+        width = 1.0 if kind == "constant" else 0.25
         for i, variant in enumerate(VARIANTS):
             points = [s for s in summary if s["kind"] == kind and s["variant"] == variant]
             if not points:
                 continue
-            offset = (i - 0.5) * 0.35
-            x = np.array([s["delay"] for s in points], dtype=float) + offset
+            x = np.array([where[s["delay"]] for s in points]) + (i - 0.5) * 0.35 * width
             for xi, s in zip(x, points):
                 ax.scatter([xi] * len(s["seed_means"]), s["seed_means"], s=14, color=colors[variant], alpha=0.45)
             ax.errorbar(
@@ -173,18 +223,27 @@ def plot(
                 color=colors[variant],
                 marker="o",
                 capsize=3,
-                label=labels[variant] + (" + latency" if kind == "uniform" and variant == "history" else ""),
+                linestyle="-" if kind == "constant" else "none",
+                label=labels[kind][variant],
             )
         for (name, by_delay), style in zip((references or {}).get(kind, {}).items(), (":", "--", "-.")):
-            ds = sorted(by_delay, key=int)
+            ds = [m for m in models if str(m) in by_delay]
             ax.plot(
-                [int(d) for d in ds], [by_delay[d] for d in ds], linestyle=style, marker=".", color="0.4", label=name
+                [where[m] for m in ds],
+                [by_delay[str(m)] for m in ds],
+                linestyle=style if kind == "constant" else "none",
+                marker="_" if kind == "random" else ".",
+                markersize=18 if kind == "random" else 6,
+                color="0.2" if "LQR" in name else "0.55",
+                label=name,
             )
-        ax.set_xticks(sorted({int(r["delay"]) for r in records if r["kind"] == kind}))
+        ax.set_xticks([where[m] for m in models])
+        if kind == "random":
+            ax.set_xticklabels([str(m) for m in models])
         ax.set_ylim(bottom=0)
-        ax.set_xlabel("action delay k (ticks)" if kind == "constant" else "action delay Uniform(0, k): k (ticks)")
+        ax.set_xlabel("action delay k (ticks)" if kind == "constant" else "action delay model (ticks, newest-due)")
         ax.set_title("constant delay" if kind == "constant" else "random delay", fontsize=10)
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("evaluation return (per seed; mean ± std)")
     fig.suptitle(title, fontsize=10)

@@ -4,7 +4,7 @@ A resumed record is published as it is, so each one must be what this
 study's own run could have written: its cell (variant, delay model, delay,
 seed) in the study's design and not repeated, the fields a cell's record
 has with their types, ``history_length`` and ``include_alpha`` as the cell
-defines them, ``steps`` the study's budget, ``eval_episodes`` finite returns,
+defines them, ``mean_age_ticks`` and ``dropped_fraction`` null or in range, ``steps`` the study's budget, ``eval_episodes`` finite returns,
 each within the scene's bounds where they are known (see
 :func:`return_bounds`), and ``mean_return`` their mean.
 """
@@ -52,7 +52,7 @@ def check_records(records: Any, config: StudyConfig) -> list[dict[str, Any]]:
         raise BadRecord(f"'records' is a {type(records).__name__}, not a list")
     design = {cell.key: cell for cell in cells(config)}
     bounds = return_bounds(config)
-    seen: set[tuple[str, str, int, int]] = set()
+    seen: set[tuple[str, str, int | str, int]] = set()
     for i, record in enumerate(records):
         try:
             key = _check_record(record, config, design, bounds)
@@ -67,13 +67,13 @@ def check_records(records: Any, config: StudyConfig) -> list[dict[str, Any]]:
 def _check_record(
     record: Any,
     config: StudyConfig,
-    design: dict[tuple[str, str, int, int], Cell],
+    design: dict[tuple[str, str, int | str, int], Cell],
     bounds: tuple[float, float] | None,
-) -> tuple[str, str, int, int]:
+) -> tuple[str, str, int | str, int]:
     if not isinstance(record, dict):
         raise BadRecord(f"a {type(record).__name__}, not a map")
     variant, kind = _field(record, "variant", str), _field(record, "kind", str)
-    delay, seed = _field(record, "delay", int), _field(record, "seed", int)
+    delay, seed = _field(record, "delay", str if kind == "random" else int), _field(record, "seed", int)
     key = (variant, kind, delay, seed)
     cell = design.get(key)
     if cell is None:
@@ -82,6 +82,10 @@ def _check_record(
         raise BadRecord(f"history_length {record['history_length']} is not the cell's {cell.history_length}")
     if _field(record, "include_alpha", bool) != cell.include_alpha:
         raise BadRecord(f"include_alpha {record['include_alpha']} is not the cell's {cell.include_alpha}")
+    if record.get("mean_age_ticks") is not None:
+        _finite(record["mean_age_ticks"], "mean_age_ticks", (0.0, math.inf))
+    if record.get("dropped_fraction") is not None:
+        _finite(record["dropped_fraction"], "dropped_fraction", (0.0, 1.0))
     if _field(record, "steps", int) != config.steps:
         raise BadRecord(f"steps {record['steps']} is not the study's {config.steps}")
     returns = _field(record, "returns", list)

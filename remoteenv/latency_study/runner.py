@@ -21,7 +21,8 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
 
 from remoteenv.latency_study.design import Cell, StudyConfig, cells
-from remoteenv.latency_study.results import load_records, record_key, write_json
+from remoteenv.latency_study.results import MAX_STUDY_FILE, load_records, record_key, write_json
+from remoteenv.wire.files.file_reads import read_json
 
 
 def host_facts() -> dict[str, Any]:
@@ -38,6 +39,31 @@ def host_facts() -> dict[str, Any]:
         "torch": torch.__version__,
         "stable_baselines3": stable_baselines3.__version__,
     }
+
+
+def _earlier(json_path: str) -> dict[str, Any]:
+    """The study file as the resumed run found it (read bounded; {} when unreadable)."""
+    try:
+        data = read_json(json_path, MAX_STUDY_FILE, what="study file")
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def _earlier_segments(json_path: str) -> list[float]:
+    """The training wall times (s) of the earlier finished segments of a resumed
+    study (one cut off before its end wrote no wall time and is not counted)."""
+    data = _earlier(json_path)
+    segments = data.get("segments")
+    if isinstance(segments, list) and all(isinstance(s, (int, float)) for s in segments) and data.get("wall_s"):
+        return [float(s) for s in segments]
+    if isinstance(data.get("wall_s"), (int, float)):
+        return [float(data["wall_s"])]
+    return []
+
+
+def _earlier_wall_s(json_path: str) -> float:
+    return float(sum(_earlier_segments(json_path)))
 
 
 def _run_cell(config: StudyConfig, cell: Cell, policy_dir: str | None, steps: Any = None) -> dict[str, Any]:
@@ -116,14 +142,19 @@ def run_study(
         config: the study.
         json_path: where ``delay_effect.json`` is written after each cell.
         workers: worker processes (1 runs the cells in this process).
-        resume: keep the records of an earlier run of the same configuration.
+        resume: keep the records of an earlier run of the same configuration;
+            ``wall_s`` then adds this run's training wall time to the earlier
+            segments' (``segments``: each segment's; a segment interrupted
+            before its end is not counted).
         policy_dir: if given, each trained policy is saved there (SB3 zip).
         on_record: called in this process with each finished record.
         references: the reference controllers' returns, stored as they are.
     """
     records = load_records(json_path, config) if resume else []
+    earlier_s = _earlier_wall_s(json_path) if resume and records else 0.0
     done = {record_key(r) for r in records}
     todo = [c for c in cells(config) if c.key not in done]
+    segments = _earlier_segments(json_path) if resume and records else []
     started = time.perf_counter()
     data: dict[str, Any] = {
         "config": config.to_json(),
@@ -166,7 +197,8 @@ def run_study(
                 except BaseException:  # Ctrl-C, SIGTERM, a failed cell: the running cells stop too
                     _stop_workers(pool)
                     raise
-    data["wall_s"] = time.perf_counter() - started
+    data["wall_s"] = earlier_s + time.perf_counter() - started
+    data["segments"] = segments + [time.perf_counter() - started]
     data["host"]["load_average_end"] = list(os.getloadavg())
     write_json(json_path, data)
     return data

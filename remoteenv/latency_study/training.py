@@ -143,6 +143,22 @@ def evaluate(env: gym.Env, policy: Policy, episodes: int, first_seed: int) -> li
     return returns
 
 
+def delay_facts(env: gym.Env) -> dict[str, float | None]:
+    """What the delays did over the episodes ``env`` ran, from its
+    ``env.unwrapped.latency_stats``: ``mean_age_ticks``, the mean age of the
+    action in force per tick (alpha), and ``dropped_fraction``, the fraction of
+    the actions sent that never took effect (overtaken by a newer one, or in
+    flight when their episode ended). None where the env reported no delays
+    (no action delay: every action acts at once, aged 0)."""
+    stats = getattr(env.unwrapped, "latency_stats", None)
+    if stats is None or not stats.action_age_ticks.count:
+        return {"mean_age_ticks": None, "dropped_fraction": None}
+    return {
+        "mean_age_ticks": float(stats.action_age_ticks.mean),
+        "dropped_fraction": stats.never_acted_fraction,
+    }
+
+
 def _linear(start: float) -> Callable[[float], float]:
     def schedule(progress_remaining: float) -> float:
         return progress_remaining * start
@@ -189,6 +205,7 @@ def train(
             ent_coef=float(settings["ent_coef"]),
             learning_rate=_linear(float(settings["learning_rate"])),
             clip_range=_linear(float(settings["clip_range"])),
+            policy_kwargs={"net_arch": [int(n) for n in settings["net_arch"]]},
             seed=cell.seed,
             device="cpu",
             verbose=0,
@@ -229,6 +246,7 @@ def run_cell(
     env = make_eval_env(config, cell)
     try:
         returns = evaluate(env, policy, config.eval_episodes, config.eval_seed)
+        ages = delay_facts(env)
     finally:
         env.close()
     return {
@@ -241,5 +259,6 @@ def run_cell(
         "history_length": cell.history_length,
         "include_alpha": cell.include_alpha,
         "steps": config.steps,
+        **ages,
         **trained,
     }

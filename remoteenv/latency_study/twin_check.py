@@ -96,10 +96,13 @@ def run_twin_check(
         lock = lock_step_returns(config, cell, policy, episodes, seed)
         results.append(
             {
+                **result,
+                # after the comparison's own keys: its "seed" (the first episode's reset seed) is
+                # kept as "episode_seed", and "seed" is the policy's training seed
+                "episode_seed": result["seed"],
                 "variant": cell.variant,
                 "trained_delay": cell.delay,
                 "seed": cell.seed,
-                **result,
                 "lock_step_returns": lock,
             }
         )

@@ -57,3 +57,30 @@ def test_the_example_holds_where_the_plain_lqr_falls(tmp_path, capsys):
     assert returns[("predictor", 8)] == 500.0
     assert returns[("lqr", 8)] < 100.0
     assert "predictor" in capsys.readouterr().out
+
+
+def test_the_expected_state_predictor_holds_under_jitter_where_the_plain_lqr_falls():
+    """Uniform(8, 16): from the buffer and alpha alone (what a history + alpha policy
+    sees), the expected in-force actions are enough to balance; the LQR is not."""
+    from remoteenv.controllers import CartpoleExpectedPredictor
+    from remoteenv.delays import Uniform
+    from remoteenv.latency_study.training import evaluate
+    from remoteenv.wrappers import ActionHistory
+
+    spec = Uniform(8, 16)
+    env = gym.make("remoteenv/CartPole-v0", continuous=True, action_delay=spec, max_episode_steps=300)
+    try:
+        lqr = evaluate(env, cartpole_continuous, 2, 10_000)
+    finally:
+        env.close()
+    env = ActionHistory(
+        gym.make("remoteenv/CartPole-v0", continuous=True, action_delay=spec, max_episode_steps=300),
+        17,
+        include_alpha=True,
+    )
+    try:
+        expected = evaluate(env, CartpoleExpectedPredictor(spec), 2, 10_000)
+    finally:
+        env.close()
+    assert max(lqr) < 150
+    assert expected == [300.0, 300.0]

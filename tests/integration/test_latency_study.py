@@ -31,7 +31,7 @@ def test_a_reduced_study_writes_every_record_the_table_the_figure_and_the_twin_c
         "--delays",
         "0,2",
         "--random-delays",
-        "2",
+        "1:2",
         "--seeds",
         "0,1",
         "--steps",
@@ -52,24 +52,32 @@ def test_a_reduced_study_writes_every_record_the_table_the_figure_and_the_twin_c
     keys = {(r["variant"], r["kind"], r["delay"], r["seed"]) for r in records}
     expected = {
         (v, kind, d, s)
-        for kind, delays in (("constant", (0, 2)), ("uniform", (2,)))
+        for kind, delays in (("constant", (0, 2)), ("random", ("U(1,2)",)))
         for d in delays
         for v in ("plain", "history")
         for s in (0, 1)
+        if (v, d) != ("history", 0)  # no action in flight: history at 0 is plain
     }
     assert keys == expected and len(records) == len(expected)
     for r in records:
         assert r["variant"] in ("plain", "history")
         assert len(r["returns"]) == 2 and math.isclose(r["mean_return"], float(np.mean(r["returns"])))
         assert all(ret >= 1 for ret in r["returns"])  # CartPole pays +1 per step survived
-        # random delays keep one action more: the in-force one at its largest age
-        uniform = r["kind"] == "uniform"
-        assert r["history_length"] == (r["delay"] + uniform if r["variant"] == "history" else 0)
-        assert r["include_alpha"] == (r["variant"] == "history" and r["kind"] == "uniform")
+        # random delays keep one action more than the largest delay: the in-force one at its largest age
+        random = r["kind"] == "random"
+        assert r["history_length"] == ((3 if random else r["delay"]) if r["variant"] == "history" else 0)
+        assert r["include_alpha"] == (r["variant"] == "history" and random)
         assert r["steps"] == 512 and r["train_s"] > 0
+        if r["delay"] != 0:  # what the delays did during the evaluation episodes
+            assert 0 <= r["dropped_fraction"] <= 1
+            low, high = (1, 2) if random else (r["delay"], r["delay"])
+            assert low - 1 <= r["mean_age_ticks"] <= high
     assert data["config"]["delays"] == [0, 2] and data["wall_s"] > 0 and data["host"]["cpus"] >= 1
+    refs = data["references"]
+    assert set(refs["random"]) == {"LQR (delay-unaware)", "expected-state predictor (buffer + alpha)"}
+    assert all(set(by_delay) == {"U(1,2)"} for by_delay in refs["random"].values())
     table = (out / "delay_effect.md").read_text()
-    assert "| Uniform(0, 2) |" in table and "| 2 |" in table
+    assert "| U(1,2) |" in table and "| 2 |" in table
     assert (out / "delay_effect.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     twin = json.loads((out / "rt_replay.json").read_text())
     assert [(p["variant"], p["trained_delay"]) for p in twin["policies"]] == [
@@ -78,6 +86,8 @@ def test_a_reduced_study_writes_every_record_the_table_the_figure_and_the_twin_c
         ("history", 2),
         ("history", 2),
     ]
+    assert [p["seed"] for p in twin["policies"]] == [0, 1, 0, 1]  # the training seeds
+    assert len({p["episode_seed"] for p in twin["policies"]}) == 4
     for p in twin["policies"]:
         assert len(p["real_time"]["returns"]) == len(p["lock_step_returns"]) == 2
         assert p["replay"] == p["real_time"]  # the exact twin repeats every episode

@@ -14,7 +14,7 @@ import pytest
 from remoteenv.latency_study.design import StudyConfig, cells
 from remoteenv.latency_study.results import load_records, write_json
 
-CONFIG = StudyConfig(delays=(0, 2), random_delays=(4,), seeds=(0, 1), steps=64, eval_episodes=2)
+CONFIG = StudyConfig(delays=(0, 2), random_delays=("U(1,4)",), seeds=(0, 1), steps=64, eval_episodes=2)
 
 
 def _record(cell, returns=(100.0, 120.0)):
