@@ -109,11 +109,12 @@ def test_the_world_cost_hint_is_read_and_bounded():
             parse_handshake(reply)
 
 
-def test_costly_worlds_get_up_to_four_processes_per_cpu(monkeypatch):
+def test_costly_worlds_get_one_process_per_cpu(monkeypatch):
     from remoteenv.agent.vector import vector_layout
 
     monkeypatch.setattr(vector_layout.os, "cpu_count", lambda: 2)
     layout = vector_layout.default_envs_per_process
     assert layout(8) == layout(8, 12e-6) == layout(8, 50e-6) == 8  # microseconds of physics: one process
     assert layout(16) == 8
-    assert layout(8, 6e-4) == 1 and layout(16, 6e-4) == 2 and layout(64, 6e-4) == 8  # camera images: 8 processes
+    assert layout(8, 6e-4) == 4 and layout(16, 6e-4) == 8 and layout(64, 6e-4) == 32  # camera images: 2 processes
+    assert layout(1, 6e-4) == 1 and layout(3, 6e-4) == 2

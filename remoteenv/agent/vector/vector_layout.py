@@ -25,13 +25,16 @@ def default_envs_per_process(num_envs: int, world_cost_s: float | None = None) -
 
     Costly worlds (``world_cost_s`` above :data:`COSTLY_WORLD_S`, e.g. camera
     observations: a process renders its worlds one after the other on one
-    CPU, while the physics of a batch runs on threads): up to four processes
-    per CPU, ``ceil(N / (4 * cpu_count))`` worlds each (8 worlds of 64x64
-    pixels on 2 CPUs: 8 processes of 1; 16: 8 of 2). Measured on the 2-CPU
-    machine under load from other jobs (three runs, 8 worlds of 64x64): the CPU
-    time per step hardly depends on K (rendering is 97% of a sim's step), so
-    the split that keeps every CPU rendering, and takes the larger share of a
-    contended machine, was fastest: K = 1 before K = 2, 4 and 8 in every run.
+    CPU, while the physics of a batch runs on threads): one process per CPU,
+    ``ceil(N / cpu_count)`` worlds each (8 worlds of 64x64 pixels on 2 CPUs:
+    2 processes of 4; 16: 2 of 8). Measured side by side on the quiet 2-CPU
+    machine (``bench --pixels --pixels-k``, 3 alternating rounds of 2 s,
+    medians): 8 worlds stepped at 2652 steps/s with K = 4 against 2136 with
+    K = 1 and 1262 with K = 8 (742, 883 and 805 us CPU per step); 16 worlds
+    at 2333 with K = 8 against 1965 with K = 4 and 1660 with K = 2. Beside a
+    CPU hog more processes take a larger share of the contended CPUs (8
+    worlds: K = 1 1399, K = 4 1315): pass ``envs_per_process`` when other
+    work shares the machine.
 
     Otherwise at least 8 worlds per process,
     and no more processes than CPUs: ``max(8, ceil(N / cpu_count))``, capped at N.
@@ -47,7 +50,7 @@ def default_envs_per_process(num_envs: int, world_cost_s: float | None = None) -
     """
     cpus = max(1, os.cpu_count() or 1)
     if world_cost_s is not None and world_cost_s > COSTLY_WORLD_S:
-        return max(1, -(-num_envs // (4 * cpus)))
+        return max(1, -(-num_envs // cpus))
     per_cpu = -(-num_envs // cpus)
     return min(num_envs, max(8, per_cpu))
 
