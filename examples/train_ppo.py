@@ -37,7 +37,6 @@ torch==2.13.0 tqdm``).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -51,6 +50,7 @@ from torch import nn
 from tqdm import tqdm
 
 import remoteenv  # noqa: F401  (registers the shipped scenes' ids)
+from remoteenv.cli.arguments import json_map
 from remoteenv.registration import find_spec  # "module:id" imports module first, as gym.make does
 
 DEFAULT_ENV = "remoteenv/CartPole-v0"
@@ -423,19 +423,6 @@ def evaluate_real_time(
         env.close()
 
 
-def env_kwargs(text: str | None) -> dict[str, Any]:
-    """``--env-kwargs``: a JSON map (exits with a message otherwise)."""
-    if not text:
-        return {}
-    try:
-        value = json.loads(text)
-    except ValueError:
-        value = None
-    if not isinstance(value, dict):
-        raise SystemExit(f"--env-kwargs must be a JSON map, got {text[:80]!r}")
-    return value
-
-
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument(
@@ -470,7 +457,7 @@ def main() -> int:
     torch.set_num_threads(1)  # small nets: threads only add overhead next to the sims
 
     ok = True
-    args.env_kwargs = env_kwargs(args.env_kwargs)
+    args.env_kwargs = json_map(args.env_kwargs, "--env-kwargs") if args.env_kwargs else {}
     if args.eval_only:
         if args.save is None:
             p.error("--eval-only needs --save (the saved policy)")

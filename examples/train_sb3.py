@@ -23,7 +23,6 @@ first). SB3's PPO defaults are used; tune them for your env.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -37,6 +36,7 @@ from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 import remoteenv  # noqa: F401  (registers the shipped scenes' ids)
+from remoteenv.cli.arguments import json_map
 from remoteenv.registration import find_spec  # "module:id" imports module first, as gym.make does
 from remoteenv.sb3 import make_sb3_vec_env
 
@@ -50,19 +50,6 @@ def policy_for(space: gym.Space) -> str:
     if is_image_space(space, check_channels=False):
         return "CnnPolicy"
     return "MlpPolicy"
-
-
-def env_kwargs(text: str | None) -> dict:
-    """``--env-kwargs``: a JSON map (exits with a message otherwise)."""
-    if not text:
-        return {}
-    try:
-        value = json.loads(text)
-    except ValueError:
-        value = None
-    if not isinstance(value, dict):
-        raise SystemExit(f"--env-kwargs must be a JSON map, got {text[:80]!r}")
-    return value
 
 
 def main() -> int:
@@ -79,7 +66,7 @@ def main() -> int:
     args = p.parse_args()
     torch.set_num_threads(1)  # small nets: threads only add overhead next to the sims
     spec = find_spec(args.env)
-    kwargs = env_kwargs(args.env_kwargs)
+    kwargs = json_map(args.env_kwargs, "--env-kwargs") if args.env_kwargs else {}
     save = args.save or f"{spec.name.lower()}_sb3_ppo.zip"
 
     if not args.eval_only:

@@ -101,14 +101,9 @@ def _close() -> None:
 
 def _forget_after_fork() -> None:
     """In a child forked from this process: the parent's reaper and dirs are the parent's."""
-    global _lock, _reaper, _write_fd
+    global _lock, _reaper
     _lock = threading.Lock()
-    if _write_fd >= 0:
-        try:
-            os.close(_write_fd)
-        except OSError:
-            pass
-    _write_fd = -1
+    _close()
     _reaper = None
     _dirs.clear()
 
