@@ -35,10 +35,13 @@ from remoteenv.agent.session.latency import LatencyStats
 from remoteenv.agent.session.pausing import Pausable, Pauser
 from remoteenv.agent.session.pickling import RebuildOnUnpickle, remember_init_args
 from remoteenv.agent.session.reset_args import is_int_seed
-from remoteenv.agent.session.session import choose_group, open_session, scene_label
+from remoteenv.agent.session.session import choose_group, scene_label
 from remoteenv.agent.session.session_attributes import SessionAttributes
+from remoteenv.agent.vector.pool_api import PoolAPI
 from remoteenv.agent.vector.vector_episodes import VectorEpisodes
+from remoteenv.agent.vector.vector_launch import open_worlds
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, plan_layout, world_slices
+from remoteenv.agent.vector.vector_results import hold_nones
 from remoteenv.wire.delays.channel_rules import NEWEST, ChannelRules
 from remoteenv.wire.delays.delays import DelaySpec
 from remoteenv.wire.handshake import Handshake
@@ -46,7 +49,7 @@ from remoteenv.wire.handshake import Handshake
 __all__ = ["RemoteVectorEnv", "default_envs_per_process"]
 
 
-class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUnpickle, VectorEnv):
+class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, RebuildOnUnpickle, VectorEnv):
     """``num_envs`` worlds of one scene in sim processes, with Gymnasium 1.x vector semantics.
 
     Usually created with ``gymnasium.make_vec("remoteenv/Reacher-v0",
@@ -62,7 +65,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
             one process up to N = 8, then two up to N = 16; the fastest splits measured
             there (see :func:`default_envs_per_process`). Worlds the sim reports
             as costly (its handshake's ``world_cost_s``, e.g. camera images)
-            are then relaunched once over up to ``4 * cpu_count`` processes.
+            are then relaunched once, one process per CPU.
             Must be 1 with ``real_time``.
         autoreset_mode: Gymnasium's :class:`~gymnasium.vector.AutoresetMode`
             (or its string): ``NEXT_STEP`` (default; the step after an episode
@@ -98,7 +101,8 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         attach: a launch-info path (or :class:`~remoteenv.agent.launch.attach.AttachedSims`):
             drive every world of those sims (see :meth:`attach`).
         batch_size: worlds :meth:`recv` returns (EnvPool's asynchronous API,
-            lock-step only); default ``num_envs``.
+            :class:`~remoteenv.agent.vector.pool_api.PoolAPI`, lock-step only);
+            default ``num_envs``.
 
     World ``i`` is world ``i % K`` of process ``i // K``. ``reset(seed=s)``
     seeds world ``i`` with ``s + i``, so a vector env and N single envs with
@@ -185,15 +189,20 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
             "link_delay": link_delay,
             "channel": ChannelRules(action_delivery, obs_delivery, delayed_rewards),
         }
-        self._open(group, int(envs_per_process), launch)
-        if asked is None and launcher is None and attach is None and not self.real_time:
-            # The default layout, chosen again from what a world costs (the handshake's
-            # world_cost_s): costly worlds are relaunched over more processes, once.
-            better = min(default_envs_per_process(self.num_envs, self._session.handshake.world_cost_s), self.num_envs)
-            if better != self.envs_per_process:
-                self._session.close()
-                group = choose_group(None, None, transport=transport, bind_host=bind_host, curve=curve)
-                self._open(group, better, launch)
+        default_layout = asked is None and launcher is None and attach is None and not self.real_time
+        self._session, self.envs_per_process = open_worlds(
+            group,
+            scene_label(type(self).__name__, self.scene),
+            self.scene,
+            self.num_envs,
+            int(envs_per_process),
+            launch,
+            regroup=(lambda: choose_group(None, None, transport=transport, bind_host=bind_host, curve=curve))
+            if default_layout
+            else None,
+        )
+        #: ``(first, end)`` world indices of each process.
+        self.slices: list[tuple[int, int]] = world_slices(self.num_envs, self.envs_per_process)
         try:
             self._set_spaces(self._session.handshake)
             self._episodes = VectorEpisodes(
@@ -206,14 +215,6 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         self.latency_stats = LatencyStats()
         self._pauser = Pauser(self._session)
         self._reach = SceneReach(self._session)
-
-    def _open(self, group: SimGroup, per_process: int, launch: dict[str, Any]) -> None:
-        """Start (or take) the sims of ``per_process`` worlds each: :attr:`slices` and the session."""
-        self.envs_per_process = min(per_process, self.num_envs)
-        #: ``(first, end)`` world indices of each process.
-        self.slices: list[tuple[int, int]] = world_slices(self.num_envs, self.envs_per_process)
-        label = scene_label(type(self).__name__, self.scene)
-        self._session = open_session(group, label, self.scene, len(self.slices), self.envs_per_process, **launch)
 
     def _set_spaces(self, hs: Handshake) -> None:
         self.single_observation_space = hs.observation_space
@@ -267,19 +268,8 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         return self._episodes.reset(seed, options, self._add_info)
 
     def _add_info(self, vector_infos: dict[str, Any], env_info: dict[str, Any], env_num: int) -> dict[str, Any]:
-        """Gymnasium's merge of one world's info, with one more rule: a world's
-        None for a key other worlds gave a number or an array (a delayed
-        lock-step world's ``latency_ticks`` while its default action acts, its
-        ``applied_action`` for a scene whose default is "no action") turns that
-        key's array into an object array holding each world's value as it came."""
-        for key, value in env_info.items():
-            arr = vector_infos.get(key)
-            if value is None and isinstance(arr, np.ndarray) and arr.dtype != object:
-                held = np.empty(self.num_envs, dtype=object)
-                for w in range(self.num_envs):
-                    held[w] = arr[w] if arr.ndim > 1 else arr[w].item()
-                vector_infos[key] = held
-        return super()._add_info(vector_infos, env_info, env_num)
+        """Gymnasium's merge of one world's info, and :func:`~remoteenv.agent.vector.vector_results.hold_nones`."""
+        return super()._add_info(hold_nones(vector_infos, env_info, self.num_envs), env_info, env_num)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every world once (or autoreset it, see ``autoreset_mode``)."""
@@ -297,32 +287,10 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, RebuildOnUn
         self.latency_stats.record_vector(result[4], round_trip)
         return result
 
-    def send(self, actions: Any, env_ids: Any = None) -> None:
-        """EnvPool's asynchronous step: send ``actions[j]`` to world ``env_ids[j]``
-        (default: every world) and return at once; :meth:`recv` returns results.
-
-        A world must not be in flight (sent and not yet received). Lock-step
-        only. A failing sim raises from :meth:`recv`, which then forgets what
-        was in flight: call :meth:`reset` before stepping again (restarts
-        cover :meth:`step` only)."""
-        self._episodes.send(actions, env_ids)
-
-    def recv(self) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        """The first ``batch_size`` worlds to finish after :meth:`send`:
-        ``(obs, rewards, terminated, truncated, infos)`` with ``batch_size`` rows,
-        world ``infos["env_id"][j]`` in row ``j``, autoreset as in :meth:`step`."""
-        return self._episodes.recv(self._add_info)
-
     @property
     def np_random_seed(self) -> tuple[int, ...]:  # type: ignore[override]
         """Each world's RNG seed, as ``SyncVectorEnv`` gives its envs' (``get_attr("np_random_seed")``)."""
         return self.get_attr("np_random_seed")
-
-    def render(self) -> tuple[Any, ...] | None:
-        """With ``render_mode="rgb_array"``: one uint8 H x W x 3 frame per world."""
-        if self.render_mode != "rgb_array":
-            return None
-        return tuple(self.render_world(i) for i in range(self.num_envs))
 
     def close_extras(self, **kwargs: Any) -> None:
         """Ask every sim to exit, then make sure they have (no process or socket

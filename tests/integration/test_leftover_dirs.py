@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -271,3 +272,68 @@ def test_a_fork_pool_terminated_as_its_workers_zygote_starts_leaves_nothing_with
         assert took < NOTHING_WITHIN_S
     finally:
         _kill_all(pids, pid_alive)
+
+
+#: An agent that registers a private dir with the dir reaper, holding the write
+#: end of an inheritable pipe it then closes; it reports the reaper's pid,
+#: whether a ``Popen`` of the reaper is alive in it, and its read end's fd.
+QUIET_AGENT = textwrap.dedent(
+    """
+    import gc, json, os, subprocess, sys, tempfile
+    read_end, write_end = os.pipe()
+    os.set_inheritable(write_end, True)
+    from remoteenv.agent.launch import dir_reaper
+    path = tempfile.mkdtemp(prefix="remoteenv-quiet-")
+    dir_reaper.watch_dir(path)
+    pid = dir_reaper.reaper_pid()
+    os.close(write_end)
+    held = any(isinstance(o, subprocess.Popen) and o.pid == pid for o in gc.get_objects())
+    print(json.dumps({"pid": pid, "path": path, "popen_held": held}), flush=True)
+    sys.stdin.read()  # until the test has looked at the pipe
+    """
+)
+
+
+def test_the_dir_reaper_holds_none_of_its_agents_descriptors_and_ends_it_quietly(tmp_path, pid_alive):
+    # Before: the agent held the reaper as a Popen, which warned "subprocess N is
+    # still running" (ResourceWarning) at every interpreter exit, e.g. pytest's.
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    agent = subprocess.Popen(
+        [sys.executable, "-X", "dev", "-c", QUIET_AGENT],
+        env=_env(tmp),
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    seen: dict = {}
+    try:
+        assert agent.stdout is not None and agent.stdin is not None
+        seen = json.loads(agent.stdout.readline())
+        assert not seen["popen_held"]
+        # The agent closed its write end of the inheritable pipe: once the reaper
+        # has closed what it inherited, nobody writes to it (timing is the
+        # behaviour here: GONE_WITHIN_S bounds a loaded machine).
+        with open(f"/proc/{agent.pid}/fd/{_pipe_read_end(agent.pid)}", "rb") as pipe:
+            ready = select.select([pipe], [], [], GONE_WITHIN_S)[0]
+            assert ready and pipe.read() == b"", "the reaper holds the agent's inheritable pipe"
+        _out, err = agent.communicate("", timeout=60)
+        assert agent.returncode == 0, err[-2000:]
+        assert "ResourceWarning" not in err, err[-2000:]
+        took, dirs, alive = _nothing_left(tmp, [seen["pid"]], pid_alive, time.monotonic())
+        assert not dirs and not alive
+    finally:
+        if agent.poll() is None:
+            agent.kill()
+            agent.wait()
+        _kill_all([seen["pid"]] if seen else [], pid_alive)
+
+
+def _pipe_read_end(pid: int) -> int:
+    """The fd of process ``pid``'s one pipe other than its stdin/stdout/stderr."""
+    for name in os.listdir(f"/proc/{pid}/fd"):
+        fd = int(name)
+        if fd > 2 and os.readlink(f"/proc/{pid}/fd/{name}").startswith("pipe:"):
+            return fd
+    raise AssertionError(f"no pipe open in process {pid}")

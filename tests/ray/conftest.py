@@ -29,6 +29,10 @@ FAST_NODE_FAILURE = {
     "health_check_failure_threshold": 3,
     "health_check_initial_delay_ms": 0,
 }
+#: Ray starts its workers (and so the sims its actors start) at nice 15, which
+#: beside two CPU hogs leaves an RLlib env runner a few per cent of a CPU; the
+#: suite must pass beside such load, so the workers run at the usual priority.
+WORKER_NICENESS = {"worker_niceness": 0}
 #: CPUs of the head and of each of the two worker nodes.
 HEAD_CPUS = 1
 WORKER_CPUS = 2
@@ -42,7 +46,7 @@ class TestCluster:
         self.pools: dict[str, str] = {}
         self.cluster = Cluster(
             initialize_head=True,
-            head_node_args={"num_cpus": HEAD_CPUS, "_system_config": FAST_NODE_FAILURE},
+            head_node_args={"num_cpus": HEAD_CPUS, "_system_config": FAST_NODE_FAILURE | WORKER_NICENESS},
         )
         self.workers: list[Any] = []
         while len(self.workers) < 2:

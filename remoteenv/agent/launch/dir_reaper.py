@@ -14,7 +14,6 @@ with no reaper and no dirs: its parent's dirs are its parent's.
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
 import threading
 from pathlib import Path
@@ -24,7 +23,9 @@ REAPER_SCRIPT = str(Path(__file__).with_name("dir_reaper_main.py"))
 
 _lock = threading.Lock()
 _dirs: set[str] = set()
-_reaper: subprocess.Popen[bytes] | None = None
+#: The reaper's pid. No ``Popen``: one still running when the interpreter
+#: ends warns (ResourceWarning), and the reaper is meant to outlive us.
+_reaper: int | None = None
 _write_fd = -1
 
 
@@ -47,14 +48,14 @@ def forget_dir(path: str) -> None:
 
 def reaper_pid() -> int | None:
     """The pid of this process's reaper, None before the first registration."""
-    return None if _reaper is None else _reaper.pid
+    return _reaper
 
 
 def _send(record: bytes) -> None:
     """Write ``record`` to the reaper, starting one (with every dir still registered) if none runs."""
     global _reaper, _write_fd
     for _attempt in range(2):
-        if _write_fd < 0 or _reaper is None or _reaper.poll() is not None:
+        if _write_fd < 0 or not _reaper_running():
             if not _start():
                 return
             record = b"".join(b"+" + os.fsencode(p) + b"\0" for p in sorted(_dirs))
@@ -67,18 +68,36 @@ def _send(record: bytes) -> None:
             _close()
 
 
+def _reaper_running() -> bool:
+    """Whether our reaper runs (one that ended is reaped here)."""
+    global _reaper
+    if _reaper is None:
+        return False
+    try:
+        pid, _status = os.waitpid(_reaper, os.WNOHANG)
+    except ChildProcessError:  # reaped by someone else
+        pid = _reaper
+    if pid == 0:
+        return True
+    _reaper = None
+    return False
+
+
 def _start() -> bool:
     global _reaper, _write_fd
     _close()
     read_end, write_end = os.pipe()  # both close-on-exec: only the reaper gets the read end
     try:
-        _reaper = subprocess.Popen(
+        _reaper = os.posix_spawn(
+            sys.executable,
             [sys.executable, "-I", "-S", REAPER_SCRIPT, str(os.getpid())],
-            stdin=read_end,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-            close_fds=True,
-            start_new_session=True,  # a signal to our process group is not for it: it follows us out
+            os.environ,
+            file_actions=[
+                (os.POSIX_SPAWN_DUP2, read_end, 0),
+                (os.POSIX_SPAWN_OPEN, 1, os.devnull, os.O_WRONLY, 0),
+                (os.POSIX_SPAWN_OPEN, 2, os.devnull, os.O_WRONLY, 0),
+            ],
+            setsid=True,  # a signal to our process group is not for it: it follows us out
         )
     except OSError:
         os.close(write_end)

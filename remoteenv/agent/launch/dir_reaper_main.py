@@ -87,8 +87,24 @@ def reap(agent_pid: int, stdin: int = 0) -> int:
     return 0
 
 
+def _close_inherited() -> None:
+    """Close every descriptor but 0-2 that the agent let us inherit: we outlive it
+    by milliseconds and must not hold its sockets or pipes open meanwhile."""
+    try:
+        fds = [int(name) for name in os.listdir("/proc/self/fd")]
+    except OSError:
+        return
+    for fd in fds:
+        if fd > 2:
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
 def main(argv: list[str]) -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C in a terminal is for the agent
+    _close_inherited()
     return reap(int(argv[0]))
 
 

@@ -184,7 +184,7 @@ class VectorAttributes:
     value), ``get_attr`` is ``call`` without arguments, and ``set_attr`` takes
     one value for all worlds or a list/tuple with one per world.
     ``call("render")`` returns each world's frame, as ``SyncVectorEnv``'s
-    calls each env's ``render()`` (:meth:`render_world`). :meth:`call_at` and
+    calls each env's ``render()`` (:meth:`render_world`); so does :meth:`render`. :meth:`call_at` and
     :meth:`set_attr_at` address some worlds only.
 
     Needs ``num_envs``, ``render_mode``, ``slices`` (``(first, end)`` world
@@ -208,6 +208,12 @@ class VectorAttributes:
             return None
         p, w = self._locate(i)
         return self._reach.session.request(p, "render", world=w)["frame"]
+
+    def render(self) -> tuple[Any, ...] | None:
+        """With ``render_mode="rgb_array"``: one uint8 H x W x 3 frame per world."""
+        if self.render_mode != "rgb_array":
+            return None
+        return tuple(self.render_world(i) for i in range(self.num_envs))
 
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         """``name`` called (or read) on every world; one result per world."""

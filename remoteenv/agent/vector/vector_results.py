@@ -101,6 +101,23 @@ def _finals(result: dict[str, Any]) -> list[Any]:
     return final
 
 
+def hold_nones(vector_infos: dict[str, Any], env_info: dict[str, Any], num_envs: int) -> dict[str, Any]:
+    """``vector_infos`` made ready for one more rule than Gymnasium's merge of
+    ``env_info`` (one world's): a world's None for a key other worlds gave a
+    number or an array (a delayed lock-step world's ``latency_ticks`` while its
+    default action acts, its ``applied_action`` for a scene whose default is
+    "no action") turns that key's array into an object array holding each
+    world's value as it came. Changes and returns ``vector_infos``."""
+    for key, value in env_info.items():
+        arr = vector_infos.get(key)
+        if value is None and isinstance(arr, np.ndarray) and arr.dtype != object:
+            held = np.empty(num_envs, dtype=object)
+            for w in range(num_envs):
+                held[w] = arr[w] if arr.ndim > 1 else arr[w].item()
+            vector_infos[key] = held
+    return vector_infos
+
+
 def assemble(
     results: dict[int, dict[str, Any]],
     slices: Sequence[tuple[int, int]],

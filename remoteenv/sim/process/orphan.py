@@ -159,3 +159,41 @@ class ParentWatch:
                 if self.private_dir:
                     remove_private_files(self.private_dir, self.instance)
                 os._exit(1)
+
+
+class AgentWatch:
+    """What a serving sim does about its agent ``parent_pid`` (None: nothing):
+    the orphan guard and the :class:`ParentWatch` from construction, and at
+    :meth:`finish` whether this instance's files go.
+
+    Args:
+        parent_pid: the agent's pid, or None.
+        private_dir: the launcher's private dir, or None.
+        instance: this sim's instance index (names its files).
+    """
+
+    def __init__(self, parent_pid: int | None, private_dir: str | None, instance: int) -> None:
+        self.parent_pid = parent_pid
+        self.private_dir = private_dir
+        self.instance = instance
+        self._guard: Guard | None = None
+        self._watch: ParentWatch | None = None
+        if parent_pid is not None:
+            self._guard = start_guard(parent_pid, private_dir, instance)
+            self._watch = ParentWatch(parent_pid, private_dir, instance)
+            self._watch.start()
+
+    def finish(self, *, orphaned: bool, pipe_ended: bool) -> None:
+        """The server has shut down: remove this instance's files if the agent is
+        gone (``orphaned``: the server found it gone), then stop the guard and watch.
+
+        ``pipe_ended``: the local pipe ended, a moment before the kernel
+        reparents us: wait up to 0.5 s for that before deciding."""
+        wait_s = 0.5 if pipe_ended else 0.0
+        gone = orphaned or (self.parent_pid is not None and parent_gone_within(self.parent_pid, wait_s))
+        if self.private_dir and gone:
+            remove_private_files(self.private_dir, self.instance)
+        if self._watch is not None:
+            self._watch.finished()
+        if self._guard is not None:
+            self._guard.release()

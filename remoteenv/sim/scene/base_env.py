@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
 from typing import Any, ClassVar, SupportsFloat
 
 import mujoco
@@ -11,22 +10,21 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
 
-from remoteenv.sim.scene.batch_result import BatchResult
 from remoteenv.sim.scene.camera_rig import CameraRig
 from remoteenv.sim.scene.cameras import CameraObservation
 from remoteenv.sim.scene.model_file import model_file
 from remoteenv.sim.scene.obs_check import check_observation
-from remoteenv.sim.scene.per_world_hooks import post_each, prepare_each
+from remoteenv.sim.scene.per_world_hooks import BatchedHooks
 from remoteenv.sim.scene.step_check import check_finite_obs, unpack_reset, unpack_step
 
 
-class BaseEnv:
+class BaseEnv(BatchedHooks):
     """One MuJoCo world and the env logic around it.
 
     A scene subclasses this and implements :meth:`reset_model`,
     :meth:`prepare_step` and :meth:`post_step`. The base class owns the
     ``MjModel``/``MjData``, ``frame_skip``, the RNG and the declared spaces, and
-    drives a step as::
+    drives a step as (the batched hooks of several worlds: :class:`~remoteenv.sim.scene.per_world_hooks.BatchedHooks`)::
 
         prepare_step(action)                 # e.g. write data.ctrl
         mj_step(model, data) x frame_skip    # the physics substeps
@@ -183,30 +181,6 @@ class BaseEnv:
     def post_step(self, action: Any) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
         """After the substeps of one tick: ``(obs, reward, terminated, info)``."""
         raise NotImplementedError
-
-    # ------------------------------------------------------------ batched hooks
-
-    @classmethod
-    def prepare_steps(cls, envs: Sequence[BaseEnv], actions: Any) -> None:
-        """Optional batched :meth:`prepare_step`: apply ``actions[i]`` to ``envs[i]``.
-
-        A lock-step sim without action or observation delays steps the worlds of one
-        ``step_batch`` request together: ``prepare_steps``, then the physics of
-        every world on threads (:mod:`remoteenv.sim.stepping.batch_physics`), then
-        :meth:`post_steps`. ``envs`` are worlds of this class; ``actions``
-        are checked and stacked: an array ``(n, *shape)`` for a Box space,
-        an int array ``(n,)`` for Discrete, else a list; never None. The
-        default calls :meth:`prepare_step` per world; a scene may override
-        both hooks to work with numpy over all worlds at once, and must then
-        give exactly the per-world hooks' results (a test should say so).
-        """
-        prepare_each(envs, actions)
-
-    @classmethod
-    def post_steps(cls, envs: Sequence[BaseEnv], actions: Any) -> BatchResult:
-        """Optional batched :meth:`post_step` for ``envs`` after their substeps
-        (see :meth:`prepare_steps`). The default calls :meth:`post_step` per world."""
-        return post_each(envs, actions, cls.__name__)
 
     # ------------------------------------------------------------ driving
 

@@ -1,8 +1,8 @@
-"""The default batched hooks of a scene: each world's own hook, in turn.
+"""The batched hooks of a scene and their default: each world's own hook, in turn.
 
-Runs in the sim process. :meth:`BaseEnv.prepare_steps <remoteenv.sim.scene.base_env.BaseEnv.prepare_steps>`
-and :meth:`~remoteenv.sim.scene.base_env.BaseEnv.post_steps` call these
-unless a scene overrides them with numpy over all worlds at once. ``envs``
+Runs in the sim process. :meth:`BatchedHooks.prepare_steps` and
+:meth:`BatchedHooks.post_steps` (which :class:`~remoteenv.sim.scene.base_env.BaseEnv`
+inherits) call these unless a scene overrides them with numpy over all worlds at once. ``envs``
 are the worlds (:class:`~remoteenv.sim.scene.base_env.BaseEnv` instances;
 typed loosely here, as this module sits below ``base_env``).
 """
@@ -44,4 +44,31 @@ def post_each(envs: Sequence[Any], actions: Any, scene: str) -> BatchResult:
     return BatchResult(obs, np.array(rewards, dtype=np.float64), np.array(terminated, dtype=np.bool_), infos)
 
 
-__all__ = ["per_world", "post_each", "prepare_each"]
+class BatchedHooks:
+    """The optional batched hooks of a scene (:class:`~remoteenv.sim.scene.base_env.BaseEnv`
+    is one), each world's own hook in turn unless the scene overrides them."""
+
+    @classmethod
+    def prepare_steps(cls, envs: Sequence[Any], actions: Any) -> None:
+        """Optional batched :meth:`prepare_step`: apply ``actions[i]`` to ``envs[i]``.
+
+        A lock-step sim without action or observation delays steps the worlds of one
+        ``step_batch`` request together: ``prepare_steps``, then the physics of
+        every world on threads (:mod:`remoteenv.sim.stepping.batch_physics`), then
+        :meth:`post_steps`. ``envs`` are worlds of this class; ``actions``
+        are checked and stacked: an array ``(n, *shape)`` for a Box space,
+        an int array ``(n,)`` for Discrete, else a list; never None. The
+        default calls :meth:`prepare_step` per world; a scene may override
+        both hooks to work with numpy over all worlds at once, and must then
+        give exactly the per-world hooks' results (a test should say so).
+        """
+        prepare_each(envs, actions)
+
+    @classmethod
+    def post_steps(cls, envs: Sequence[Any], actions: Any) -> BatchResult:
+        """Optional batched :meth:`post_step` for ``envs`` after their substeps
+        (see :meth:`prepare_steps`). The default calls :meth:`post_step` per world."""
+        return post_each(envs, actions, cls.__name__)
+
+
+__all__ = ["BatchedHooks", "per_world", "post_each", "prepare_each"]

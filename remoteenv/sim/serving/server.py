@@ -24,14 +24,7 @@ from typing import Any
 import zmq
 
 from remoteenv.sim.process.lifecycle import exit_on_sigterm, remove_ipc_file, write_ready_file
-from remoteenv.sim.process.orphan import (
-    CHECK_INTERVAL_S,
-    ParentWatch,
-    parent_alive,
-    parent_gone_within,
-    remove_private_files,
-    start_guard,
-)
+from remoteenv.sim.process.orphan import CHECK_INTERVAL_S, AgentWatch, parent_alive
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.serving.command_table import build_table, pack_reply
 from remoteenv.sim.serving.waits import ServingWaits
@@ -188,25 +181,12 @@ class RemoteControlledAgent:
     def serve(self) -> None:
         """Answer requests until a ``close`` command, SIGTERM/SIGINT or parent death."""
         exit_on_sigterm()
-        watch = guard = None
-        if self.parent_pid is not None:
-            guard = start_guard(self.parent_pid, self.private_dir, self.instance)
-            watch = ParentWatch(self.parent_pid, self.private_dir, self.instance)
-            watch.start()
+        watch = AgentWatch(self.parent_pid, self.private_dir, self.instance)
         try:
             self._serve_until_stopped()
         finally:
             self.shutdown()
-            # The pipe ends a moment before the kernel reparents us: wait for that
-            # before deciding that the agent is gone (and its files with it).
-            wait_s = 0.5 if self._pipe_ended else 0.0
-            gone = self.orphaned or (self.parent_pid is not None and parent_gone_within(self.parent_pid, wait_s))
-            if self.private_dir and gone:
-                remove_private_files(self.private_dir, self.instance)
-            if watch is not None:
-                watch.finished()
-            if guard is not None:
-                guard.release()
+            watch.finish(orphaned=self.orphaned, pipe_ended=self._pipe_ended)
 
     def _serve_until_stopped(self) -> None:
         stepping, clock, pipe = self.stepping, self.clock, self._pipe

@@ -16,6 +16,7 @@ from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.stepping.emulated_link import EmulatedLink
+from remoteenv.sim.stepping.real_time_pacing import PacingFigures
 from remoteenv.sim.stepping.real_time_replay import ReplayCursor
 from remoteenv.sim.stepping.real_time_reply import PendingStep, SinceReply
 from remoteenv.sim.transport.channels import Channel, Outgoing
@@ -24,7 +25,6 @@ from remoteenv.wire.delays.delays import DelaySpec
 from remoteenv.wire.errors import PROTOCOL, SCENE
 from remoteenv.wire.protocol import error_reply
 from remoteenv.wire.real_time_modes import ELASTIC, FIXED_STEP, check_real_time_mode, split_replay
-from remoteenv.wire.stats import RunningStats
 
 #: A clock: seconds, monotonic (``time.monotonic`` in a sim process).
 Clock = Callable[[], float]
@@ -32,8 +32,10 @@ Clock = Callable[[], float]
 _IDLE, _READY, _RUNNING, _FROZEN, _FAILED = "idle", "ready", "running", "frozen", "failed"
 
 
-class RealTimeStepper:
+class RealTimeStepper(PacingFigures):
     """One world advanced on the wall clock; driven by :class:`RealTimeStepping`.
+    Its pacing figures (:class:`~remoteenv.sim.stepping.real_time_pacing.PacingFigures`)
+    are kept as it goes.
 
     Args:
         env: the world.
@@ -63,28 +65,17 @@ class RealTimeStepper:
         self.env = env
         self.factor = factor
         self.clock = clock
-        #: Wall seconds per physics substep.
-        self.period = float(env.model.opt.timestep) / factor
+        self._link = EmulatedLink(link_delay, seed)
+        #: The emulated link delay's draws (None: no emulated link).
+        self.link = self._link.stream
+        super().__init__(float(env.model.opt.timestep) / factor, self._link.delays)
         self.state = _IDLE
-        #: Wall-clock lateness (s) of every substep boundary against its deadline;
-        #: percentiles over the last 60 s of substeps (at most 200,000 of them).
-        self.pacing_error = RunningStats(window=min(200_000, max(1000, int(60.0 / self.period))))
-        #: Wall seconds from a step request's arrival to the substep where it took effect.
-        self.apply_delay = RunningStats()
-        #: Substeps run more than one ``period`` late, since the process started.
-        self.overruns = 0
-        self.substeps = 0
         self._t0 = 0.0
         self._n = 0
         self._held: Any = None
         self._pending: PendingStep | None = None
         self._since = SinceReply()
         self._failure = ""
-        self._link = EmulatedLink(link_delay, seed)
-        #: The emulated link delay's draws (None: no emulated link).
-        self.link = self._link.stream
-        #: Emulated link delays drawn (wall seconds).
-        self.link_delay = self._link.delays
         self._paused_at: float | None = None
         self._replay: ReplayCursor | None = None
 
@@ -118,24 +109,6 @@ class RealTimeStepper:
         out["real_time_mode"] = self.mode
         self._link.describe(out)
         return out
-
-    def timing(self) -> dict[str, Any]:
-        """Pacing figures of this world (wall seconds)."""
-        return {
-            "pacing_error_s": self.pacing_error.summary(),
-            "apply_delay_s": self.apply_delay.summary(),
-            "overruns": self.overruns,
-            "substeps": self.substeps,
-            "period_s": self.period,
-            "link_delay_s": self.link_delay.summary(),
-        }
-
-    def clear_timing(self) -> None:
-        self.pacing_error.clear()
-        self.apply_delay.clear()
-        self.link_delay.clear()
-        self.overruns = 0
-        self.substeps = 0
 
     # ------------------------------------------------------------ episode
 
@@ -227,11 +200,7 @@ class RealTimeStepper:
         At a tick end the tick is scored (and may end the episode); then a
         newly arrived action takes effect, and the next substep is computed.
         """
-        deadline = self._t0 + self._n * self.period
-        lateness = now - deadline
-        self.pacing_error.add(lateness)
-        if lateness > self.period:
-            self.overruns += 1
+        self.record_lateness(now - (self._t0 + self._n * self.period))
         return self._boundary(now)
 
     def _replay_step(self, pending: PendingStep) -> dict[str, Any]:
