@@ -7,6 +7,7 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from remoteenv.cli.optional import is_optional, missing_message
 
@@ -23,8 +24,16 @@ COMMANDS = {
 }
 
 
+class OneLineErrors(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (exit status 2),
+    naming the command and where its usage is, instead of the usage above it."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (usage: {self.prog} --help)\n")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
+    parser = OneLineErrors(
         prog="python -m remoteenv",
         description="remoteenv: MuJoCo simulations in their own processes, driven as Gymnasium envs.",
     )
