@@ -184,8 +184,8 @@ class VectorAttributes:
     value), ``get_attr`` is ``call`` without arguments, and ``set_attr`` takes
     one value for all worlds or a list/tuple with one per world.
     ``call("render")`` returns each world's frame, as ``SyncVectorEnv``'s
-    calls each env's ``render()`` (:meth:`render_world`); so does :meth:`render`. :meth:`call_at` and
-    :meth:`set_attr_at` address some worlds only.
+    calls each env's ``render()`` (:meth:`render_world`); so does :meth:`render`.
+    :meth:`call_at` and :meth:`set_attr_at` address some worlds only.
 
     Needs ``num_envs``, ``render_mode``, ``slices`` (``(first, end)`` world
     indices of each sim) and ``_reach`` (a :class:`SceneReach` over the env's

@@ -23,8 +23,9 @@ class BaseEnv(BatchedHooks):
 
     A scene subclasses this and implements :meth:`reset_model`,
     :meth:`prepare_step` and :meth:`post_step`. The base class owns the
-    ``MjModel``/``MjData``, ``frame_skip``, the RNG and the declared spaces, and
-    drives a step as (the batched hooks of several worlds: :class:`~remoteenv.sim.scene.per_world_hooks.BatchedHooks`)::
+    ``MjModel``/``MjData``, ``frame_skip``, the RNG and the declared spaces
+    (the optional batched hooks of several worlds at once come from
+    :class:`~remoteenv.sim.scene.per_world_hooks.BatchedHooks`), and drives a step as::
 
         prepare_step(action)                 # e.g. write data.ctrl
         mj_step(model, data) x frame_skip    # the physics substeps

@@ -2,8 +2,8 @@
 
 Runs in the sim process. :meth:`BatchedHooks.prepare_steps` and
 :meth:`BatchedHooks.post_steps` (which :class:`~remoteenv.sim.scene.base_env.BaseEnv`
-inherits) call these unless a scene overrides them with numpy over all worlds at once. ``envs``
-are the worlds (:class:`~remoteenv.sim.scene.base_env.BaseEnv` instances;
+inherits) call these unless a scene overrides them with numpy over all worlds
+at once. ``envs`` are the worlds (:class:`~remoteenv.sim.scene.base_env.BaseEnv` instances;
 typed loosely here, as this module sits below ``base_env``).
 """
 
