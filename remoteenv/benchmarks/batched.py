@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import statistics
 import time
 from collections.abc import Callable
@@ -30,7 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 from remoteenv.benchmarks.anchors import CpuHog, PhysicsLimit, cpu_seconds, make_envpool
-from remoteenv.benchmarks.report import emit, progress_log
+from remoteenv.benchmarks.report import emit, machine_record, progress_log
 
 REMOTE_ID = "remoteenv/Reacher-v0"
 GYM_ID = "Reacher-v5"
@@ -214,7 +213,7 @@ def measure(
     ]
     return {
         "date": time.strftime("%Y-%m-%d %H:%M %Z"),
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version()},
+        "machine": machine_record(),
         "load_avg_per_round": loads,
         "hogs": hog,
         "duration_s": duration,

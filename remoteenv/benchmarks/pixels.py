@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import functools
 import os
-import platform
 import statistics
 from collections.abc import Callable
 from typing import Any
@@ -33,7 +32,7 @@ from remoteenv.benchmarks.anchors import CpuHog
 from remoteenv.benchmarks.batched import Contender
 from remoteenv.benchmarks.in_process import make_in_process
 from remoteenv.benchmarks.render_cost import format_cost, render_cost
-from remoteenv.benchmarks.report import emit, progress_log
+from remoteenv.benchmarks.report import emit, machine_record, progress_log
 
 REMOTE_ID = "remoteenv/CartPole-v0"
 #: (image side, worlds) measured by default; the first is the one with targets.
@@ -160,9 +159,7 @@ def measure(
                     c.close()
     return {
         "machine": {
-            "cpus": os.cpu_count(),
-            "platform": platform.platform(),
-            "python": platform.python_version(),
+            **machine_record(),
             "load_avg_at_end": list(os.getloadavg()),
             "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS"),
         },

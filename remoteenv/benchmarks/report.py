@@ -5,9 +5,16 @@ progress lines then go to stderr)."""
 from __future__ import annotations
 
 import json
+import os
+import platform
 import sys
 from collections.abc import Callable
 from typing import Any
+
+
+def machine_record() -> dict[str, Any]:
+    """The machine a benchmark ran on, for its JSON: CPU count, platform, Python version."""
+    return {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version()}
 
 
 def progress_log(json_path: str | None) -> Callable[[str], None]:

@@ -27,14 +27,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import statistics
 import time
 from collections.abc import Callable
 from typing import Any
 
 from remoteenv.benchmarks.anchors import cpu_seconds
-from remoteenv.benchmarks.report import emit, progress_log
+from remoteenv.benchmarks.report import emit, machine_record, progress_log
 
 GYM_ID = "CartPole-v1"
 REMOTE_ID = "remoteenv/CartPole-v0"
@@ -218,7 +217,7 @@ def measure(
         loads.append(os.getloadavg()[0])
     return {
         "date": time.strftime("%Y-%m-%d %H:%M %Z"),
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version()},
+        "machine": machine_record(),
         "versions": {"stable_baselines3": stable_baselines3.__version__, "torch": torch.__version__},
         "torch_threads": torch.get_num_threads(),
         "load_avg_per_round": loads,

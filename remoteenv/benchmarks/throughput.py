@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -20,7 +19,7 @@ from typing import Any
 import gymnasium as gym
 
 from remoteenv import SHIPPED_SCENES
-from remoteenv.benchmarks.report import emit, progress_log
+from remoteenv.benchmarks.report import emit, machine_record, progress_log
 from remoteenv.benchmarks.timing import timed as _timed
 from remoteenv.benchmarks.transport_floor import pipe_floor, zmq_floor
 
@@ -191,12 +190,7 @@ def measure(
                     k,
                 )
     return {
-        "machine": {
-            "cpus": os.cpu_count(),
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "load_avg_at_end": list(os.getloadavg()),
-        },
+        "machine": {**machine_record(), "load_avg_at_end": list(os.getloadavg())},
         "duration_s": duration,
         "floor_round_trips_per_s": floor,
         "pipe_floor_round_trips_per_s": pfloor,

@@ -15,6 +15,7 @@ guard's 0.5 s grace and a loaded 2-core machine.
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
 import select
@@ -152,49 +153,10 @@ EARLY_AGENT = textwrap.dedent(
     """
 )
 
-#: A fork-context pool whose worker makes an env; the pool is terminated as soon
-#: as the worker's zygote process exists. Prints the pids it saw and when.
-EARLY_POOL_AGENT = textwrap.dedent(
-    """
-    import json, multiprocessing, os, sys, time
-    import gymnasium as gym
-    import remoteenv
-
-    def work():
-        gym.make("remoteenv/CartPole-v0")
-
-    def children(parent, marker):
-        found = []
-        for entry in os.listdir("/proc"):
-            try:
-                with open(f"/proc/{entry}/stat") as f:
-                    ppid = int(f.read().rsplit(")", 1)[1].split()[1])
-                with open(f"/proc/{entry}/cmdline", "rb") as f:
-                    cmd = f.read()
-            except (OSError, ValueError, IndexError):
-                continue
-            if ppid == parent and marker in cmd:
-                found.append(int(entry))
-        return found
-
-    if __name__ == "__main__":
-        pool = multiprocessing.get_context("fork").Pool(1)
-        worker = pool.apply(os.getpid)
-        pool.apply_async(work)
-        deadline = time.monotonic() + 60
-        zygotes = []
-        while not zygotes and time.monotonic() < deadline:
-            zygotes = children(worker, b"zygote/start.py")
-        reapers = children(worker, b"dir_reaper_main.py")
-        killed = time.monotonic()
-        pool.terminate()  # SIGTERM to the worker while its zygote imports
-        pool.join()
-        print(json.dumps({"killed": killed, "pids": zygotes + reapers, "zygotes": len(zygotes)}), flush=True)
-    """
-)
-
 
 def _children(parent: int, marker: bytes) -> list[int]:
+    """Pids of ``parent``'s children whose command line holds ``marker``
+    (the early pool agent below runs this function's own source)."""
     found = []
     for entry in os.listdir("/proc"):
         try:
@@ -207,6 +169,42 @@ def _children(parent: int, marker: bytes) -> list[int]:
         if ppid == parent and marker in cmd:
             found.append(int(entry))
     return found
+
+
+#: A fork-context pool whose worker makes an env; the pool is terminated as soon
+#: as the worker's zygote process exists. Prints the pids it saw and when.
+EARLY_POOL_AGENT = textwrap.dedent(
+    """
+    import json, multiprocessing, os, sys, time
+    import gymnasium as gym
+    import remoteenv
+
+    def work():
+        gym.make("remoteenv/CartPole-v0")
+    """
+)
+EARLY_POOL_AGENT += (
+    "\n\n"
+    + inspect.getsource(_children)
+    + textwrap.dedent(
+        """
+
+    if __name__ == "__main__":
+        pool = multiprocessing.get_context("fork").Pool(1)
+        worker = pool.apply(os.getpid)
+        pool.apply_async(work)
+        deadline = time.monotonic() + 60
+        zygotes = []
+        while not zygotes and time.monotonic() < deadline:
+            zygotes = _children(worker, b"zygote/start.py")
+        reapers = _children(worker, b"dir_reaper_main.py")
+        killed = time.monotonic()
+        pool.terminate()  # SIGTERM to the worker while its zygote imports
+        pool.join()
+        print(json.dumps({"killed": killed, "pids": zygotes + reapers, "zygotes": len(zygotes)}), flush=True)
+    """
+    )
+)
 
 
 def _nothing_left(tmp: Path, pids: list[int], pid_alive, since: float) -> tuple[float, list[str], list[int]]:

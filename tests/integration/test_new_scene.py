@@ -15,6 +15,20 @@ from remoteenv.cli.new_scene import write_package
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
+def _assert_generated_tests_pass(tests: str, cwd: Path, env: dict[str, str]) -> None:
+    """The generated package's own four tests pass, run with pytest on ``tests`` from ``cwd``."""
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", tests],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "4 passed" in done.stdout
+
+
 def test_generated_package_installs_and_passes_check_env(tmp_path, capsys):
     pkg, target = tmp_path / "pkg", tmp_path / "site"
     assert cli_main(["new-scene", "point_mass", "--dir", str(pkg)]) == 0
@@ -48,16 +62,7 @@ def test_generated_package_installs_and_passes_check_env(tmp_path, capsys):
         check=True,
     )
     assert where.stdout.strip().startswith(str(target))  # the installed copy, not the source
-    tests = subprocess.run(
-        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(pkg / "tests")],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert tests.returncode == 0, tests.stdout + tests.stderr
-    assert "4 passed" in tests.stdout
+    _assert_generated_tests_pass(str(pkg / "tests"), tmp_path, env)
 
 
 def _private_venv(where):
@@ -201,13 +206,4 @@ def test_pixels_writes_a_camera_scene_whose_tests_read_the_registration(tmp_path
         timeout=120,
     )
     assert probe.stdout.strip() == "uint8 (64, 64, 3)", probe.stdout + probe.stderr
-    tests = subprocess.run(
-        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests"],
-        cwd=pkg,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert tests.returncode == 0, tests.stdout + tests.stderr
-    assert "4 passed" in tests.stdout
+    _assert_generated_tests_pass("tests", pkg, env)
