@@ -1,7 +1,8 @@
 """``python -m remoteenv bench``: throughput (default), ``--batched`` (batched stepping
 next to EnvPool and the physics limit), ``--real-time`` pacing, ``--soak``, ``--sb3``
 (SB3 PPO on remote CartPole next to SubprocVecEnv), ``--pixels`` (camera
-observations in vector envs next to Gymnasium's of the same in-process task)."""
+observations in vector envs next to Gymnasium's of the same in-process task),
+``--action-timing`` (real-time steps whose action acted before it was sent)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ BENCHMARKS = {
     "sb3_ppo": "--sb3",
     "startup": "--startup",
     "pixels": "--pixels",
+    "action_timing": "--action-timing",
 }
 
 
@@ -32,7 +34,9 @@ def add_parser(sub: Any) -> None:
         "--soak: a long run that reports agent and sim memory. "
         "--sb3: SB3 PPO on remote CartPole next to the same PPO on SubprocVecEnv and DummyVecEnv. "
         "--pixels: the camera CartPole's RemoteVectorEnv next to Gymnasium's Async/SyncVectorEnv of the same "
-        "task in process (--hog for a CPU hog beside it).",
+        "task in process (--hog for a CPU hog beside it). "
+        "--action-timing: real-time steps whose action acted before it was sent, thinking a third of a tick "
+        "and with the sim stopped while the agent thinks, in both regimes.",
     )
     mode = p.add_mutually_exclusive_group()
     for name, flag in BENCHMARKS.items():

@@ -233,9 +233,12 @@ class RemoteControlledAgent:
                     self._expensive_left -= 1
                 reply = self.handle(msg, channel, reply_to)
             if reply is not None:
-                channel.send(reply_to, pack_reply(reply))
-                if stepping.clock_waiting:  # a reset was answered: its world's clock starts now
+                payload = pack_reply(reply)
+                if stepping.clock_waiting:  # a reset was answered: its world's clock starts as the reply goes
+                    # Read before sending: the reset's reply never reaches the
+                    # agent before substep 0's deadline, so no action can.
                     stepping.start_clocks(self.clock())
+                channel.send(reply_to, payload)
 
     def _send_later(self, outgoing: Outgoing) -> None:
         channel, reply_to, reply = outgoing

@@ -16,7 +16,7 @@ from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.stepping.emulated_link import EmulatedLink
-from remoteenv.sim.stepping.real_time_pacing import PacingFigures
+from remoteenv.sim.stepping.real_time_pacing import CATCH_UP_LIMIT_S, PacingFigures
 from remoteenv.sim.stepping.real_time_replay import ReplayCursor
 from remoteenv.sim.stepping.real_time_reply import PendingStep, SinceReply
 from remoteenv.sim.transport.channels import Channel, Outgoing
@@ -149,14 +149,15 @@ class RealTimeStepper(PacingFigures):
         """Restart the clock where it stopped; returns the paused wall seconds.
 
         Every deadline and a waiting request's arrival shift by the pause, so
-        it counts in no timing figure."""
+        it counts in no timing figure (a request that came during the pause
+        counts as arrived when it began: it acts at the first boundary after it)."""
         if self._paused_at is None:
             return 0.0
-        paused = max(0.0, now - self._paused_at)
-        self._paused_at = None
+        stopped, self._paused_at = self._paused_at, None
+        paused = max(0.0, now - stopped)
         self._t0 += paused
-        if self._pending is not None:
-            self._pending.arrived += paused
+        if self._pending is not None:  # one that came during the pause arrived, on the clock, at its start
+            self._pending.arrived = min(self._pending.arrived, stopped) + paused
         return paused
 
     def submit(self, seq: int, action: Any, channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
@@ -198,9 +199,16 @@ class RealTimeStepper(PacingFigures):
         """Process the substep boundary that was due; ``now`` is the clock time it is processed.
 
         At a tick end the tick is scored (and may end the episode); then a
-        newly arrived action takes effect, and the next substep is computed.
+        newly arrived action takes effect (one read by the boundary's
+        deadline), and the next substep is computed. A boundary more than
+        :data:`~remoteenv.sim.stepping.real_time_pacing.CATCH_UP_LIMIT_S`
+        late slips the clock to ``now`` first.
         """
-        self.record_lateness(now - (self._t0 + self._n * self.period))
+        lateness = now - (self._t0 + self._n * self.period)
+        self.record_lateness(lateness)
+        if lateness > CATCH_UP_LIMIT_S:  # too far behind to catch up: this boundary is due now
+            self._t0 += lateness
+            self.record_slip(lateness)
         return self._boundary(now)
 
     def _replay_step(self, pending: PendingStep) -> dict[str, Any]:
@@ -238,7 +246,7 @@ class RealTimeStepper(PacingFigures):
                 self.state = _FROZEN
                 return out
         pending = self._pending
-        if pending is not None and pending.applied_sim_time is None and self._arrived(pending, now):
+        if pending is not None and pending.applied_sim_time is None and self._arrived(pending, replay=now is None):
             env.prepare_step(pending.action)
             self._held = pending.action
             pending.applied_sim_time = float(env.data.time)
@@ -256,14 +264,23 @@ class RealTimeStepper(PacingFigures):
         self.substeps += 1
         return out
 
-    def _arrived(self, pending: PendingStep, now: float | None) -> bool:
+    def _arrived(self, pending: PendingStep, *, replay: bool) -> bool:
         """Whether ``pending``'s action may take effect at boundary ``self._n``
-        (fixed-step: only at a tick boundary after the episode's first tick)."""
+        (fixed-step: only at a tick boundary after the episode's first tick).
+
+        On the clock, the boundary's *deadline* is what counts, not the time
+        it is processed: a boundary processed late (the sim catching up after
+        a stall) whose deadline passed before the action was read (plus the
+        emulated link's delay) runs with the action that was in force then,
+        so no action acts at a sim time that preceded its arrival. The sim
+        reads a request no earlier than it arrived, so ``arrived`` is an
+        upper bound of the arrival: an action that waited unread in the
+        channel during a stall acts once the clock reaches the moment it was read."""
         if self.mode == FIXED_STEP and (self._n == 0 or self._n % self.env.frame_skip):
             return False
-        if now is None:
+        if replay:
             return self._n >= pending.apply_at
-        return now >= pending.arrived + pending.link_delay
+        return self._t0 + self._n * self.period >= pending.arrived + pending.link_delay
 
     def _reply(self, pending: PendingStep, *, terminated: bool) -> dict[str, Any]:
         """The reply to ``pending``: the current observation and what accumulated since the last reply."""
