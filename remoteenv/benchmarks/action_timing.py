@@ -73,8 +73,9 @@ def steady(mode: str, steps: int, think_ticks: float, seed: int) -> dict[str, An
     """``steps`` steps thinking ``think_ticks`` ticks each; the counts of the module docs."""
     env = gym.make(ENV_ID, continuous=True, real_time=True, real_time_mode=mode, max_episode_steps=-1)
     try:
-        dt = float(env.unwrapped.dt)
-        frame_skip = int(env.unwrapped.handshake.frame_skip)
+        remote: Any = env.unwrapped
+        dt = float(remote.dt)
+        frame_skip = int(remote.handshake.frame_skip)
         period = dt / frame_skip  # real_time_factor 1
         episodes: list[list[dict[str, float]]] = []
         obs, _ = env.reset(seed=seed)
@@ -137,7 +138,7 @@ def stalled(mode: str, trials: int, stall_s: float, think_s: float, seed: int) -
     env = gym.make(ENV_ID, continuous=True, real_time=True, real_time_mode=mode, max_episode_steps=-1)
     out = []
     try:
-        pid = env.unwrapped.pid
+        pid = env.unwrapped.pid  # type: ignore[attr-defined]
         obs, _ = env.reset(seed=seed)
         for _ in range(5):  # settle
             obs, *_ = env.step(cartpole_continuous(obs))

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from remoteenv.latency_twin.recorded_env import RecordedEnv
 from remoteenv.latency_twin.trace import twin_latency, twin_values
 from remoteenv.wire.delays.delays import Trace
 
@@ -38,6 +39,10 @@ class RecordedEpisode:
         obs_digests: :func:`~remoteenv.latency_twin.digest.obs_digest` of the
             reset's observation, then of each step's.
         unreplayable: why the exact twin cannot replay this episode (None: it can).
+        link_delays: with an emulated link, each step's ``info["link_delay_s"]``
+            (wall seconds), which the twin reports again; None: no link.
+        env: the env it ran in (:class:`~remoteenv.latency_twin.recorded_env.RecordedEnv`;
+            None: unknown, e.g. a recording of format version 1).
     """
 
     seed: int | None
@@ -52,6 +57,8 @@ class RecordedEpisode:
     action_substeps: list[int] = field(default_factory=list)
     obs_digests: list[str] = field(default_factory=list)
     unreplayable: str | None = None
+    link_delays: list[float] | None = None
+    env: RecordedEnv | None = None
 
     @property
     def steps(self) -> int:

@@ -60,7 +60,8 @@ class ExactTwin(gym.Wrapper):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(
-            seed=seed, options=replay_options(options, self.episode.mode, self.episode.action_substeps)
+            seed=seed,
+            options=replay_options(options, self.episode.mode, self.episode.action_substeps, self.episode.link_delays),
         )
         self.obs_digests, self.rewards = [obs_digest(obs)], []
         self.terminated = self.truncated = False

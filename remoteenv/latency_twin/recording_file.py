@@ -5,8 +5,13 @@ atomically, never through a symlink; read through
 :mod:`remoteenv.wire.files.file_reads` with a size bound, every field checked):
 
 ``format``           ``"remoteenv.real_time_recording"``.
-``version``          1 (a reader refuses a version it does not know).
+``version``          2 (this reader also reads 1, which has no ``env`` and
+                     no ``link_delays``; it refuses a version it does not know).
 ``env_id``           the env id the episode ran in.
+``env``              the env it ran in: ``{"kwargs", "max_episode_steps",
+                     "real_time_factor", "link_delay", "unrecorded"}``
+                     (:class:`~remoteenv.latency_twin.recorded_env.RecordedEnv`),
+                     or null when unknown.
 ``real_time_mode``   ``"elastic"`` or ``"fixed_step"``.
 ``seed``             the seed of the episode's reset or of the last seeded
                      reset before it (None: never seeded).
@@ -22,6 +27,8 @@ atomically, never through a symlink; read through
                      step's (:func:`~remoteenv.latency_twin.digest.obs_digest`).
 ``terminated``, ``truncated``  how the episode ended.
 ``unreplayable``     None, or why the exact twin cannot replay it.
+``link_delays``      with an emulated link, per step ``info["link_delay_s"]``
+                     (wall seconds); null without one.
 
 Plain trace files (:meth:`~remoteenv.latency_twin.LatencyRecorder.save_trace`)
 are not recordings; :func:`~remoteenv.latency_twin.make_twin` still takes them
@@ -36,12 +43,15 @@ import os
 from typing import Any
 
 from remoteenv.latency_twin.episode import RecordedEpisode
+from remoteenv.latency_twin.recorded_env import RecordedEnv
 from remoteenv.wire.files.file_reads import UnreadableFile, parse_json, read_bytes, read_text
-from remoteenv.wire.files.files import write_atomic
+from remoteenv.wire.files.files import write_user_file
 from remoteenv.wire.real_time_modes import MAX_REPLAY_STEPS, REAL_TIME_MODES
 
 FORMAT = "remoteenv.real_time_recording"
-VERSION = 1
+VERSION = 2
+#: The versions this reader reads.
+READABLE_VERSIONS = (1, 2)
 #: Largest recording file read (bytes).
 MAX_RECORDING_BYTES = 64 * 1024 * 1024
 
@@ -63,13 +73,16 @@ def recording_document(episode: RecordedEpisode, env_id: str) -> dict[str, Any]:
         "terminated": episode.terminated,
         "truncated": episode.truncated,
         "unreplayable": episode.unreplayable,
+        "link_delays": None if episode.link_delays is None else list(episode.link_delays),
+        "env": None if episode.env is None else episode.env.to_document(),
     }
 
 
 def save_recording(episode: RecordedEpisode, path: str | os.PathLike[str], env_id: str) -> str:
-    """Write ``episode`` to ``path`` (see the module docs); returns the path."""
+    """Write ``episode`` to ``path`` (see the module docs); returns the path.
+    An error names ``path`` (e.g. its folder does not exist)."""
     path = os.fspath(path)
-    write_atomic(path, json.dumps(recording_document(episode, env_id)) + "\n", 0o644)
+    write_user_file(path, json.dumps(recording_document(episode, env_id)) + "\n", "recording")
     return path
 
 
@@ -95,8 +108,10 @@ def episode_from_document(doc: Any, what: str = "recording") -> tuple[RecordedEp
     """A parsed recording: ``(episode, env_id)``; ValueError names what is wrong."""
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ValueError(f"{what} is not a remoteenv real-time recording (no 'format': {FORMAT!r})")
-    if doc.get("version") != VERSION:
-        raise ValueError(f"{what} has version {str(doc.get('version'))[:20]}; this remoteenv reads version {VERSION}")
+    if doc.get("version") not in READABLE_VERSIONS:
+        raise ValueError(
+            f"{what} has version {str(doc.get('version'))[:20]}; this remoteenv reads versions {READABLE_VERSIONS}"
+        )
     mode = doc.get("real_time_mode")
     if mode not in REAL_TIME_MODES:
         raise ValueError(f"{what}: real_time_mode must be one of {REAL_TIME_MODES}")
@@ -122,6 +137,12 @@ def episode_from_document(doc: Any, what: str = "recording") -> tuple[RecordedEp
         raise ValueError(f"{what}: resets_after_seed must be an int >= 0")
     unreplayable = doc.get("unreplayable")
     substeps = _ints(doc, "action_substeps", None if unreplayable else n)
+    link = doc.get("link_delays")
+    if link is not None:
+        ok = isinstance(link, list) and len(link) == n
+        if not ok or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v < 3600 for v in link):
+            raise ValueError(f"{what}: link_delays needs one delay per step ({n}), in seconds")
+    env = None if doc.get("env") is None else RecordedEnv.from_document(doc["env"], what)
     episode = RecordedEpisode(
         seed,
         since,
@@ -134,6 +155,8 @@ def episode_from_document(doc: Any, what: str = "recording") -> tuple[RecordedEp
         action_substeps=substeps,
         obs_digests=digests,
         unreplayable=None if unreplayable is None else str(unreplayable)[:500],
+        link_delays=None if link is None else [float(v) for v in link],
+        env=env,
     )
     return episode, str(doc.get("env_id") or "")[:200]
 
@@ -148,6 +171,7 @@ def load_recording(path: str | os.PathLike[str]) -> tuple[RecordedEpisode, str]:
 __all__ = [
     "FORMAT",
     "MAX_RECORDING_BYTES",
+    "READABLE_VERSIONS",
     "VERSION",
     "episode_from_document",
     "is_recording",

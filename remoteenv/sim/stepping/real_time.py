@@ -85,8 +85,9 @@ seconds unless noted):
 ``apply_delay_s``     wall seconds from the request's arrival at its world
                       (once decoded and checked) to the substep where it
                       took effect, the emulated link delay included.
-``link_delay_s``      the emulated link delay drawn for this step's action
-                      (wall seconds; 0.0 without ``link_delay``).
+``link_delay_s``      with ``link_delay`` only: the emulated link delay
+                      drawn for this step's action (wall seconds; 0.0 for
+                      a step answered at once by a frozen world).
 ``pacing_overruns``   running count, for this world since the process
                       started, of substeps that ran more than one substep
                       period (``timestep / factor`` wall seconds) late.

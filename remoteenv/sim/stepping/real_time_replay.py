@@ -27,13 +27,18 @@ class ReplayCursor:
             which its action took effect in the recorded run (checked by
             :func:`remoteenv.wire.real_time_modes.split_replay`).
         frame_skip: substeps per control tick.
+        link_delays: per step, the emulated link delay the recorded run
+            reported (wall seconds; None: none recorded, 0.0 is replayed).
     """
 
-    def __init__(self, action_substeps: list[int], frame_skip: int) -> None:
+    def __init__(self, action_substeps: list[int], frame_skip: int, link_delays: list[float] | None = None) -> None:
         self.action_substeps = action_substeps
         self.frame_skip = frame_skip
+        self.link_delays = link_delays
         #: Steps replayed since the reset.
         self.steps = 0
+        #: The recorded link delay of the step :meth:`next_substep` last returned.
+        self.link_delay = 0.0
 
     def next_substep(self, current: int) -> int:
         """The substep at which the next step's action takes effect; ``current``
@@ -53,6 +58,7 @@ class ReplayCursor:
                 PROTOCOL,
                 f"replay step {j} would run {target - current} substeps, more than {MAX_DELAY_TICKS} ticks",
             )
+        self.link_delay = 0.0 if self.link_delays is None else self.link_delays[j]
         self.steps += 1
         return target
 

@@ -24,7 +24,7 @@ from remoteenv.sim.transport.checks import RequestError
 from remoteenv.wire.delays.delays import DelaySpec
 from remoteenv.wire.errors import PROTOCOL, SCENE
 from remoteenv.wire.protocol import error_reply
-from remoteenv.wire.real_time_modes import ELASTIC, FIXED_STEP, check_real_time_mode, split_replay
+from remoteenv.wire.real_time_modes import ELASTIC, FIXED_STEP, check_real_time_mode, split_replay_schedule
 
 #: A clock: seconds, monotonic (``time.monotonic`` in a sim process).
 Clock = Callable[[], float]
@@ -118,11 +118,21 @@ class RealTimeStepper(PacingFigures):
         Options carrying a replay schedule put the world into replay for this
         episode (:mod:`remoteenv.sim.stepping.real_time_replay`)."""
         try:
-            options, schedule = split_replay(options, self.mode)
+            options, schedule = split_replay_schedule(options, self.mode)
         except ValueError as exc:
             raise RequestError(PROTOCOL, str(exc)) from None
+        if schedule is not None and schedule.link_delays is not None and self.link is None:
+            raise RequestError(
+                PROTOCOL,
+                "this replay carries the emulated link delays of its recording, but this sim emulates no link: "
+                "launch the twin with the recording's link_delay",
+            )
         obs, info = self.env.reset(seed=seed, options=options)
-        self._replay = None if schedule is None else ReplayCursor(schedule, self.env.frame_skip)
+        self._replay = (
+            None
+            if schedule is None
+            else ReplayCursor(schedule.action_substeps, self.env.frame_skip, schedule.link_delays)
+        )
         self._link.reset(seed)
         self.state = _READY
         self._held = self.env.default_action()
@@ -218,6 +228,7 @@ class RealTimeStepper(PacingFigures):
         if self.state != _RUNNING:
             raise RequestError(PROTOCOL, "a replayed step before its reset's reply: reset first")
         pending.apply_at = self._replay.next_substep(self._n)
+        pending.link_delay = self._replay.link_delay
         self._pending = pending
         while True:
             try:
@@ -291,6 +302,7 @@ class RealTimeStepper(PacingFigures):
             substep=self._n,
             frame_skip=self.env.frame_skip,
             overruns=self.overruns,
+            link=self.link is not None,
         )
 
 
