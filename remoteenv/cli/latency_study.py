@@ -11,9 +11,10 @@ run repeats from its seed; the policy follows the observation: an MLP for
 values, a CNN for an image, multi-input for a Dict, the actions in flight a
 separate input beside images) and evaluates the deterministic policy at the
 delay it was trained under, beside fixed reference controllers. Then it runs
-trained policies in real time with a think
-time, records the latency every action had, replays the recordings in
-lock-step, and compares the two return distributions.
+trained policies in real time with a think time, records each episode,
+replays every recording in its exact twin (the same actions applied at the
+same physics substeps, without the clock) and reports how many episodes the
+twin reproduced bit for bit, with the first differing step of any other.
 
 Outputs in ``--out``: ``delay_effect.json`` (every record, rewritten after
 each finished run; ``--resume`` continues an interrupted study),
