@@ -146,7 +146,10 @@ drives the worlds may close a sim (see Drivers).
 ``timing`` ``{"clear": bool}`` -> ``{"worlds": [map, ...]}`` (real-time sims
 only): per world, ``pacing_error_s`` and ``apply_delay_s`` summaries
 (``count``, ``mean``, ``p50``, ``p99``, ``max``, wall seconds), ``overruns``,
-``substeps``, ``period_s`` (and ``link_delay_s``, the emulated link delays
+``substeps``, ``period_s``, ``clock_slips`` and ``slipped_s`` (times the
+world's clock slipped because it fell more than a second behind, and the
+wall seconds it dropped; see :mod:`remoteenv.sim.stepping.real_time`; the
+reference server sends them) and ``link_delay_s`` (the emulated link delays
 drawn, when the reference server emulates one); ``clear`` resets them after
 replying. In real time a ``step`` reply is sent when its action has been in
 force for one control tick (see :mod:`remoteenv.sim.stepping.real_time`).
