@@ -14,9 +14,34 @@ those of the recorded run, bit for bit.
 
 from __future__ import annotations
 
+from typing import Any
+
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.wire.delays.delays import MAX_DELAY_TICKS
 from remoteenv.wire.errors import PROTOCOL
+from remoteenv.wire.real_time_modes import split_replay_schedule
+
+
+def replay_from_options(
+    options: dict[str, Any] | None, mode: str, frame_skip: int, has_link: bool
+) -> tuple[dict[str, Any] | None, ReplayCursor | None]:
+    """A reset's options for the scene, and the replay their schedule asks for
+    (None: none), for a world of ``mode`` that emulates a link or not. Raises a
+    protocol :class:`RequestError` for a malformed schedule, one of another
+    regime, or link delays for a world without an emulated link."""
+    try:
+        options, schedule = split_replay_schedule(options, mode)
+    except ValueError as exc:
+        raise RequestError(PROTOCOL, str(exc)) from None
+    if schedule is None:
+        return options, None
+    if schedule.link_delays is not None and not has_link:
+        raise RequestError(
+            PROTOCOL,
+            "this replay carries the emulated link delays of its recording, but this sim emulates no link: "
+            "launch the twin with the recording's link_delay",
+        )
+    return options, ReplayCursor(schedule.action_substeps, frame_skip, schedule.link_delays)
 
 
 class ReplayCursor:
@@ -63,4 +88,4 @@ class ReplayCursor:
         return target
 
 
-__all__ = ["ReplayCursor"]
+__all__ = ["ReplayCursor", "replay_from_options"]

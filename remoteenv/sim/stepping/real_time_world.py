@@ -17,14 +17,14 @@ from typing import Any
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.stepping.emulated_link import EmulatedLink
 from remoteenv.sim.stepping.real_time_pacing import CATCH_UP_LIMIT_S, PacingFigures
-from remoteenv.sim.stepping.real_time_replay import ReplayCursor
+from remoteenv.sim.stepping.real_time_replay import ReplayCursor, replay_from_options
 from remoteenv.sim.stepping.real_time_reply import PendingStep, SinceReply
 from remoteenv.sim.transport.channels import Channel, Outgoing
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.wire.delays.delays import DelaySpec
 from remoteenv.wire.errors import PROTOCOL, SCENE
 from remoteenv.wire.protocol import error_reply
-from remoteenv.wire.real_time_modes import ELASTIC, FIXED_STEP, check_real_time_mode, split_replay_schedule
+from remoteenv.wire.real_time_modes import ELASTIC, FIXED_STEP, check_real_time_mode
 
 #: A clock: seconds, monotonic (``time.monotonic`` in a sim process).
 Clock = Callable[[], float]
@@ -117,22 +117,9 @@ class RealTimeStepper(PacingFigures):
 
         Options carrying a replay schedule put the world into replay for this
         episode (:mod:`remoteenv.sim.stepping.real_time_replay`)."""
-        try:
-            options, schedule = split_replay_schedule(options, self.mode)
-        except ValueError as exc:
-            raise RequestError(PROTOCOL, str(exc)) from None
-        if schedule is not None and schedule.link_delays is not None and self.link is None:
-            raise RequestError(
-                PROTOCOL,
-                "this replay carries the emulated link delays of its recording, but this sim emulates no link: "
-                "launch the twin with the recording's link_delay",
-            )
+        options, replay = replay_from_options(options, self.mode, self.env.frame_skip, self.link is not None)
         obs, info = self.env.reset(seed=seed, options=options)
-        self._replay = (
-            None
-            if schedule is None
-            else ReplayCursor(schedule.action_substeps, self.env.frame_skip, schedule.link_delays)
-        )
+        self._replay = replay
         self._link.reset(seed)
         self.state = _READY
         self._held = self.env.default_action()
@@ -158,9 +145,8 @@ class RealTimeStepper(PacingFigures):
     def resume(self, now: float) -> float:
         """Restart the clock where it stopped; returns the paused wall seconds.
 
-        Every deadline and a waiting request's arrival shift by the pause, so
-        it counts in no timing figure (a request that came during the pause
-        counts as arrived when it began: it acts at the first boundary after it)."""
+        Every deadline and a waiting request's arrival (one that came during
+        the pause: its start) shift by the pause, so it counts in no timing figure."""
         if self._paused_at is None:
             return 0.0
         stopped, self._paused_at = self._paused_at, None
@@ -208,11 +194,9 @@ class RealTimeStepper(PacingFigures):
     def advance(self, now: float) -> list[Outgoing]:
         """Process the substep boundary that was due; ``now`` is the clock time it is processed.
 
-        At a tick end the tick is scored (and may end the episode); then a
-        newly arrived action takes effect (one read by the boundary's
-        deadline), and the next substep is computed. A boundary more than
-        :data:`~remoteenv.sim.stepping.real_time_pacing.CATCH_UP_LIMIT_S`
-        late slips the clock to ``now`` first.
+        At a tick end the tick is scored (and may end the episode); then an
+        action read by the boundary's deadline takes effect, and the next
+        substep is computed. A boundary over ``CATCH_UP_LIMIT_S`` late slips the clock first.
         """
         lateness = now - (self._t0 + self._n * self.period)
         self.record_lateness(lateness)
@@ -278,15 +262,9 @@ class RealTimeStepper(PacingFigures):
     def _arrived(self, pending: PendingStep, *, replay: bool) -> bool:
         """Whether ``pending``'s action may take effect at boundary ``self._n``
         (fixed-step: only at a tick boundary after the episode's first tick).
-
-        On the clock, the boundary's *deadline* is what counts, not the time
-        it is processed: a boundary processed late (the sim catching up after
-        a stall) whose deadline passed before the action was read (plus the
-        emulated link's delay) runs with the action that was in force then,
-        so no action acts at a sim time that preceded its arrival. The sim
-        reads a request no earlier than it arrived, so ``arrived`` is an
-        upper bound of the arrival: an action that waited unread in the
-        channel during a stall acts once the clock reaches the moment it was read."""
+        On the clock the boundary's *deadline* counts, not when it is processed:
+        one processed late whose deadline preceded the action's reading (plus
+        the link's delay) keeps the action in force then (see the module docs)."""
         if self.mode == FIXED_STEP and (self._n == 0 or self._n % self.env.frame_skip):
             return False
         if replay:
