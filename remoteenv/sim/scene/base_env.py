@@ -98,7 +98,9 @@ class BaseEnv(BatchedHooks):
         self.frame_skip = int(frame_skip)
         #: What the hooks return (the state); the observation adds the cameras' images to it.
         self.state_space = observation_space
-        self.observation_space = observation_space if cameras is None else cameras.space(observation_space)
+        self.observation_space = (
+            observation_space if cameras is None else cameras.space(observation_space, self.model.ngeom)
+        )
         self.action_space = action_space
         #: The renderers of the declared cameras (None: no camera in the observation).
         self.camera_rig = None if cameras is None else CameraRig(self.model, cameras, type(self).__name__)
@@ -194,7 +196,7 @@ class BaseEnv(BatchedHooks):
         mujoco.mj_resetData(self.model, self._data)
         obs, info = unpack_reset(self.reset_model(options), scene=type(self).__name__)
         self._check_obs(obs, "reset_model")
-        return self.observe(obs), info
+        return self.observe(obs, fresh=True), info
 
     def finish_tick(self, action: Any) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
         """:meth:`post_step`, its result checked: four values, a scalar reward,
@@ -208,10 +210,20 @@ class BaseEnv(BatchedHooks):
             return result
         return (self.observe(result[0]), *result[1:])
 
-    def observe(self, state: Any) -> Any:
-        """The observation now from the hooks' state obs: ``state``, or with cameras composed with their images."""
+    def observe(self, state: Any, *, fresh: bool = False) -> Any:
+        """The observation now from the hooks' state obs: ``state``, or with cameras
+        composed with their images (``fresh``: an episode's first, which fills frame stacks)."""
         rig = self.camera_rig
-        return state if rig is None else rig.observation.compose(state, rig.pixels(self.data))
+        return state if rig is None else rig.observation.compose(state, rig.pixels(self.data, fresh=fresh))
+
+    def camera_geometry(self) -> dict[str, dict[str, Any]]:
+        """Each observed camera's ``intrinsics`` (K, 3x3) and ``cam2world`` (4x4 pose,
+        OpenCV axes), ``width`` and ``height`` now, by camera name
+        (:mod:`remoteenv.sim.scene.camera_geometry`); an agent reads them with
+        ``env.call("camera_geometry")``, one per world of a vector env."""
+        if self.camera_rig is None:
+            raise ValueError(f"{type(self).__name__} observes through no camera: no camera geometry to give")
+        return self.camera_rig.geometry(self.data)
 
     def _check_obs(self, obs: Any, hook: str) -> None:
         scene = type(self).__name__
