@@ -49,7 +49,7 @@ def _in_process_image(data: mujoco.MjData, size: int, *, cheap: bool = True) -> 
         ({"name": ""}, "name of an MJCF camera"),
         ({"name": "a", "width": 0}, "width must be an int in 1..4096"),
         ({"name": "a", "height": 64.0}, "height must be an int"),
-        ({"name": "a", "kind": "normals"}, "kind must be one of ('rgb', 'depth', 'segmentation', 'rgbd')"),
+        ({"name": "a", "kind": "normals"}, "kind must be one of ('rgb', 'gray', 'depth', 'segmentation', 'rgbd')"),
         ({"name": "a", "kind": ("rgb", "rgb")}, "or a tuple of"),
     ],
 )

@@ -10,7 +10,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
 
-from remoteenv.sim.scene.camera_rig import CameraRig
+from remoteenv.sim.scene.camera_rig import CameraRig, cheap_renderer
 from remoteenv.sim.scene.cameras import CameraObservation
 from remoteenv.sim.scene.model_file import model_file
 from remoteenv.sim.scene.obs_check import check_observation
@@ -106,6 +106,10 @@ class BaseEnv(BatchedHooks):
         self.camera_rig = None if cameras is None else CameraRig(self.model, cameras, type(self).__name__)
         self.render_mode = render_mode
         self.width, self.height = int(width), int(height)
+        #: ``render()`` at the MJCF's quality (True, the default: videos) or cheaply, without
+        #: multisampling and shadows (False: what a frame publisher streams unless asked);
+        #: read when the renderer is made, at the first ``render()``.
+        self.render_quality = True
         self._renderer: mujoco.Renderer | None = None
         self._viewer: Any = None
         if render_mode == "human":
@@ -264,7 +268,7 @@ class BaseEnv(BatchedHooks):
         if self.render_mode != "rgb_array":
             return None
         if self._renderer is None:
-            self._renderer = mujoco.Renderer(self.model, height=self.height, width=self.width)
+            self._renderer = cheap_renderer(self.model, self.width, self.height, quality=bool(self.render_quality))
         camera = self.default_camera if self.default_camera is not None else -1
         self._renderer.update_scene(self.data, camera=camera)
         return self._renderer.render().copy()

@@ -25,6 +25,9 @@ import numpy as np
 from remoteenv.sim.scene.camera_geometry import camera_geometry
 from remoteenv.sim.scene.cameras import Camera, CameraObservation, ImageEntry
 
+#: ITU-R BT.601 luma weights (OpenCV's RGB2GRAY) in 1/256ths: 0.299, 0.587, 0.114.
+_LUMA = np.array([77, 150, 29], dtype=np.uint16)
+
 
 class CameraSetupError(ValueError):
     """A declared camera does not fit the scene's model (unknown name, too large an image)."""
@@ -99,6 +102,10 @@ class CameraRig:
             out = np.empty(camera.image_shape(entry.kind), dtype=entry.dtype)
         if entry.kind == "rgb":
             return renderer.render(out=out)
+        if entry.kind == "gray":
+            rgb = renderer.render().astype(np.uint16)
+            np.copyto(out[..., 0], (rgb @ _LUMA + 128) >> 8, casting="unsafe")
+            return out
         if entry.kind == "depth":
             renderer.enable_depth_rendering()
             try:

@@ -12,6 +12,8 @@ Every image has a channel axis, channel-last (what Stable-Baselines3,
 Gymnasium's image wrappers and RLlib's CNN read):
 
 - ``"rgb"``: uint8 ``(H, W, 3)`` in ``Box(0, 255)``;
+- ``"gray"``: uint8 ``(H, W, 1)``, the rgb image's luma (ITU-R BT.601
+  weights, as OpenCV's ``RGB2GRAY``), in ``Box(0, 255)``;
 - ``"depth"``: float32 ``(H, W, 1)``, metres from the camera's plane along its
   view axis (MuJoCo's ``Renderer`` depth), in ``Box(0, inf)``;
 - ``"segmentation"``: int32 ``(H, W, 1)``, the id of the model geom drawn at
@@ -43,7 +45,7 @@ import numpy as np
 from gymnasium import spaces
 
 #: What a camera renders, one image each (see the module docstring).
-KINDS = ("rgb", "depth", "segmentation")
+KINDS = ("rgb", "gray", "depth", "segmentation")
 #: Shorthands for several kinds of one camera.
 KIND_GROUPS = {"rgbd": ("rgb", "depth")}
 #: The observation modes :func:`camera_observation` understands.
@@ -55,9 +57,10 @@ MAX_SIDE = 4096
 #: The most frames :attr:`CameraObservation.frame_stack` may stack.
 MAX_FRAME_STACK = 64
 
-_CHANNELS = {"rgb": 3, "depth": 1, "segmentation": 1}
+_CHANNELS = {"rgb": 3, "gray": 1, "depth": 1, "segmentation": 1}
 _DTYPES: dict[str, np.dtype] = {
     "rgb": np.dtype(np.uint8),
+    "gray": np.dtype(np.uint8),
     "depth": np.dtype(np.float32),
     "segmentation": np.dtype(np.int32),
 }
@@ -113,7 +116,7 @@ class Camera:
     def image_space(self, kind: str, frames: int = 1, ngeom: int | None = None) -> spaces.Box:
         """The space of its ``kind`` image; segmentation ids are bounded by the model's ``ngeom`` when given."""
         shape = self.image_shape(kind, frames)
-        if kind == "rgb":
+        if kind in ("rgb", "gray"):
             return spaces.Box(0, 255, shape, dtype=np.uint8)
         if kind == "depth":
             return spaces.Box(0.0, np.inf, shape, dtype=np.float32)
@@ -127,7 +130,7 @@ class Camera:
 
     @property
     def dtype(self) -> np.dtype:
-        """A single-kind camera's image dtype: uint8 rgb, float32 depth, int32 segmentation."""
+        """A single-kind camera's image dtype: uint8 rgb and gray, float32 depth, int32 segmentation."""
         return _DTYPES[self._only_kind()]
 
     @property
