@@ -15,10 +15,11 @@ from remoteenv.sim.scene.cameras import CameraObservation
 from remoteenv.sim.scene.model_file import model_file
 from remoteenv.sim.scene.obs_check import check_observation
 from remoteenv.sim.scene.per_world_hooks import BatchedHooks
+from remoteenv.sim.scene.scene_cameras import SceneCameras
 from remoteenv.sim.scene.step_check import check_finite_obs, unpack_reset, unpack_step
 
 
-class BaseEnv(BatchedHooks):
+class BaseEnv(BatchedHooks, SceneCameras):
     """One MuJoCo world and the env logic around it.
 
     A scene subclasses this and implements :meth:`reset_model`,
@@ -37,7 +38,9 @@ class BaseEnv(BatchedHooks):
     where it arrives), so subclasses must keep all per-step logic in these hooks.
 
     Cameras (``cameras=``, a :class:`~remoteenv.sim.scene.cameras.CameraObservation`):
-    the hooks keep returning the state obs; :meth:`observe` adds the images (docs/cameras.md).
+    the hooks keep returning the state obs; :meth:`observe` adds the images, and
+    :meth:`camera_geometry` gives the cameras' intrinsics and extrinsics
+    (:class:`~remoteenv.sim.scene.scene_cameras.SceneCameras`, docs/cameras.md).
 
     Truncation (episode time limits) is the agent side's business
     (``gymnasium.make``'s ``max_episode_steps``); ``post_step`` reports only
@@ -213,21 +216,6 @@ class BaseEnv(BatchedHooks):
         if self.camera_rig is None:
             return result
         return (self.observe(result[0]), *result[1:])
-
-    def observe(self, state: Any, *, fresh: bool = False) -> Any:
-        """The observation now from the hooks' state obs: ``state``, or with cameras
-        composed with their images (``fresh``: an episode's first, which fills frame stacks)."""
-        rig = self.camera_rig
-        return state if rig is None else rig.observation.compose(state, rig.pixels(self.data, fresh=fresh))
-
-    def camera_geometry(self) -> dict[str, dict[str, Any]]:
-        """Each observed camera's ``intrinsics`` (K, 3x3) and ``cam2world`` (4x4 pose,
-        OpenCV axes), ``width`` and ``height`` now, by camera name
-        (:mod:`remoteenv.sim.scene.camera_geometry`); an agent reads them with
-        ``env.call("camera_geometry")``, one per world of a vector env."""
-        if self.camera_rig is None:
-            raise ValueError(f"{type(self).__name__} observes through no camera: no camera geometry to give")
-        return self.camera_rig.geometry(self.data)
 
     def _check_obs(self, obs: Any, hook: str) -> None:
         scene = type(self).__name__
