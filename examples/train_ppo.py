@@ -1,13 +1,15 @@
 """Train PPO on a registered remote env (default remoteenv/CartPole-v0), save it, evaluate it.
 
-A compact PPO (clipped surrogate, GAE, separate actor and critic networks) in
+A compact PPO (clipped surrogate, GAE, actor and critic networks) in
 plain torch on the CPU, for any remote env id whose observations are a Box,
 an image or a Dict of them and whose actions are Discrete (a categorical
 policy) or a Box (a Gaussian policy, actions clipped to the bounds). The
 network reads the observation space: flat values go to MLPs as they are; an
-image (uint8 ``H x W x C``, e.g. a camera ``obs_mode="pixels"``) first goes
-through a small CNN; a Dict (``{"state", "pixels"}``) through one input each,
-their features side by side. The worlds run in sim
+image (uint8 ``H x W x C``, e.g. a camera ``obs_mode="pixels"``, stacked
+frames too) first goes through a small CNN, one shared by actor and critic;
+a Dict (``{"state", "pixels"}``) through one input each, their features side
+by side. Flat observations get separate actor and critic MLPs. ``--json``
+writes the run's figures. The worlds run in sim
 processes (RemoteVectorEnv; by default one process hosts all 8 and steps them
 from one request); the agent sees a Gymnasium vector env.
 

@@ -269,15 +269,26 @@ def test_depth_segmentation_and_two_cameras_as_one_flat_dict_that_sb3_trains_on(
     sb3 = pytest.importorskip("stable_baselines3")
     from remoteenv.sb3 import make_sb3_vec_env
 
-    kwargs = {"obs_mode": "state_pixels", "image_size": 36, "cameras": ["agent", "side"], "camera_kind": "rgbd"}
+    two = {"obs_mode": "state_pixels", "image_size": 36, "cameras": ["agent", "side"]}
+    env = gym.make(ENV_ID, **two)
+    try:
+        assert set(env.observation_space.spaces) == {"state", "agent_rgb", "side_rgb"}
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # two rgb cameras: SB3's checker has nothing to say
+            sb3.common.env_checker.check_env(env, warn=True, skip_render_check=True)
+    finally:
+        env.close()
+    kwargs = {**two, "camera_kind": "rgbd"}
     env = gym.make(ENV_ID, **kwargs)
     try:
         space = env.observation_space
         assert set(space.spaces) == {"state", "agent_rgb", "agent_depth", "side_rgb", "side_depth"}
         assert space["agent_depth"] == gym.spaces.Box(0.0, np.inf, (36, 36, 1), np.float32)
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
             sb3.common.env_checker.check_env(env, warn=True, skip_render_check=True)
+        # SB3 only notes that a float32 depth image is no uint8 image (it goes to the MLP)
+        assert caught and all("depth is an image but its `dtype` is (float32)" in str(w.message) for w in caught)
         obs, _ = env.reset(seed=0)
         assert space.contains(obs)
     finally:
