@@ -29,6 +29,8 @@ from one request); the agent sees a Gymnasium vector env.
     python examples/train_ppo.py --env my_arm:my_arm/MyArm-v0 --budget 100000 --save my_arm_ppo.pt
     python examples/train_ppo.py --eval-only --save my_arm_ppo.pt  # load and evaluate again
     python examples/train_ppo.py --env-kwargs '{"obs_mode": "state_pixels"}' --budget 200000
+    python examples/train_ppo.py --env-kwargs '{"obs_mode": "pixels", "frame_stack": 4}' --budget 300000 \\
+        --reward-scale 0.01 --ent-coef 0.01 --torch-threads 2          # the camera recipe, docs/cameras.md
 
 ``--env`` takes any registered id; ``module:id`` imports ``module`` first
 (an env package of your own); ``--env-kwargs`` is a JSON map of the env's
@@ -281,9 +283,10 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
                     final = {key: np.stack([f[key] for f in finals]) for key in layout["inputs"]}
                 else:
                     final = np.stack(list(infos["final_obs"][cut]))
-                with torch.no_grad():
-                    reward[cut] += args.gamma * model.value(as_inputs(final, layout, int(cut.sum()))).numpy()
-            buf_rew[t] = torch.as_tensor(reward, dtype=torch.float32)
+                with torch.no_grad():  # the value is in scaled reward units
+                    bootstrap = model.value(as_inputs(final, layout, int(cut.sum()))).numpy()
+                    reward[cut] += args.gamma * bootstrap / args.reward_scale
+            buf_rew[t] = torch.as_tensor(reward * args.reward_scale, dtype=torch.float32)
             buf_done[t] = torch.as_tensor(done, dtype=torch.float32)
             for i in np.flatnonzero(done):
                 recent.append(float(ep_return[i]))
@@ -465,6 +468,10 @@ def write_json(args: argparse.Namespace, trained: Any, evaluation: dict[str, flo
         "budget": args.budget,
         "num_envs": args.num_envs,
         "seed": args.seed,
+        "hyperparameters": {
+            key: getattr(args, key)
+            for key in ("rollout_steps", "epochs", "minibatch", "lr", "ent_coef", "reward_scale", "torch_threads")
+        },
         "training": trained,
         "evaluation": evaluation,
         "load_average_before": [round(x, 2) for x in load_before],
@@ -501,6 +508,13 @@ def main() -> int:
     p.add_argument("--clip", type=float, default=0.2)
     p.add_argument("--vf-coef", type=float, default=0.5)
     p.add_argument("--ent-coef", type=float, default=0.0)
+    p.add_argument(
+        "--reward-scale",
+        type=float,
+        default=1.0,
+        help="multiply rewards by this for learning (value targets near 1; returns are logged unscaled)",
+    )
+    p.add_argument("--torch-threads", type=int, default=1, help="torch's CPU threads (1: the sims keep the rest)")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--log-every", type=int, default=10, help="updates between log lines")
     p.add_argument("--save", default=None, help="where to save the policy (default: <Name>_ppo.pt)")
@@ -509,7 +523,9 @@ def main() -> int:
     p.add_argument("--think-ms", default="", help="real-time evaluation at these think times, ms (e.g. 0,10,20)")
     p.add_argument("--json", default=None, help="also write the run's figures (training, evaluation, load) here")
     args = p.parse_args()
-    torch.set_num_threads(1)  # small nets: threads only add overhead next to the sims
+    if not args.reward_scale > 0:
+        p.error(f"--reward-scale must be > 0, got {args.reward_scale}")
+    torch.set_num_threads(args.torch_threads)  # small nets: by default one, the sims keep the other CPUs
 
     ok, trained = True, None
     load_before = os.getloadavg()
