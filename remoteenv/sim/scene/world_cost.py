@@ -39,8 +39,8 @@ def world_cost(env: Any) -> float:
     rig = getattr(env, "camera_rig", None)
     if rig is None:
         return physics
-    rig.pixels(data)  # makes the renderer (not counted)
-    return physics + _fastest(lambda: rig.pixels(data))
+    rig.frames(data)  # makes the renderers (not counted)
+    return physics + _fastest(lambda: rig.frames(data))
 
 
 __all__ = ["world_cost"]
