@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import signal
 import tempfile
 from typing import Any
@@ -196,9 +195,10 @@ def _study(args: argparse.Namespace, config: Any, json_path: str) -> int:
     from remoteenv.latency_study.results import markdown_table, plot, write_json
     from remoteenv.latency_study.runner import run_study
     from remoteenv.latency_study.twin_check import run_twin_check
+    from remoteenv.wire.files.owned_dirs import remove_dir
 
     scratch = tempfile.mkdtemp(prefix="remoteenv-study-policies-")
-    watch_dir(scratch)
+    scratch_id = watch_dir(scratch)
     try:
         policy_dir = args.policies or scratch
         references = reference_returns(config)
@@ -222,6 +222,7 @@ def _study(args: argparse.Namespace, config: Any, json_path: str) -> int:
                 f"{check['identical']} of {check['total']} episodes identical ({check['steps']} steps)"
             )
     finally:
-        shutil.rmtree(scratch, ignore_errors=True)
+        if scratch_id is not None:
+            remove_dir(scratch, scratch_id)
         forget_dir(scratch)
     return 0
