@@ -8,7 +8,7 @@ import os
 from pathlib import Path
 
 from remoteenv.sim.process.orphan_guard import remove_instance_files
-from remoteenv.wire.files.owned_dirs import format_id, identity, parse_id, remove_dir, remove_files
+from remoteenv.wire.files.owned_dirs import format_id, identity, parse_id, remove_dir
 
 
 def _victim(tmp_path: Path) -> Path:
