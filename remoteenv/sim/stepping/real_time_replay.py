@@ -9,14 +9,17 @@ step's action taken as arrived just before the substep the schedule names,
 until the reply real time would have sent. The boundaries are processed by
 the same code as on the wall clock (score the tick with the held action,
 apply the newly arrived one, step), so physics, rewards and flags are
-those of the recorded run, bit for bit.
+those of the recorded run, bit for bit. The work one step may cause is
+bounded: at most :data:`~remoteenv.wire.real_time_modes.MAX_REPLAY_STEP_TICKS`
+ticks, and a scene's cameras render only the ticks whose observation a reply
+carries (the real run's replies), not every tick run on the way.
 """
 
 from __future__ import annotations
 
 from remoteenv.sim.transport.checks import RequestError
-from remoteenv.wire.delays.delays import MAX_DELAY_TICKS
 from remoteenv.wire.errors import PROTOCOL
+from remoteenv.wire.real_time_modes import MAX_REPLAY_STEP_TICKS
 
 
 class ReplayCursor:
@@ -39,7 +42,7 @@ class ReplayCursor:
         """The substep at which the next step's action takes effect; ``current``
         is the world's next substep. Raises a protocol :class:`RequestError`
         beyond the recording or for a step that would span more than
-        ``MAX_DELAY_TICKS`` ticks (a bound on the work one request may ask for)."""
+        ``MAX_REPLAY_STEP_TICKS`` ticks (a bound on the work one request may ask for)."""
         j = self.steps
         if j >= len(self.action_substeps):
             raise RequestError(
@@ -48,10 +51,11 @@ class ReplayCursor:
                 "beyond the recording (the twin's policy acted differently, or the episode was cut short): reset",
             )
         target = self.action_substeps[j]
-        if target - current > MAX_DELAY_TICKS * self.frame_skip:
+        if target - current > MAX_REPLAY_STEP_TICKS * self.frame_skip:
             raise RequestError(
                 PROTOCOL,
-                f"replay step {j} would run {target - current} substeps, more than {MAX_DELAY_TICKS} ticks",
+                f"replay step {j} would run {target - current} substeps, more than the {MAX_REPLAY_STEP_TICKS} "
+                "ticks one replayed step may run: this episode cannot be replayed",
             )
         self.steps += 1
         return target
