@@ -114,7 +114,9 @@ def _config(args: argparse.Namespace) -> Any:
         kwargs: dict[str, Any] = {"continuous": True} if args.env == DEFAULT_ENV else {}
     else:
         kwargs = json_map(args.env_kwargs, "--env-kwargs")
-    delays = int_list(args.delays, "--delays") if args.delays.strip() else []
+    from remoteenv.delays import MAX_DELAY_TICKS
+
+    delays = int_list(args.delays, "--delays", MAX_DELAY_TICKS) if args.delays.strip() else []
     random_delays = random_models(args.random_delays) if args.random_delays.strip() else []
     try:
         return StudyConfig(

@@ -52,9 +52,11 @@ class CartPoleEnv(BaseEnv):
         image_size: int = 64,
         camera_quality: bool = False,
     ) -> None:
+        if not isinstance(continuous, (bool, np.bool_)):
+            raise ValueError(f"CartPoleEnv: continuous must be True or False, got {str(continuous)[:40]!r}")
         self.continuous = bool(continuous)
         cameras = camera_observation(
-            obs_mode, Camera("agent", width=int(image_size), height=int(image_size)), quality=bool(camera_quality)
+            obs_mode, Camera("agent", width=image_size, height=image_size), quality=camera_quality
         )
         action_space: spaces.Space = (
             spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32) if self.continuous else spaces.Discrete(2)

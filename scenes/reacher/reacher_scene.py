@@ -49,7 +49,7 @@ class ReacherEnv(BaseEnv):
         camera_quality: bool = False,
     ) -> None:
         cameras = camera_observation(
-            obs_mode, Camera("overhead", width=int(image_size), height=int(image_size)), quality=bool(camera_quality)
+            obs_mode, Camera("overhead", width=image_size, height=image_size), quality=camera_quality
         )
         super().__init__(
             MODEL_PATH,

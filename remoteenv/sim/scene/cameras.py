@@ -54,7 +54,9 @@ class Camera:
         for side in ("width", "height"):
             value = getattr(self, side)
             if type(value) is not int or not 0 < value <= MAX_SIDE:
-                raise ValueError(f"Camera {self.name!r}: {side} must be an int in 1..{MAX_SIDE}, got {value!r}")
+                raise ValueError(
+                    f"Camera {self.name!r}: {side} must be an int in 1..{MAX_SIDE}, got {str(value)[:40]!r}"
+                )
         if self.kind not in KINDS:
             raise ValueError(f"Camera {self.name!r}: kind must be one of {KINDS}, got {self.kind!r}")
 
@@ -97,6 +99,8 @@ class CameraObservation:
     quality: bool = False
 
     def __post_init__(self) -> None:
+        check_flag("with_state", self.with_state)
+        check_flag("quality", self.quality)
         if not self.cameras or not all(isinstance(c, Camera) for c in self.cameras):
             raise ValueError(f"CameraObservation needs one or more Camera, got {self.cameras!r}")
         names = [c.name for c in self.cameras]
@@ -120,13 +124,20 @@ class CameraObservation:
         return {STATE_KEY: state, PIXELS_KEY: pixels} if self.with_state else pixels
 
 
+def check_flag(name: str, value: Any) -> None:
+    """Refuse anything but a bool for the flag ``name`` (``"no"`` is no False)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {str(value)[:40]!r}")
+
+
 def camera_observation(
     obs_mode: str, cameras: Camera | Sequence[Camera], *, quality: bool = False
 ) -> CameraObservation | None:
     """The declaration for a scene's ``obs_mode``: ``"state"`` None (no camera),
     ``"pixels"`` the images alone, ``"state_pixels"`` a Dict of state and images."""
-    if obs_mode not in OBS_MODES:
-        raise ValueError(f"obs_mode must be one of {OBS_MODES}, got {obs_mode!r}")
+    if not isinstance(obs_mode, str) or obs_mode not in OBS_MODES:
+        raise ValueError(f"obs_mode must be one of {OBS_MODES}, got {str(obs_mode)[:40]!r}")
+    check_flag("camera quality", quality)
     if obs_mode == "state":
         return None
     chosen = (cameras,) if isinstance(cameras, Camera) else tuple(cameras)
