@@ -125,7 +125,7 @@ class ZmqChannel:
                 while sock.getsockopt(zmq.RCVMORE):
                     sock.recv(zmq.NOBLOCK, copy=False)
                 continue
-            fd_of[routing_id] = frame.get(zmq.SRCFD)
+            fd_of[routing_id] = _source_fd(frame)
             if routing_id in owners:
                 out.append((routing_id, frame))
                 continue
@@ -170,6 +170,15 @@ class ZmqChannel:
 
     def send(self, reply_to: Any, payload: bytes) -> None:
         self.socket.send_multipart([reply_to, payload])
+
+
+def _source_fd(frame: Any) -> int:
+    """The descriptor of the connection ``frame`` came on (-1 where libzmq has
+    none to say, e.g. inproc: such a peer is never reported gone)."""
+    try:
+        return int(frame.get(zmq.SRCFD))
+    except zmq.ZMQError:
+        return -1
 
 
 class LaneWatch(Protocol):
