@@ -51,10 +51,12 @@ class ReplayCursor:
                 "beyond the recording (the twin's policy acted differently, or the episode was cut short): reset",
             )
         target = self.action_substeps[j]
-        if target - current > MAX_REPLAY_STEP_TICKS * self.frame_skip:
+        span = target - current
+        if span > MAX_REPLAY_STEP_TICKS * self.frame_skip:
             raise RequestError(
                 PROTOCOL,
-                f"replay step {j} would run {target - current} substeps, more than the {MAX_REPLAY_STEP_TICKS} "
+                f"replay step {j} would run {span} substeps (about {span // self.frame_skip} ticks of "
+                f"{self.frame_skip}), more than the {MAX_REPLAY_STEP_TICKS} "
                 "ticks one replayed step may run: this episode cannot be replayed",
             )
         self.steps += 1
