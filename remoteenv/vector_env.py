@@ -41,7 +41,7 @@ from remoteenv.agent.vector.pool_api import PoolAPI
 from remoteenv.agent.vector.vector_episodes import VectorEpisodes
 from remoteenv.agent.vector.vector_launch import open_worlds
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, plan_layout, world_slices
-from remoteenv.agent.vector.vector_results import hold_nones
+from remoteenv.agent.vector.vector_results import hold_big_ints, hold_nones
 from remoteenv.wire.delays.channel_rules import NEWEST, ChannelRules
 from remoteenv.wire.delays.delays import DelaySpec
 from remoteenv.wire.handshake import Handshake
@@ -268,8 +268,10 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         return self._episodes.reset(seed, options, self._add_info)
 
     def _add_info(self, vector_infos: dict[str, Any], env_info: dict[str, Any], env_num: int) -> dict[str, Any]:
-        """Gymnasium's merge of one world's info, and :func:`~remoteenv.agent.vector.vector_results.hold_nones`."""
-        return super()._add_info(hold_nones(vector_infos, env_info, self.num_envs), env_info, env_num)
+        """Gymnasium's merge of one world's info, after :func:`~remoteenv.agent.vector.vector_results.hold_nones`
+        and :func:`~remoteenv.agent.vector.vector_results.hold_big_ints`."""
+        held = hold_big_ints(hold_nones(vector_infos, env_info, self.num_envs), env_info, self.num_envs)
+        return super()._add_info(held, env_info, env_num)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every world once (or autoreset it, see ``autoreset_mode``)."""

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import math
 import os
 import statistics
 from collections.abc import Callable
@@ -33,6 +34,9 @@ from remoteenv.benchmarks.batched import Contender
 from remoteenv.benchmarks.in_process import make_in_process
 from remoteenv.benchmarks.render_cost import format_cost, render_cost
 from remoteenv.benchmarks.report import emit, machine_record, progress_log
+from remoteenv.sim.scene.cameras import MAX_SIDE
+from remoteenv.wire.frame_limits import MAX_MESSAGE_BYTES
+from remoteenv.wire.memory import format_bytes, resident_bytes, worlds_problem
 
 REMOTE_ID = "remoteenv/CartPole-v0"
 #: (image side, worlds) measured by default; the first is the one with targets.
@@ -44,6 +48,32 @@ TARGETS = [
 ]
 
 
+#: Longest ``--pixels-duration`` (seconds per contender per round).
+MAX_DURATION_S = 600.0
+#: Most ``--pixels-rounds``.
+MAX_ROUNDS = 100
+
+
+def _duration(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and 0 < value <= MAX_DURATION_S):
+        raise argparse.ArgumentTypeError(f"must be seconds in (0, {MAX_DURATION_S:g}], got {text[:40]!r}")
+    return value
+
+
+def _rounds(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= MAX_ROUNDS:
+        raise argparse.ArgumentTypeError(f"must be an int in 1..{MAX_ROUNDS}, got {text[:40]!r}")
+    return value
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("pixels benchmark (--pixels)")
     g.add_argument(
@@ -51,8 +81,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=DEFAULT_CASES,
         help=f"comma-separated SIDExWORLDS cases (default {DEFAULT_CASES}; targets at the first)",
     )
-    g.add_argument("--pixels-duration", type=float, default=1.0, help="seconds per contender per round (default 1)")
-    g.add_argument("--pixels-rounds", type=int, default=3, help="alternating rounds; medians shown (default 3)")
+    g.add_argument(
+        "--pixels-duration",
+        type=_duration,
+        default=1.0,
+        help=f"seconds per contender per round, at most {MAX_DURATION_S:g} (default 1)",
+    )
+    g.add_argument(
+        "--pixels-rounds",
+        type=_rounds,
+        default=3,
+        help=f"alternating rounds, at most {MAX_ROUNDS}; medians shown (default 3)",
+    )
     g.add_argument(
         "--pixels-k",
         default="",
@@ -61,18 +101,78 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def parse_cases(text: str) -> list[tuple[int, int]]:
-    """``"64x8,84x8"`` -> ``[(64, 8), (84, 8)]``; exits with a message on anything else."""
+    """``"64x8,84x8"`` -> ``[(64, 8), (84, 8)]``; exits with a message on anything else:
+    a side above what a camera declares or one frame beyond what a reply carries."""
     cases = []
-    for part in text.split(","):
+    largest = max_side()
+    for part in text.split(",")[:64]:
         side, _, worlds = part.strip().partition("x")
         try:
             case = (int(side), int(worlds))
         except ValueError:
-            raise SystemExit(f"--pixels-cases must be SIDExWORLDS items like 64x8, got {part!r}") from None
+            raise SystemExit(f"--pixels-cases must be SIDExWORLDS items like 64x8, got {part[:40]!r}") from None
         if min(case) < 1:
-            raise SystemExit(f"--pixels-cases needs positive sides and worlds, got {part!r}")
+            raise SystemExit(f"--pixels-cases needs positive sides and worlds, got {part[:40]!r}")
+        if case[0] > largest:
+            raise SystemExit(
+                f"--pixels-cases {part.strip()[:40]}: a {case[0]}x{case[0]} image is beyond the largest a "
+                f"camera world sends ({largest}x{largest}: {MAX_SIDE} px per side, one frame per reply); "
+                f"use a side up to {largest}"
+            )
         cases.append(case)
     return cases
+
+
+def max_side() -> int:
+    """The largest square RGB image side a camera declares and one reply carries."""
+    return min(MAX_SIDE, math.isqrt(MAX_MESSAGE_BYTES // 3))
+
+
+def world_footprint(side: int) -> tuple[int, int] | None:
+    """``(bytes, interpreter bytes)``: what one more in-process camera world of
+    ``side`` pixels costs this process (its resident set grown by building and
+    rendering it, measured on the second of two), and this process's resident
+    set before (about what an ``AsyncVectorEnv`` worker costs besides its
+    world); None where it cannot be read."""
+    base = resident_bytes()
+    envs = [make_in_process("cartpole", None, obs_mode="pixels", image_size=side)]
+    try:
+        envs[0].reset(seed=0)
+        before = resident_bytes()
+        envs.append(make_in_process("cartpole", None, obs_mode="pixels", image_size=side))
+        envs[1].reset(seed=0)
+        after = resident_bytes()
+    finally:
+        for env in envs:
+            env.close()
+    if base is None or before is None or after is None:
+        return None
+    return max(after - before, 1), base
+
+
+def check_memory(cases: list[tuple[int, int]], footprint: Callable[[int], tuple[int, int] | None]) -> None:
+    """Exit with one line, before anything is built, for a case whose three
+    contenders would not fit in the memory this machine has available: each
+    world is held three times (in process for SyncVectorEnv, in an
+    ``AsyncVectorEnv`` worker with its interpreter, in a sim for
+    RemoteVectorEnv), at ``footprint(side)`` as measured here."""
+    measured: dict[int, tuple[int, int] | None] = {}
+    for side, n in cases:
+        if side not in measured:
+            measured[side] = footprint(side)
+        figures = measured[side]
+        if figures is None:
+            continue
+        world, interpreter = figures
+        problem = worlds_problem(
+            n,
+            3 * world + interpreter,
+            f"--pixels-cases {side}x{n}",
+            "ask for at most {fit} worlds at this side (measured here: "
+            + f"{format_bytes(world)} a world, {format_bytes(interpreter)} an AsyncVectorEnv worker's interpreter)",
+        )
+        if problem is not None:
+            raise SystemExit(problem)
 
 
 def _actions(n: int) -> list[np.ndarray]:
@@ -218,13 +318,17 @@ def format_table(result: dict[str, Any]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     cases = parse_cases(args.pixels_cases)
-    ks = [int(k) for k in args.pixels_k.split(",") if k.strip()] if args.pixels_k else []
-    if args.pixels_duration <= 0 or args.pixels_rounds < 1 or args.hog < 0 or any(k < 1 for k in ks):
-        raise SystemExit("--pixels-duration must be > 0 s, --pixels-rounds >= 1, --hog >= 0, --pixels-k >= 1")
+    try:
+        ks = [int(k) for k in args.pixels_k.split(",") if k.strip()] if args.pixels_k else []
+    except ValueError:
+        raise SystemExit(f"--pixels-k must be comma-separated ints >= 1, got {args.pixels_k[:40]!r}") from None
+    if args.hog < 0 or any(k < 1 for k in ks):
+        raise SystemExit("--hog must be >= 0 and --pixels-k >= 1")
+    check_memory(cases, world_footprint)
     log = progress_log(args.json)
     result = measure(cases, args.pixels_duration, args.pixels_rounds, args.hog, ks, log=log)
     emit(result, args.json, format_table)
     return 0
 
 
-__all__ = ["measure", "parse_cases", "ratios"]
+__all__ = ["check_memory", "max_side", "measure", "parse_cases", "ratios", "world_footprint"]

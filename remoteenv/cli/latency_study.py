@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import signal
 import tempfile
 from typing import Any
@@ -116,7 +115,9 @@ def _config(args: argparse.Namespace) -> Any:
         kwargs: dict[str, Any] = {"continuous": True} if args.env == DEFAULT_ENV else {}
     else:
         kwargs = json_map(args.env_kwargs, "--env-kwargs")
-    delays = int_list(args.delays, "--delays") if args.delays.strip() else []
+    from remoteenv.delays import MAX_DELAY_TICKS
+
+    delays = int_list(args.delays, "--delays", MAX_DELAY_TICKS) if args.delays.strip() else []
     random_delays = random_models(args.random_delays) if args.random_delays.strip() else []
     try:
         return StudyConfig(
@@ -197,9 +198,10 @@ def _study(args: argparse.Namespace, config: Any, json_path: str) -> int:
     from remoteenv.latency_study.results import markdown_table, plot, write_json
     from remoteenv.latency_study.runner import run_study
     from remoteenv.latency_study.twin_check import run_twin_check
+    from remoteenv.wire.files.owned_dirs import remove_dir
 
     scratch = tempfile.mkdtemp(prefix="remoteenv-study-policies-")
-    watch_dir(scratch)
+    scratch_id = watch_dir(scratch)
     try:
         policy_dir = args.policies or scratch
         references = reference_returns(config)
@@ -223,6 +225,7 @@ def _study(args: argparse.Namespace, config: Any, json_path: str) -> int:
                 f"{check['identical']} of {check['total']} episodes identical ({check['steps']} steps)"
             )
     finally:
-        shutil.rmtree(scratch, ignore_errors=True)
+        if scratch_id is not None:
+            remove_dir(scratch, scratch_id)
         forget_dir(scratch)
     return 0

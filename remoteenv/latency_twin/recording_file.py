@@ -40,6 +40,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import stat
 from typing import Any
 
 from remoteenv.latency_twin.episode import RecordedEpisode
@@ -87,11 +88,15 @@ def save_recording(episode: RecordedEpisode, path: str | os.PathLike[str], env_i
 
 
 def is_recording(path: str | os.PathLike[str]) -> bool:
-    """Whether ``path`` holds a recording (a JSON object) rather than a plain trace."""
+    """Whether ``path`` holds a recording (a JSON object) rather than a plain trace.
+    Raises :class:`~remoteenv.wire.files.file_reads.UnreadableFile` for a path that
+    is no regular file (a FIFO is refused, never waited on)."""
     try:
         data = read_bytes(path, MAX_RECORDING_BYTES, what="recording or trace file")
     except UnreadableFile:
-        return False
+        if stat.S_ISREG(os.stat(path).st_mode):
+            return False  # too large for a recording: a plain trace's reader decides
+        raise  # a FIFO, device or directory is neither: said as such
     return data.lstrip().startswith(b"{")
 
 
@@ -102,6 +107,21 @@ def _ints(doc: dict[str, Any], key: str, n: int | None) -> list[int]:
     if not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in values):
         raise ValueError(f"recording field {key!r} must hold ints >= 0")
     return values
+
+
+def _as_float(value: Any) -> float | None:
+    """``value`` as a float if it is a number (not a bool) a float holds, else None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        return float(value)
+    except OverflowError:  # an int beyond a double's range (10**400)
+        return None
+
+
+def _finite(value: Any) -> bool:
+    number = _as_float(value)
+    return number is not None and math.isfinite(number)
 
 
 def episode_from_document(doc: Any, what: str = "recording") -> tuple[RecordedEpisode, str]:
@@ -124,15 +144,15 @@ def episode_from_document(doc: Any, what: str = "recording") -> tuple[RecordedEp
     digests = doc.get("obs_digests")
     if not (isinstance(latency, list) and isinstance(rewards, list) and len(latency) == len(rewards) == n):
         raise ValueError(f"{what}: latency_ticks and rewards need one value per step ({n})")
-    if not all(v is None or isinstance(v, (int, float)) and math.isfinite(v) for v in latency):
-        raise ValueError(f"{what}: latency_ticks must be numbers or null")
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in rewards):
-        raise ValueError(f"{what}: rewards must be numbers")
+    if not all(v is None or _finite(v) for v in latency):
+        raise ValueError(f"{what}: latency_ticks must be finite numbers or null")
+    if not all(_as_float(v) is not None for v in rewards):
+        raise ValueError(f"{what}: rewards must be numbers a float holds")
     if not isinstance(digests, list) or len(digests) != n + 1 or not all(isinstance(d, str) for d in digests):
         raise ValueError(f"{what}: obs_digests needs one string per step plus the reset's")
     seed, since = doc.get("seed"), doc.get("resets_after_seed")
-    if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool)):
-        raise ValueError(f"{what}: seed must be an int or null")
+    if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed < 2**64):
+        raise ValueError(f"{what}: seed must be an int in 0..2**64-1 (a reset's seed) or null")
     if not isinstance(since, int) or isinstance(since, bool) or since < 0:
         raise ValueError(f"{what}: resets_after_seed must be an int >= 0")
     unreplayable = doc.get("unreplayable")
@@ -148,7 +168,7 @@ def episode_from_document(doc: Any, what: str = "recording") -> tuple[RecordedEp
         since,
         ticks_elapsed=ticks,
         latency_ticks=[None if v is None else float(v) for v in latency],
-        rewards=[float(r) for r in rewards],
+        rewards=[float(r) for r in rewards],  # checked above: each fits a float
         terminated=bool(doc.get("terminated")),
         truncated=bool(doc.get("truncated")),
         mode=mode,

@@ -12,11 +12,19 @@ from typing import Any
 from remoteenv.sim.process.log import log_to_stderr
 from remoteenv.sim.process.pacing_levers import GC_MODES, apply_levers
 from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.scene.world_builds import WorldsDoNotFit, build_worlds
 from remoteenv.sim.serving.server import RemoteControlledAgent
 from remoteenv.wire.delays.channel_rules import DELIVERY_RULES, NEWEST, ChannelRules
 from remoteenv.wire.delays.delay_file import read_delay_file
 from remoteenv.wire.delays.delays import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
-from remoteenv.wire.errors import EXIT_SCENE_ARGS, SCENE_ARGS_MARKER, ProtocolError, short_repr
+from remoteenv.wire.errors import (
+    EXIT_RESOURCES,
+    EXIT_SCENE_ARGS,
+    RESOURCES_MARKER,
+    SCENE_ARGS_MARKER,
+    ProtocolError,
+    short_repr,
+)
 from remoteenv.wire.files.keys import read_key, read_keys
 from remoteenv.wire.real_time_modes import ELASTIC, REAL_TIME_MODES
 
@@ -184,13 +192,16 @@ def run_scene(
     if args.render_mode is not None:
         env_kwargs["render_mode"] = args.render_mode
     try:
-        envs = [env_factory(**env_kwargs) for _ in range(args.worlds)]
+        envs = build_worlds(lambda: env_factory(**env_kwargs), args.worlds, f"sim instance {args.instance}")
     except TypeError as exc:
         if "keyword argument" not in str(exc):
             raise
         # The launcher turns this exit status into a TypeError in the agent.
         print(f"{SCENE_ARGS_MARKER} {exc}", file=sys.stderr)
         sys.exit(EXIT_SCENE_ARGS)
+    except WorldsDoNotFit as exc:  # the launcher raises it as a LimitError, one line
+        print(f"{RESOURCES_MARKER} {exc}", file=sys.stderr)
+        sys.exit(EXIT_RESOURCES)
     if args.seed is not None:
         for w, env in enumerate(envs):
             env.seed_rng(args.seed + w)

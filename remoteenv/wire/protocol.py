@@ -268,17 +268,17 @@ Drivers
 One connection drives each world (a connection is the local pipe, or one
 ZeroMQ peer, known by its routing id: a client keeps its routing id when it
 reconnects). A sim with a local pipe is driven by the pipe, every world and
-for good. Otherwise nobody drives a world until a connection resets it
-(``reset``, ``reset_batch``), and the connection that reset a world last
-drives it. A ``state`` error answers ``step`` or ``step_batch`` on a world
-another connection drives; ``reset`` or ``reset_batch`` from anything but
-the pipe of a sim that has one; and ``close``, ``pause`` or ``resume`` from
-a connection that does not drive every world somebody drives (the sim's
-owner: its pipe, else the connection driving its worlds). Every other
-command is open to every connection. A client that wants to drive a world
-resets it first. This keeps a second client from displacing a driver's
-steps or stopping its sim; it does not tell users apart (without a pipe a
-reset takes a world over): who may connect at all is up to the transport
+for good. Otherwise nobody drives a world until a connection resets or
+steps it; that connection then drives it until its connection ends (the
+sim's socket monitor reports the disconnect). A ``state`` error answers
+``reset``, ``reset_batch``, ``step`` or ``step_batch`` on a world another
+connection drives; and ``close``, ``pause`` or ``resume`` from a connection
+that does not drive every world somebody drives (the sim's owner: its pipe,
+else the connection driving its worlds). Every other command is open to
+every connection. A client that wants to drive a world resets it first.
+This keeps a second client from displacing a driver's steps, taking its
+worlds over or stopping its sim; it does not tell users apart: who may
+connect at all is up to the transport
 (an ipc socket in a private dir, CURVE keys).
 
 Values

@@ -43,6 +43,12 @@ REPLAY_OPTION = "remoteenv_replay"
 MAX_REPLAY_STEPS = 100_000
 #: Largest substep index a replay schedule may name (2**31 - 1: far beyond any episode).
 MAX_REPLAY_SUBSTEP = 2**31 - 1
+#: Most control ticks one replayed step may run (the work one ~100-byte request
+#: may cause: 20 s of simulated time at dt 0.02, a real-time step whose agent
+#: stalled that long). A recorded step that lasted longer is not replayable.
+MAX_REPLAY_STEP_TICKS = 1_000
+#: Most unseeded resets an exact twin repeats to reach a recorded episode's start.
+MAX_REPLAY_RESETS = 10_000
 #: Largest emulated link delay a replay schedule may carry (wall seconds).
 MAX_REPLAY_LINK_DELAY_S = 3600.0
 
@@ -133,7 +139,9 @@ __all__ = [
     "ELASTIC",
     "FIXED_STEP",
     "MAX_REPLAY_LINK_DELAY_S",
+    "MAX_REPLAY_RESETS",
     "MAX_REPLAY_STEPS",
+    "MAX_REPLAY_STEP_TICKS",
     "MAX_REPLAY_SUBSTEP",
     "REAL_TIME_MODES",
     "REPLAY_OPTION",

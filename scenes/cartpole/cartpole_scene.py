@@ -59,14 +59,16 @@ class CartPoleEnv(BaseEnv):
         cameras: str | Sequence[str] = "agent",
         frame_stack: int = 1,
     ) -> None:
+        if not isinstance(continuous, (bool, np.bool_)):
+            raise ValueError(f"CartPoleEnv: continuous must be True or False, got {str(continuous)[:40]!r}")
         self.continuous = bool(continuous)
         kind = camera_kind if isinstance(camera_kind, str) else tuple(camera_kind)
         names = (cameras,) if isinstance(cameras, str) else tuple(cameras)
         observed = camera_observation(
             obs_mode,
-            [Camera(name, width=int(image_size), height=int(image_size), kind=kind) for name in names],
-            quality=bool(camera_quality),
-            frame_stack=int(frame_stack),
+            [Camera(name, width=image_size, height=image_size, kind=kind) for name in names],
+            quality=camera_quality,
+            frame_stack=frame_stack,
         )
         action_space: spaces.Space = (
             spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32) if self.continuous else spaces.Discrete(2)

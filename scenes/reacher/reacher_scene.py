@@ -53,9 +53,9 @@ class ReacherEnv(BaseEnv):
         kind = camera_kind if isinstance(camera_kind, str) else tuple(camera_kind)
         cameras = camera_observation(
             obs_mode,
-            Camera("overhead", width=int(image_size), height=int(image_size), kind=kind),
-            quality=bool(camera_quality),
-            frame_stack=int(frame_stack),
+            Camera("overhead", width=image_size, height=image_size, kind=kind),
+            quality=camera_quality,
+            frame_stack=frame_stack,
         )
         super().__init__(
             MODEL_PATH,

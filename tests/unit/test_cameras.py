@@ -296,3 +296,36 @@ def test_sims_get_one_llvmpipe_thread_unless_the_user_chose(monkeypatch):
     assert launch_environment(None)["LP_NUM_THREADS"] == "1"
     monkeypatch.setenv("LP_NUM_THREADS", "4")
     assert launch_environment(None)["LP_NUM_THREADS"] == "4"
+
+
+# Issue 35, item 8: the shipped scenes took camera_quality="no" as True and
+# image_size 64.7, "64" and True as 64 (they converted with bool() and int()).
+@pytest.mark.parametrize("scene", ["cartpole", "reacher"])
+@pytest.mark.parametrize(
+    ("kwargs", "says"),
+    [
+        ({"camera_quality": "no"}, "camera quality must be True or False, got 'no'"),
+        ({"camera_quality": 0}, "camera quality must be True or False"),
+        ({"image_size": 64.7}, "width must be an int in 1..4096, got '64.7'"),
+        ({"image_size": "64"}, "width must be an int in 1..4096, got '64'"),
+        ({"image_size": True}, "width must be an int in 1..4096, got 'True'"),
+        ({"image_size": float("nan")}, "width must be an int"),
+        ({"obs_mode": "pixles"}, "obs_mode must be one of"),
+    ],
+)
+def test_the_shipped_scenes_refuse_loose_camera_arguments(scene, kwargs, says):
+    spec = importlib.util.spec_from_file_location(f"{scene}_scene_loose", remoteenv.scene_path(scene))
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    cls = next(
+        v for k, v in vars(module).items() if isinstance(v, type) and issubclass(v, BaseEnv) and v is not BaseEnv
+    )
+    with pytest.raises(ValueError, match=says.replace("(", r"\(").replace(")", r"\)").replace(".", r"\.")):
+        cls(**{"obs_mode": "pixels", **kwargs})
+
+
+def test_cartpole_refuses_a_continuous_flag_that_is_no_bool():
+    with pytest.raises(ValueError, match="continuous must be True or False"):
+        CartPole(continuous=float("nan"))
+    assert CartPole(continuous=np.bool_(True)).continuous is True

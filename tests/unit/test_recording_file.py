@@ -58,6 +58,11 @@ def test_a_recording_round_trips_through_its_file(tmp_path):
         ({"obs_digests": ["a"]}, "obs_digests"),
         ({"seed": "7"}, "seed"),
         ({"latency_ticks": [0.4, "x"]}, "latency_ticks"),
+        # Issue 35, item 6: raw OverflowError and a seed Gymnasium refuses at reset.
+        ({"rewards": [1.0, 10**400]}, "rewards must be numbers a float holds"),
+        ({"latency_ticks": [10**400, None]}, "latency_ticks must be finite numbers"),
+        ({"seed": -1}, "seed must be an int in 0..2"),
+        ({"seed": 2**64}, "seed must be an int in 0..2"),
     ],
 )
 def test_a_malformed_recording_is_refused_naming_the_field(change, message):
@@ -258,3 +263,33 @@ def test_saving_into_a_missing_folder_names_the_users_path(tmp_path):
     assert str(target) in str(err.value) and "does not exist" in str(err.value) and ".tmp" not in str(err.value)
     with pytest.raises(FileNotFoundError, match="does not exist"):
         make_twin("remoteenv/CartPole-v0", tmp_path / "nothing.json")
+
+
+# Replays are bounded before any sim starts; a FIFO given as a recording is named as one.
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"resets_after_seed": 10**12}, "unseeded resets after its seed, more than the 10000"),
+        ({"ticks_elapsed": [1, 1_001], "rewards": [0.0, 0.0]}, "lasted 1001 ticks, more than the 1000"),
+    ],
+)
+def test_a_replay_beyond_its_bounds_is_refused_before_a_sim_starts(tmp_path, change, message):
+    doc = {**recording_document(episode(), "remoteenv/CartPole-v0"), **change}
+    path = tmp_path / "ep.json"
+    path.write_text(json.dumps(doc))
+    loaded, _ = load_recording(path)  # a figure the lock-step twin may still use
+    with pytest.raises(ValueError, match=message):
+        make_twin("remoteenv/CartPole-v0", path)  # a sim would fail the test's no-process fixture
+
+
+def test_a_fifo_given_as_a_recording_is_refused_as_no_regular_file(tmp_path):
+    import os
+
+    from remoteenv.wire.files.file_reads import UnreadableFile
+
+    fifo = tmp_path / "ep.json"
+    os.mkfifo(fifo)
+    with pytest.raises(UnreadableFile, match="recording or trace file .* is not a regular file"):
+        make_twin("remoteenv/CartPole-v0", fifo)

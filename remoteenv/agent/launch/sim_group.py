@@ -33,11 +33,17 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 from remoteenv.agent.connection.sim_connection import SimConnection
+from remoteenv.agent.errors import LimitError
 from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delay_file import delay_file_text
 from remoteenv.wire.delays.delays import SECONDS, TICKS, DelaySpec, as_delay
 from remoteenv.wire.files.keys import KeyPair
 from remoteenv.wire.real_time_modes import ELASTIC, check_real_time_mode
+
+#: Longest JSON text of a launch's env kwargs (characters): they travel on the
+#: sim's command line (a fork request below the zygote's control-message limit,
+#: or an exec argument below the kernel's 128 KiB per argument).
+MAX_ENV_KWARGS_CHARS = 64 * 1024
 
 
 @dataclass(frozen=True)
@@ -111,9 +117,14 @@ class LaunchSpec:
                 "link_delay emulates a network in real time (real_time=True); in lock-step use action_delay/obs_delay"
             )
         try:
-            json.dumps(self.env_kwargs)
+            size = len(json.dumps(self.env_kwargs))
         except TypeError as exc:
             raise TypeError(f"env kwargs must be JSON-serializable to reach the scene: {exc}") from None
+        if size > MAX_ENV_KWARGS_CHARS:
+            raise LimitError(
+                f"env kwargs take {size} characters as JSON, more than the {MAX_ENV_KWARGS_CHARS} a sim's "
+                "command line carries: pass large data as a file path the scene reads instead"
+            )
 
     def delay_file_text(self) -> str | None:
         """The text of each sim's delay file (see :mod:`remoteenv.wire.delays.delay_file`):

@@ -24,14 +24,14 @@ import zmq
 
 from remoteenv.agent.connection.connection import SimConnection
 from remoteenv.agent.connection.reply_checks import ReplyChecks
-from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.agent.errors import BatchTooLargeError, RemoteEnvError
 from remoteenv.agent.launch.attach import AttachedSims
 from remoteenv.agent.launch.launcher import Launcher
 from remoteenv.agent.launch.restart import RestartBudget
 from remoteenv.agent.launch.sim_group import LaunchSpec, SimGroup
 from remoteenv.agent.session.scene_signature import check_scene_kwargs
 from remoteenv.wire.errors import ProtocolError
-from remoteenv.wire.handshake import Handshake, handshake_request, parse_handshake
+from remoteenv.wire.handshake import BatchTooLarge, Handshake, handshake_request, parse_handshake
 
 #: Seconds to wait for a sim to acknowledge ``close`` (unless ``call_timeouts``
 #: says otherwise) before its group stops it anyway.
@@ -239,6 +239,13 @@ class SimSession:
     def _parse(self, conn: SimConnection, reply: dict[str, Any]) -> Handshake:
         try:
             return parse_handshake(reply)
+        except BatchTooLarge as exc:
+            err = BatchTooLargeError(
+                f"sim instance {conn.instance} at {conn.endpoint} gave {self.label} a handshake it cannot use: {exc}",
+                instance=conn.instance,
+            )
+            err.worlds_that_fit = exc.worlds_that_fit
+            raise err from None
         except ProtocolError as exc:
             raise RemoteEnvError(
                 f"sim instance {conn.instance} at {conn.endpoint} gave {self.label} a handshake it cannot use: {exc}",

@@ -205,15 +205,17 @@ class BaseEnv(BatchedHooks, SceneCameras):
         self._check_obs(obs, "reset_model")
         return self.observe(obs, fresh=True), info
 
-    def finish_tick(self, action: Any) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
+    def finish_tick(self, action: Any, *, observe: bool = True) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
         """:meth:`post_step`, its result checked: four values, a scalar reward,
         a bool ``terminated``, a dict info (:mod:`remoteenv.sim.scene.step_check`)
-        and the observation against ``observation_space``."""
+        and the observation against ``observation_space``. ``observe=False``:
+        the hooks' state obs, the cameras not rendered (a tick whose observation
+        nobody receives; :meth:`observe` renders it later if needed)."""
         result = unpack_step(
             self.post_step(action), scene=type(self).__name__, hook="post_step", finite=self.check_finite
         )
         self._check_obs(result[0], "post_step")
-        if self.camera_rig is None:
+        if self.camera_rig is None or not observe:
             return result
         return (self.observe(result[0]), *result[1:])
 

@@ -97,11 +97,13 @@ class Camera:
         for side in ("width", "height"):
             value = getattr(self, side)
             if type(value) is not int or not 0 < value <= MAX_SIDE:
-                raise ValueError(f"Camera {self.name!r}: {side} must be an int in 1..{MAX_SIDE}, got {value!r}")
+                raise ValueError(
+                    f"Camera {self.name!r}: {side} must be an int in 1..{MAX_SIDE}, got {str(value)[:40]!r}"
+                )
         if not _kinds(self.kind):
             choices = (*KINDS, *KIND_GROUPS)
             raise ValueError(
-                f"Camera {self.name!r}: kind must be one of {choices} or a tuple of {KINDS}, got {self.kind!r}"
+                f"Camera {self.name!r}: kind must be one of {choices} or a tuple of {KINDS}, got {str(self.kind)[:60]!r}"
             )
 
     @property
@@ -184,6 +186,8 @@ class CameraObservation:
     frame_stack: int = 1
 
     def __post_init__(self) -> None:
+        check_flag("with_state", self.with_state)
+        check_flag("quality", self.quality)
         if not self.cameras or not all(isinstance(c, Camera) for c in self.cameras):
             raise ValueError(f"CameraObservation needs one or more Camera, got {self.cameras!r}")
         names = [c.name for c in self.cameras]
@@ -234,14 +238,21 @@ class CameraObservation:
         return {STATE_KEY: state, **pixels}
 
 
+def check_flag(name: str, value: Any) -> None:
+    """Refuse anything but a bool for the flag ``name`` (``"no"`` is no False)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {str(value)[:40]!r}")
+
+
 def camera_observation(
     obs_mode: str, cameras: Camera | Sequence[Camera], *, quality: bool = False, frame_stack: int = 1
 ) -> CameraObservation | None:
     """The declaration for a scene's ``obs_mode``: ``"state"`` None (no camera),
     ``"pixels"`` the images alone, ``"state_pixels"`` a Dict of state and images.
     ``frame_stack`` (images only) stacks each image's last frames."""
-    if obs_mode not in OBS_MODES:
-        raise ValueError(f"obs_mode must be one of {OBS_MODES}, got {obs_mode!r}")
+    if not isinstance(obs_mode, str) or obs_mode not in OBS_MODES:
+        raise ValueError(f"obs_mode must be one of {OBS_MODES}, got {str(obs_mode)[:40]!r}")
+    check_flag("camera quality", quality)
     if obs_mode == "state":
         if frame_stack != 1:
             raise ValueError(

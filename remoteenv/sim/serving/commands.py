@@ -126,7 +126,7 @@ class Commands:
         stepper = self._worlds[world]
         require_reset(stepper.has_reset, world, self.instance)
         action = check_action(self.envs[world].action_space, msg.get("action"))  # the same answer for anyone
-        self.drivers.require((world,), (channel, reply_to), "step")
+        self.drivers.take((world,), (channel, reply_to), "step")
         reply = stepper.submit(msg["seq"], action, channel, reply_to)
         return None if reply is None else describe_scalars(reply)
 

@@ -151,7 +151,12 @@ class RemoteControlledAgent:
             raise
         self.endpoint: str = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
         #: The ROUTER's channel: the drivers' frames first, the others' within budgets.
-        self.router = ZmqChannel(self.socket, owners=lambda: drivers.routing_ids)
+        self.router = ZmqChannel(
+            self.socket,
+            owners=lambda: drivers.routing_ids,
+            disconnected=self._gate.take_disconnected,
+            gone=lambda routing_id: drivers.release((self.router, routing_id)),
+        )
         self.channels: list[Channel] = [self.router]
         if self._pipe is not None:
             self.channels.append(self._pipe)

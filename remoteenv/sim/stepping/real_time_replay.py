@@ -9,7 +9,10 @@ step's action taken as arrived just before the substep the schedule names,
 until the reply real time would have sent. The boundaries are processed by
 the same code as on the wall clock (score the tick with the held action,
 apply the newly arrived one, step), so physics, rewards and flags are
-those of the recorded run, bit for bit.
+those of the recorded run, bit for bit. The work one step may cause is
+bounded: at most :data:`~remoteenv.wire.real_time_modes.MAX_REPLAY_STEP_TICKS`
+ticks, and a scene's cameras render only the ticks whose observation a reply
+carries (the real run's replies), not every tick run on the way.
 """
 
 from __future__ import annotations
@@ -17,9 +20,8 @@ from __future__ import annotations
 from typing import Any
 
 from remoteenv.sim.transport.checks import RequestError
-from remoteenv.wire.delays.delays import MAX_DELAY_TICKS
 from remoteenv.wire.errors import PROTOCOL
-from remoteenv.wire.real_time_modes import split_replay_schedule
+from remoteenv.wire.real_time_modes import MAX_REPLAY_STEP_TICKS, split_replay_schedule
 
 
 def replay_from_options(
@@ -69,7 +71,7 @@ class ReplayCursor:
         """The substep at which the next step's action takes effect; ``current``
         is the world's next substep. Raises a protocol :class:`RequestError`
         beyond the recording or for a step that would span more than
-        ``MAX_DELAY_TICKS`` ticks (a bound on the work one request may ask for)."""
+        ``MAX_REPLAY_STEP_TICKS`` ticks (a bound on the work one request may ask for)."""
         j = self.steps
         if j >= len(self.action_substeps):
             raise RequestError(
@@ -78,10 +80,13 @@ class ReplayCursor:
                 "beyond the recording (the twin's policy acted differently, or the episode was cut short): reset",
             )
         target = self.action_substeps[j]
-        if target - current > MAX_DELAY_TICKS * self.frame_skip:
+        span = target - current
+        if span > MAX_REPLAY_STEP_TICKS * self.frame_skip:
             raise RequestError(
                 PROTOCOL,
-                f"replay step {j} would run {target - current} substeps, more than {MAX_DELAY_TICKS} ticks",
+                f"replay step {j} would run {span} substeps (about {span // self.frame_skip} ticks of "
+                f"{self.frame_skip}), more than the {MAX_REPLAY_STEP_TICKS} "
+                "ticks one replayed step may run: this episode cannot be replayed",
             )
         self.link_delay = 0.0 if self.link_delays is None else self.link_delays[j]
         self.steps += 1

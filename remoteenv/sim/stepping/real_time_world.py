@@ -230,7 +230,10 @@ class RealTimeStepper(PacingFigures):
         out: list[Outgoing] = []
         fs = env.frame_skip
         if self._n and self._n % fs == 0:
-            obs, reward, terminated, info = env.finish_tick(self._held)
+            # Replay renders a tick's cameras only when a reply carries its observation.
+            obs, reward, terminated, info = env.finish_tick(self._held, observe=now is not None)
+            if now is None and (terminated or self._replies_here(self._pending)):
+                obs = env.observe(obs)
             self._since.add_tick(obs, reward, info)
             pending = self._pending
             if pending is not None and (pending.applied_sim_time is not None or terminated):
@@ -258,6 +261,13 @@ class RealTimeStepper(PacingFigures):
         self._n += 1
         self.substeps += 1
         return out
+
+    def _replies_here(self, pending: PendingStep | None) -> bool:
+        """Replay, at a tick end: whether ``pending``'s reply goes at this boundary
+        (its action in force; fixed-step: its action takes effect here)."""
+        if pending is None:
+            return False
+        return pending.applied_sim_time is not None or (self.mode == FIXED_STEP and self._arrived(pending, replay=True))
 
     def _arrived(self, pending: PendingStep, *, replay: bool) -> bool:
         """Whether ``pending``'s action may take effect at boundary ``self._n``
