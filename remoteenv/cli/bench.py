@@ -1,7 +1,9 @@
 """``python -m remoteenv bench``: throughput (default), ``--batched`` (batched stepping
 next to EnvPool and the physics limit), ``--real-time`` pacing, ``--soak``, ``--sb3``
 (SB3 PPO on remote CartPole next to SubprocVecEnv), ``--pixels`` (camera
-observations in vector envs next to Gymnasium's of the same in-process task)."""
+observations in vector envs next to Gymnasium's of the same in-process task),
+``--train-loop`` (a PPO-shaped training loop on each vector env, learner on the
+same CPUs, next to EnvPool and Gymnasium's)."""
 
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ BENCHMARKS = {
     "sb3_ppo": "--sb3",
     "startup": "--startup",
     "pixels": "--pixels",
+    "train_loop": "--train-loop",
 }
 
 
@@ -32,7 +35,9 @@ def add_parser(sub: Any) -> None:
         "--soak: a long run that reports agent and sim memory. "
         "--sb3: SB3 PPO on remote CartPole next to the same PPO on SubprocVecEnv and DummyVecEnv. "
         "--pixels: the camera CartPole's RemoteVectorEnv next to Gymnasium's Async/SyncVectorEnv of the same "
-        "task in process (--hog for a CPU hog beside it).",
+        "task in process (--hog for a CPU hog beside it). "
+        "--train-loop: the envs inside a PPO-shaped training loop, learner on the same CPUs, next to EnvPool and "
+        "Gymnasium's Sync/AsyncVectorEnv.",
     )
     mode = p.add_mutually_exclusive_group()
     for name, flag in BENCHMARKS.items():
