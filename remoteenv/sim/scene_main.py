@@ -189,6 +189,8 @@ def run_scene(
     env_kwargs: dict[str, Any] = json.loads(args.env_kwargs)
     if not isinstance(env_kwargs, dict):
         sys.exit(f"--env-kwargs must be a JSON map, got {args.env_kwargs!r}")
+    # A scratch world (measuring what one costs) opens no viewer window.
+    scratch_kwargs = dict(env_kwargs)
     if args.render_mode is not None:
         env_kwargs["render_mode"] = args.render_mode
     try:
@@ -229,6 +231,7 @@ def run_scene(
         curve_client_keys=client_keys,
         private_dir=args.private_dir,
         pipe_fd=args.pipe_fd,
+        world_factory=lambda: env_factory(**scratch_kwargs),
     )
     if args.rt_spin_s is not None:
         server.deadline_spin_s = max(0.0, float(args.rt_spin_s))

@@ -44,9 +44,10 @@ LOCK_STEP_COMMANDS = frozenset({"reset_batch", "step_batch"})
 REAL_TIME_COMMANDS = frozenset({"timing"})
 
 
-def handshake_request(version: int = PROTOCOL_VERSION) -> dict[str, Any]:
-    """The arguments of a ``handshake`` request (without ``seq``/``cmd``)."""
-    return {"protocol": version}
+def handshake_request(version: int = PROTOCOL_VERSION, world_cost: bool = False) -> dict[str, Any]:
+    """The arguments of a ``handshake`` request (without ``seq``/``cmd``);
+    ``world_cost``: ask the sim to measure one world's whole tick (``metadata["world_cost_s"]``)."""
+    return {"protocol": version, "world_cost": True} if world_cost else {"protocol": version}
 
 
 @dataclass(frozen=True)

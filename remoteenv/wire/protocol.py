@@ -100,18 +100,20 @@ version mismatch), ``"invalid_action"``, ``"scene"`` (the env code raised),
 
 Commands (version 1)
 --------------------
-``handshake`` ``{"protocol": int}`` -> ``{"protocol", "env_id", "instance",
-"pid", "num_worlds", "observation_space", "action_space", "metadata",
-"stepping", "commands"}``. The server refuses a protocol version it does not speak,
+``handshake`` ``{"protocol": int, "world_cost": bool (optional)}`` -> ``{"protocol",
+"env_id", "instance", "pid", "num_worlds", "observation_space", "action_space",
+"metadata", "stepping", "commands"}``. The server refuses a protocol version it does not speak,
 naming both versions. ``commands`` (optional; a list of str) names every
 command the server answers; a client that finds no such field assumes
 ``reset_batch``/``step_batch`` exist exactly when ``stepping.mode`` is
 ``"lock_step"`` and ``timing`` exactly when it is ``"real_time"``. ``metadata`` holds ``render_modes``, ``render_fps``,
 ``dt`` (seconds of simulated time per env step), ``timestep`` (seconds per
 physics substep), ``frame_skip`` and, optionally, ``world_cost_s`` (wall
-seconds one world's control tick costs the server on one thread: physics and
-rendering its camera observation; a hint for how many worlds a process
-should host); ``stepping`` holds ``mode``
+seconds one world's whole control tick costs the server on one thread: the
+physics and every hook of the scene, images included, measured on a scratch
+world; a hint for how many worlds a process should host). A server measures
+it only when the request carries ``"world_cost": true`` (it takes a few ticks'
+time) and may answer without it (then the client keeps its layout); ``stepping`` holds ``mode``
 (``"lock_step"`` or ``"real_time"``) and that mode's parameters: in lock-step
 ``action_delay`` (ticks; the largest of a random model) and, with delays
 beyond a constant action delay, ``obs_delay`` (the largest, ticks),

@@ -171,8 +171,8 @@ def test_the_default_layout_spreads_costly_worlds_over_more_processes():
         for kwargs in ({}, {"obs_mode": "pixels", "image_size": 32}):
             made.append(gym.make_vec(ENV_ID, num_envs=8, vectorization_mode="vector_entry_point", **kwargs).unwrapped)
         state, pixels = made
-        cost_state = state._session.handshake.world_cost_s
-        cost_pixels = pixels._session.handshake.world_cost_s
+        cost_state = state.world_cost_s
+        cost_pixels = pixels.world_cost_s
         assert 0 < cost_state < cost_pixels  # rendering a camera image costs more than CartPole's physics
         for env, cost in ((state, cost_state), (pixels, cost_pixels)):
             assert env.envs_per_process == min(8, default_envs_per_process(8, cost))

@@ -26,14 +26,18 @@ def open_worlds(
     launch: dict[str, Any],
     *,
     regroup: Callable[[], SimGroup] | None = None,
-) -> tuple[SimSession, int]:
+    measure_cost: bool = False,
+) -> tuple[SimSession, int, float | None]:
     """Start (or take) the sims of ``num_envs`` worlds, ``envs_per_process`` (K,
-    capped at ``num_envs``) each: the open session and the K it runs.
+    capped at ``num_envs``) each: the open session, the K it runs, and what one
+    world's tick costs (seconds; None unless measured).
 
     ``launch``: :func:`~remoteenv.agent.session.session.open_session`'s options.
     ``regroup`` (given for the default layout only): the worlds are placed
-    again from what one costs (the handshake's ``world_cost_s``, see
-    :func:`~remoteenv.agent.vector.vector_layout.default_envs_per_process`):
+    again from what one costs (with ``measure_cost``, the first sim measures
+    one world's whole tick: physics and every hook, however the scene renders,
+    the handshake's ``world_cost_s``, see :mod:`remoteenv.sim.scene.world_cost`
+    and :func:`~remoteenv.agent.vector.vector_layout.default_envs_per_process`):
     if that gives another K, the sims are closed and relaunched once in a
     group from ``regroup()``. K is also at most what one batch reply carries
     the observations of (a process of 8 worlds of 1280x1280 pixels, 39 MB,
@@ -42,28 +46,30 @@ def open_worlds(
     """
     per_process = min(envs_per_process, num_envs)
 
-    def start(source: SimGroup, k: int) -> SimSession:
-        return open_session(source, label, scene, len(world_slices(num_envs, k)), k, **launch)
+    def start(source: SimGroup, k: int, measure: bool = False) -> SimSession:
+        slices = len(world_slices(num_envs, k))
+        return open_session(source, label, scene, slices, k, measure_world_cost=measure, **launch)
 
     try:
-        session = start(group, per_process)
+        session = start(group, per_process, measure_cost)
     except BatchTooLargeError as exc:
         # The default layout put more worlds in a process than one batch reply
         # carries the observations of: place them again so that each fits.
         if regroup is None or not 1 <= exc.worlds_that_fit < per_process:
             raise
         per_process = exc.worlds_that_fit
-        return _bounded(start(regroup(), per_process), num_envs, label), per_process
+        return _bounded(start(regroup(), per_process), num_envs, label), per_process, None
     _bounded(session, num_envs, label)
-    if regroup is None:
-        return session, per_process
     handshake = session.handshake
+    cost = handshake.world_cost_s
+    if regroup is None:
+        return session, per_process, cost
     fit = worlds_that_fit(handshake.observation_space)
-    better = min(default_envs_per_process(num_envs, handshake.world_cost_s), num_envs, max(1, fit))
+    better = min(default_envs_per_process(num_envs, cost), num_envs, max(1, fit))
     if better == per_process:
-        return session, per_process
+        return session, per_process, cost
     session.close()
-    return start(regroup(), better), better
+    return start(regroup(), better), better, cost
 
 
 def _bounded(session: SimSession, num_envs: int, label: str) -> SimSession:

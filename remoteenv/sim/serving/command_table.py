@@ -69,15 +69,17 @@ def build_table(
     instance: int,
     stop: Callable[[], None],
     pipe: PipeChannel | None,
+    world_factory: Callable[[], BaseEnv] | None = None,
     **stepping_options: Any,
 ) -> tuple[Stepping, CommandTable, Drivers]:
     """The stepping strategy, command table and driver rule of a server of
     ``envs``. ``stop`` ends serving (``close``); ``pipe`` is the launcher's
-    channel, if any; ``stepping_options`` are
+    channel, if any; ``world_factory`` makes a scratch world for the
+    handshake's cost measurement (:class:`~remoteenv.sim.serving.commands.Commands`); ``stepping_options`` are
     :func:`~remoteenv.sim.serving.stepping_modes.stepping_and_commands`'s
     (``real_time``, ``real_time_factor``, the delays, ``seed``, ``clock``)."""
     stepping, mode_commands = stepping_and_commands(envs, instance, **stepping_options)
-    common = Commands(envs, stepping, instance, stop, launcher_channel=pipe)
+    common = Commands(envs, stepping, instance, stop, launcher_channel=pipe, world_factory=world_factory)
     handlers: dict[str, Handler] = common.handlers()
     handlers.update(AttributeCommands(envs, instance).handlers())
     handlers.update(mode_commands)

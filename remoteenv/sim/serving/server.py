@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from typing import Any
 
 import zmq
@@ -82,6 +83,9 @@ class RemoteControlledAgent:
             the socket (see "The local pipe" in :mod:`remoteenv.wire.protocol`);
             its end of file stops the server.
         clock: the loop's and real-time stepping's clock (seconds, monotonic).
+        world_factory: makes a scratch world like ``envs[0]`` (never served), for
+            measuring what a world's whole tick costs when a handshake asks
+            (:mod:`remoteenv.sim.scene.world_cost`); None: that cost is estimated.
     """
 
     def __init__(
@@ -106,6 +110,7 @@ class RemoteControlledAgent:
         private_dir: str | None = None,
         pipe_fd: int | None = None,
         clock: Clock = time.monotonic,
+        world_factory: Callable[[], BaseEnv] | None = None,
     ) -> None:
         if not envs:
             raise ValueError("RemoteControlledAgent needs at least one env")
@@ -128,6 +133,7 @@ class RemoteControlledAgent:
             instance,
             self.stop,
             self._pipe,
+            world_factory=world_factory,
             real_time=real_time,
             real_time_factor=real_time_factor,
             real_time_mode=real_time_mode,
