@@ -16,8 +16,8 @@ pytestmark = pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="ne
 REACHER = "remoteenv/Reacher-v0"
 
 
-def _make(**kwargs):
-    return gym.make_vec(REACHER, num_envs=4, vectorization_mode="vector_entry_point", **kwargs).unwrapped
+def _make(num_envs: int = 4, **kwargs):
+    return gym.make_vec(REACHER, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs).unwrapped
 
 
 def _cpus() -> list[int]:
@@ -42,8 +42,12 @@ def test_own_lock_step_sims_are_batch_work_on_a_cpu_each():
 
 
 def test_place_sims_none_and_real_time_leave_the_sims_to_the_os():
-    for kwargs in ({"place_sims": None}, {"real_time": True}):
-        env = _make(envs_per_process=2, **kwargs)
+    # A real-time sim hosts one world: two worlds, two sims, as many as fit on two CPUs.
+    for kwargs in (
+        {"envs_per_process": 2, "place_sims": None},
+        {"num_envs": 2, "envs_per_process": 1, "real_time": True},
+    ):
+        env = _make(**kwargs)
         try:
             for pid in env.pids:
                 assert os.sched_getscheduler(pid) == os.SCHED_OTHER, kwargs
