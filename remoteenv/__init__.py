@@ -63,6 +63,9 @@ _SUBMODULES = frozenset(
         "compliance",
         "delays",
         "wrappers",
+        "latency",
+        "integrations",
+        "scene_controllers",
     }
 )
 

@@ -5,7 +5,7 @@ the sim (see :mod:`remoteenv.protocol`); spaces and metadata come from the
 sim's handshake, so they are declared once, in the scene. Where the sim runs
 is a :class:`~remoteenv.agent.launch.sim_group.SimGroup` (``launcher=``/``attach=``);
 its lifecycle (start or attach, handshake, restarts, close) is the
-:class:`~remoteenv.agent.session.session.SimSession` this env shares with
+:class:`~remoteenv.agent.session.sim_session.SimSession` this env shares with
 :class:`remoteenv.RemoteVectorEnv`.
 """
 
@@ -23,15 +23,15 @@ from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launch.restart import restarted_info
 from remoteenv.agent.launch.sim_group import SimGroup
 from remoteenv.agent.session.forwarding import SceneAttributes, SceneReach
-from remoteenv.agent.session.latency import LatencyStats
+from remoteenv.agent.session.latency_stats import LatencyStats
 from remoteenv.agent.session.pausing import Pausable, Pauser
 from remoteenv.agent.session.pickling import RebuildOnUnpickle, remember_init_args
-from remoteenv.agent.session.session import choose_group, open_session, scene_label
 from remoteenv.agent.session.session_attributes import SessionAttributes
-from remoteenv.wire.actions import check_action
+from remoteenv.agent.session.sim_session import choose_group, open_session, scene_label
+from remoteenv.wire.codec.scalar_types import restore_scalars
 from remoteenv.wire.delays.channel_rules import NEWEST, ChannelRules
-from remoteenv.wire.delays.delays import DelaySpec
-from remoteenv.wire.scalar_types import restore_scalars
+from remoteenv.wire.delays.delay_specs import DelaySpec
+from remoteenv.wire.messages.action_rules import check_action
 
 __all__ = ["OpenAIRemoteEnv", "check_action"]
 
@@ -113,7 +113,7 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
     arguments, with a fresh sim (see :mod:`remoteenv.agent.session.pickling`).
 
     Attributes:
-        latency_stats: :class:`remoteenv.agent.session.latency.LatencyStats` of every step so
+        latency_stats: :class:`remoteenv.agent.session.latency_stats.LatencyStats` of every step so
             far: action latency (mean/p50/p99/max, seconds and ticks), wall
             round trip, late actions, pacing overruns. With ``real_time`` or
             ``action_delay`` each step's info also carries the timing keys

@@ -10,7 +10,7 @@ one world and is driven with plain ``step``/``reset`` requests, so every world
 keeps its own paced clock.
 
 The class keeps Gymnasium's vector semantics; the jobs under it live in
-:mod:`remoteenv.agent`: the sims' lifecycle (:mod:`~remoteenv.agent.session.session`),
+:mod:`remoteenv.agent`: the sims' lifecycle (:mod:`~remoteenv.agent.session.sim_session`),
 the requests of a call and their gathering (:mod:`~remoteenv.agent.vector.vector_episodes`,
 :mod:`~remoteenv.agent.vector.vector_requests`,
 :mod:`~remoteenv.agent.connection.fan_in`), autoreset planning
@@ -31,20 +31,20 @@ from gymnasium.vector.utils import batch_space
 
 from remoteenv.agent.launch.sim_group import SimGroup
 from remoteenv.agent.session.forwarding import SceneReach, VectorAttributes
-from remoteenv.agent.session.latency import LatencyStats
+from remoteenv.agent.session.latency_stats import LatencyStats
 from remoteenv.agent.session.pausing import Pausable, Pauser
 from remoteenv.agent.session.pickling import RebuildOnUnpickle, remember_init_args
 from remoteenv.agent.session.reset_args import is_int_seed
-from remoteenv.agent.session.session import choose_group, scene_label
 from remoteenv.agent.session.session_attributes import SessionAttributes
+from remoteenv.agent.session.sim_session import choose_group, scene_label
 from remoteenv.agent.vector.pool_api import PoolAPI
 from remoteenv.agent.vector.vector_episodes import VectorEpisodes
 from remoteenv.agent.vector.vector_launch import open_worlds
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, plan_layout, world_slices
 from remoteenv.agent.vector.vector_results import hold_nones
 from remoteenv.wire.delays.channel_rules import NEWEST, ChannelRules
-from remoteenv.wire.delays.delays import DelaySpec
-from remoteenv.wire.handshake import Handshake
+from remoteenv.wire.delays.delay_specs import DelaySpec
+from remoteenv.wire.messages.handshake import Handshake
 
 __all__ = ["RemoteVectorEnv", "default_envs_per_process"]
 
@@ -115,7 +115,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
     constructor arguments, with fresh sims.
 
     Attributes:
-        latency_stats: :class:`remoteenv.agent.session.latency.LatencyStats` of every
+        latency_stats: :class:`remoteenv.agent.session.latency_stats.LatencyStats` of every
             vector step so far: one wall round trip per call, and with
             ``real_time`` or ``action_delay`` each world's action latency.
     """

@@ -5,7 +5,7 @@ uint8 images rendered by MuJoCo's offscreen renderer, without MSAA and
 shadows) stepped as ``RemoteVectorEnv`` (its default layout, and the splits
 given with ``--pixels-k``) next to Gymnasium's ``AsyncVectorEnv`` and
 ``SyncVectorEnv`` of the same task written as an in-process env
-(:mod:`remoteenv.benchmarks.in_process`: the same MJCF, hooks and renderer
+(:mod:`remoteenv.benchmarks.harness.in_process`: the same MJCF, hooks and renderer
 settings), at each ``--pixels-cases`` (image side x worlds; default 64x8,
 84x8, 64x16). Per case the contenders are built, then timed in
 ``--pixels-rounds`` alternating rounds of ``--pixels-duration`` s, so load
@@ -28,11 +28,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from remoteenv.benchmarks.anchors import CpuHog
 from remoteenv.benchmarks.batched import Contender
-from remoteenv.benchmarks.in_process import make_in_process
+from remoteenv.benchmarks.harness.anchors import CpuHog
+from remoteenv.benchmarks.harness.in_process import make_in_process
+from remoteenv.benchmarks.harness.report import emit, machine_record, progress_log
 from remoteenv.benchmarks.render_cost import format_cost, render_cost
-from remoteenv.benchmarks.report import emit, machine_record, progress_log
 
 REMOTE_ID = "remoteenv/CartPole-v0"
 #: (image side, worlds) measured by default; the first is the one with targets.

@@ -1,4 +1,4 @@
-"""The command line every scene script shares: ``python <scene script> --address ...``."""
+"""The command line every scene script shares: ``python <scene script> --address ...``. Runs in the sim process."""
 
 from __future__ import annotations
 
@@ -12,13 +12,13 @@ from typing import Any
 from remoteenv.sim.process.log import log_to_stderr
 from remoteenv.sim.process.pacing_levers import GC_MODES, apply_levers
 from remoteenv.sim.scene.base_env import BaseEnv
-from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.serving.sim_server import RemoteControlledAgent
 from remoteenv.wire.delays.channel_rules import DELIVERY_RULES, NEWEST, ChannelRules
 from remoteenv.wire.delays.delay_file import read_delay_file
-from remoteenv.wire.delays.delays import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
-from remoteenv.wire.errors import EXIT_SCENE_ARGS, SCENE_ARGS_MARKER, ProtocolError, short_repr
+from remoteenv.wire.delays.delay_specs import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
 from remoteenv.wire.files.keys import read_key, read_keys
-from remoteenv.wire.real_time_modes import ELASTIC, REAL_TIME_MODES
+from remoteenv.wire.run_options.real_time_modes import ELASTIC, REAL_TIME_MODES
+from remoteenv.wire.wire_errors import EXIT_SCENE_ARGS, SCENE_ARGS_MARKER, ProtocolError, short_repr
 
 
 def _delay_argument(text: str, unit: str) -> DelaySpec:

@@ -117,7 +117,7 @@ def test_reset_refills_the_queue_with_the_default_action():
 
 
 def test_negative_delay_is_refused():
-    from remoteenv.sim.stepping.stepping import LockStepper
+    from remoteenv.sim.stepping.interfaces import LockStepper
 
     with pytest.raises(ValueError, match="action_delay"):
         LockStepper(ReacherEnv(), action_delay=-1)

@@ -11,7 +11,7 @@ import pytest
 
 import remoteenv
 from remoteenv.sim.scene.base_env import BaseEnv
-from remoteenv.sim.stepping.batch import BatchCommands
+from remoteenv.sim.stepping.batch_commands import BatchCommands
 from remoteenv.sim.stepping.lock_step import LockStepping
 from remoteenv.wire import protocol
 from remoteenv.wire.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET

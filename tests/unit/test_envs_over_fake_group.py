@@ -24,8 +24,8 @@ from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout, SimDiedErro
 from remoteenv.agent.launch.restart import INFO_RESTARTED, INFO_RESTARTS
 from remoteenv.agent.launch.sim_group import LaunchSpec, SimGroup, SimHandle, SimLayout
 from remoteenv.wire import protocol
-from remoteenv.wire.batch import columnar_infos, stack
-from remoteenv.wire.spaces import space_to_wire
+from remoteenv.wire.codec.spaces import space_to_wire
+from remoteenv.wire.messages.batch_encoding import columnar_infos, stack
 
 SCENE = "/nonexistent/walker_scene.py"  # the fake group never runs it
 OBS_SPACE = gym.spaces.Box(-10.0, 10.0, (2,), np.float32)

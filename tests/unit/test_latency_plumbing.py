@@ -14,9 +14,9 @@ from remoteenv.agent.launch.sim_group import LaunchSpec
 from remoteenv.delays import Categorical, Constant, Trace, Uniform
 from remoteenv.sim.scene_main import seconds_delay_argument, tick_delay_argument
 from remoteenv.sim.stepping.lock_step import LockStepper
+from remoteenv.wire.codec.spaces import space_to_wire
 from remoteenv.wire.delays.delay_file import delays_from_map, read_delay_file
-from remoteenv.wire.handshake import parse_handshake
-from remoteenv.wire.spaces import space_to_wire
+from remoteenv.wire.messages.handshake import parse_handshake
 from tests.unit.test_sim_lock_step import DT, RecordingWorld
 
 

@@ -14,7 +14,7 @@ import pytest
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
 from remoteenv.sim.stepping.real_time import RealTimeStepper
 from remoteenv.sim.transport.checks import RequestError
-from remoteenv.wire.real_time_modes import REPLAY_OPTION, replay_options, split_replay
+from remoteenv.wire.run_options.real_time_modes import REPLAY_OPTION, replay_options, split_replay
 from tests.unit.test_real_time_stepper import FRAME_SKIP, T0, FakeClock, TickWorld, run_until
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from remoteenv.latency_twin import (
+from remoteenv.latency.twin import (
     LatencyRecorder,
     RecordedEpisode,
     first_difference,
@@ -18,8 +18,8 @@ from remoteenv.latency_twin import (
     make_twin,
     save_recording,
 )
-from remoteenv.latency_twin.digest import obs_digest
-from remoteenv.latency_twin.recording_file import episode_from_document, recording_document
+from remoteenv.latency.twin.digest import obs_digest
+from remoteenv.latency.twin.recording_file import episode_from_document, recording_document
 
 
 def episode() -> RecordedEpisode:

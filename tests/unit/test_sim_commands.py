@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
-from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.serving.sim_server import RemoteControlledAgent
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import MAX_ECHO_CHARS
-from remoteenv.wire.spaces import space_from_wire
+from remoteenv.wire.codec.spaces import space_from_wire
+from remoteenv.wire.wire_errors import MAX_ECHO_CHARS
 
 MakeServer = Callable[..., RemoteControlledAgent]
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
-from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.serving.sim_server import RemoteControlledAgent
 from remoteenv.sim.transport.drivers import Drivers
 
 

@@ -7,7 +7,7 @@ import msgpack
 import pytest
 
 from remoteenv.wire import protocol
-from remoteenv.wire.arrays import MAX_BIG_INT_BYTES
+from remoteenv.wire.codec.arrays import MAX_BIG_INT_BYTES
 
 
 @pytest.mark.parametrize("value", [2**64, 2**127 + 12345, -(2**63) - 1, -(2**200), 2**511 - 1, -(2**511)])

@@ -22,7 +22,7 @@ import weakref
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from remoteenv.agent.connection.connection import SimConnection, connect_sim
+from remoteenv.agent.connection.connect import SimConnection, connect_sim
 from remoteenv.agent.launch.dir_reaper import watch_dir
 from remoteenv.agent.launch.processes import pid_alive
 from remoteenv.agent.launch.sim_command import wait_ready

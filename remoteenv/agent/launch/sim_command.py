@@ -2,7 +2,7 @@
 
 Runs wherever sims are started for an agent: in the agent process (the local
 :class:`remoteenv.Launcher`) or in a Ray actor on a cluster node
-(:mod:`remoteenv.ray`). Both build the same command line here, so a sim
+(:mod:`remoteenv.integrations.ray`). Both build the same command line here, so a sim
 started either way gets the same arguments (see
 :func:`remoteenv.sim.scene_main.scene_argument_parser` for their meaning).
 Delay specs are not arguments: the launcher writes them to a delay file in
@@ -20,8 +20,8 @@ from typing import Any, Protocol
 
 from remoteenv.agent.errors import RemoteEnvError, SceneArgumentError
 from remoteenv.wire.delays.delay_file import write_delay_file
-from remoteenv.wire.errors import SCENE_ARGS_MARKER
 from remoteenv.wire.files.file_reads import UnreadableFile, read_json
+from remoteenv.wire.wire_errors import SCENE_ARGS_MARKER
 
 #: Largest ready file read (a sim writes its endpoint and pid: well under 1 KiB).
 READY_FILE_LIMIT = 64 << 10

@@ -5,7 +5,7 @@ an env drives": it starts them (or attaches to running ones), names each
 one's endpoint and liveness, connects to them, relaunches one, and closes.
 :class:`remoteenv.OpenAIRemoteEnv` and :class:`remoteenv.RemoteVectorEnv`
 drive any object with this shape (their ``launcher=`` argument) through
-:class:`remoteenv.agent.session.session.SimSession`, and never learn which kind it is.
+:class:`remoteenv.agent.session.sim_session.SimSession`, and never learn which kind it is.
 
 Implementations:
 
@@ -35,9 +35,9 @@ from typing import Any, Protocol, runtime_checkable
 from remoteenv.agent.connection.sim_connection import SimConnection
 from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delay_file import delay_file_text
-from remoteenv.wire.delays.delays import SECONDS, TICKS, DelaySpec, as_delay
+from remoteenv.wire.delays.delay_specs import SECONDS, TICKS, DelaySpec, as_delay
 from remoteenv.wire.files.keys import KeyPair
-from remoteenv.wire.real_time_modes import ELASTIC, check_real_time_mode
+from remoteenv.wire.run_options.real_time_modes import ELASTIC, check_real_time_mode
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ class LaunchSpec:
         real_time: run each sim on a paced wall clock.
         real_time_factor: simulated seconds per wall-clock second.
         real_time_mode: real time; the regime, ``"elastic"`` or ``"fixed_step"``
-            (:mod:`remoteenv.wire.real_time_modes`).
+            (:mod:`remoteenv.wire.run_options.real_time_modes`).
         action_delay: lock-step; an action takes effect this many ticks later
             (an int, or a :mod:`remoteenv.delays` spec in ticks).
         obs_delay: lock-step; observations arrive this many ticks late (the same).

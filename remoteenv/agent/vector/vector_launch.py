@@ -9,7 +9,7 @@ from collections.abc import Callable
 from typing import Any
 
 from remoteenv.agent.launch.sim_group import SimGroup
-from remoteenv.agent.session.session import SimSession, open_session
+from remoteenv.agent.session.sim_session import SimSession, open_session
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, world_slices
 
 
@@ -26,7 +26,7 @@ def open_worlds(
     """Start (or take) the sims of ``num_envs`` worlds, ``envs_per_process`` (K,
     capped at ``num_envs``) each: the open session and the K it runs.
 
-    ``launch``: :func:`~remoteenv.agent.session.session.open_session`'s options.
+    ``launch``: :func:`~remoteenv.agent.session.sim_session.open_session`'s options.
     ``regroup`` (given for the default layout only): the worlds are placed
     again from what one costs (the handshake's ``world_cost_s``, see
     :func:`~remoteenv.agent.vector.vector_layout.default_envs_per_process`):

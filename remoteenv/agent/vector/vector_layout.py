@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launch.sim_group import SimLayout
-from remoteenv.wire.handshake import Handshake
+from remoteenv.wire.messages.handshake import Handshake
 
 #: A world that costs its sim more than this per tick (wall seconds on one
 #: thread, the handshake's ``world_cost_s``) is costly: camera rendering, not

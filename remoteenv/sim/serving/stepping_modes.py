@@ -9,13 +9,13 @@ from collections.abc import Sequence
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.serving.commands import Handler
-from remoteenv.sim.stepping.batch import BatchCommands
+from remoteenv.sim.stepping.batch_commands import BatchCommands
+from remoteenv.sim.stepping.interfaces import Stepping
 from remoteenv.sim.stepping.lock_step import LockStepping
 from remoteenv.sim.stepping.real_time import Clock, RealTimeStepping
-from remoteenv.sim.stepping.stepping import Stepping
 from remoteenv.wire.delays.channel_rules import ChannelRules
-from remoteenv.wire.delays.delays import DelaySpec
-from remoteenv.wire.real_time_modes import ELASTIC
+from remoteenv.wire.delays.delay_specs import DelaySpec
+from remoteenv.wire.run_options.real_time_modes import ELASTIC
 
 
 def stepping_and_commands(

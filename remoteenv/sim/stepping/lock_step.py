@@ -4,7 +4,7 @@ Runs in the sim process. The same seed and the same actions give the same
 trajectory in any process. :class:`LockStepper` steps one world;
 :class:`LockStepping` is the server loop's strategy for all of them (no
 clock: the loop just waits for requests). Both satisfy the interfaces of
-:mod:`remoteenv.sim.stepping.stepping`. The delay rules themselves (counting, the
+:mod:`remoteenv.sim.stepping.interfaces`. The delay rules themselves (counting, the
 newest due action in force, the newest arrived observation returned,
 seeding) are :class:`remoteenv.wire.delays.delay_line.LockStepDelays`'s, written
 down in ``docs/delays.md``.
@@ -17,10 +17,10 @@ from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.transport.channels import Channel, Outgoing
+from remoteenv.wire.codec.scalar_types import describe_scalars
 from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delay_line import LockStepDelays
-from remoteenv.wire.delays.delays import TICKS, Constant, DelaySpec, as_delay
-from remoteenv.wire.scalar_types import describe_scalars
+from remoteenv.wire.delays.delay_specs import TICKS, Constant, DelaySpec, as_delay
 
 
 def _tick_delay(value: DelaySpec | int, name: str) -> DelaySpec:
@@ -38,7 +38,7 @@ class LockStepper:
 
     Without delays each action is applied in its own tick and the reply's
     ``info`` is the scene's. With ``action_delay`` and/or ``obs_delay``
-    (ticks: an int, or a :class:`~remoteenv.wire.delays.delays.DelaySpec`) the
+    (ticks: an int, or a :class:`~remoteenv.wire.delays.delay_specs.DelaySpec`) the
     action sent with step ``t`` arrives at tick ``t + d_t`` (or later, in
     order, with ``action_delivery="in_order"``) and the step returns the
     newest observation that has arrived; during the first ticks the scene's

@@ -2,7 +2,7 @@
 
 Runs in the sim process. :class:`RealTimeStepper` owns the schedule and
 action handling of one world; :class:`RealTimeStepping` is the server loop's
-strategy for all of them (see :mod:`remoteenv.sim.stepping.stepping`): the loop
+strategy for all of them (see :mod:`remoteenv.sim.stepping.interfaces`): the loop
 answers requests between physics substeps and fires each world's substeps on
 their deadlines. Both read time from an injected clock (``time.monotonic`` in
 a sim process), in seconds.
@@ -36,7 +36,7 @@ Replay: a reset whose options carry a replay schedule replays a recorded
 episode without the clock (see :mod:`remoteenv.sim.stepping.real_time_replay`).
 
 Emulated link: with ``link_delay`` (seconds: a number or a
-:class:`~remoteenv.wire.delays.delays.DelaySpec` with ``unit="s"``, e.g.
+:class:`~remoteenv.wire.delays.delay_specs.DelaySpec` with ``unit="s"``, e.g.
 ``Uniform(0.005, 0.015, unit="s")`` for jitter) every arriving action is
 held back by a delay drawn for it, on top of the real one, before it can
 take effect at the next substep: the extra round trip of a longer network,
@@ -96,8 +96,8 @@ from typing import Any
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.stepping.real_time_world import Clock, RealTimeStepper
 from remoteenv.sim.transport.channels import Channel, Outgoing
-from remoteenv.wire.delays.delays import DelaySpec
-from remoteenv.wire.real_time_modes import ELASTIC
+from remoteenv.wire.delays.delay_specs import DelaySpec
+from remoteenv.wire.run_options.real_time_modes import ELASTIC
 
 
 class RealTimeStepping:

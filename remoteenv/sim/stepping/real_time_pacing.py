@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from remoteenv.wire.stats import RunningStats
+from remoteenv.wire.running_stats import RunningStats
 
 
 class PacingFigures:

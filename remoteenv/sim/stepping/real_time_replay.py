@@ -1,7 +1,7 @@
 """A real-time world replaying a recorded episode without a clock (the exact twin).
 
 Runs in the sim process. A ``reset`` whose options carry a replay schedule
-(:mod:`remoteenv.wire.real_time_modes`) puts a
+(:mod:`remoteenv.wire.run_options.real_time_modes`) puts a
 :class:`~remoteenv.sim.stepping.real_time_world.RealTimeStepper` into replay
 for that episode: its clock is not consulted, no substep runs on a deadline,
 and each ``step`` runs the world's substep boundaries back to back, with the
@@ -15,8 +15,8 @@ those of the recorded run, bit for bit.
 from __future__ import annotations
 
 from remoteenv.sim.transport.checks import RequestError
-from remoteenv.wire.delays.delays import MAX_DELAY_TICKS
-from remoteenv.wire.errors import PROTOCOL
+from remoteenv.wire.delays.delay_specs import MAX_DELAY_TICKS
+from remoteenv.wire.wire_errors import PROTOCOL
 
 
 class ReplayCursor:
@@ -25,7 +25,7 @@ class ReplayCursor:
     Args:
         action_substeps: per step, the substep (counted from the reset) at
             which its action took effect in the recorded run (checked by
-            :func:`remoteenv.wire.real_time_modes.split_replay`).
+            :func:`remoteenv.wire.run_options.real_time_modes.split_replay`).
         frame_skip: substeps per control tick.
     """
 

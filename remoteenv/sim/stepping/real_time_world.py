@@ -21,10 +21,10 @@ from remoteenv.sim.stepping.real_time_replay import ReplayCursor
 from remoteenv.sim.stepping.real_time_reply import PendingStep, SinceReply
 from remoteenv.sim.transport.channels import Channel, Outgoing
 from remoteenv.sim.transport.checks import RequestError
-from remoteenv.wire.delays.delays import DelaySpec
-from remoteenv.wire.errors import PROTOCOL, SCENE
+from remoteenv.wire.delays.delay_specs import DelaySpec
 from remoteenv.wire.protocol import error_reply
-from remoteenv.wire.real_time_modes import ELASTIC, FIXED_STEP, check_real_time_mode, split_replay
+from remoteenv.wire.run_options.real_time_modes import ELASTIC, FIXED_STEP, check_real_time_mode, split_replay
+from remoteenv.wire.wire_errors import PROTOCOL, SCENE
 
 #: A clock: seconds, monotonic (``time.monotonic`` in a sim process).
 Clock = Callable[[], float]
@@ -46,7 +46,7 @@ class RealTimeStepper(PacingFigures):
         seed: the world's launch seed: seeds the link stream at the first
             reset when that reset brings no seed (None: OS entropy).
         mode: the regime, ``"elastic"`` or ``"fixed_step"``
-            (:mod:`remoteenv.wire.real_time_modes`).
+            (:mod:`remoteenv.wire.run_options.real_time_modes`).
     """
 
     def __init__(
