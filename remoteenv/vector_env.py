@@ -42,9 +42,11 @@ from remoteenv.agent.vector.vector_episodes import VectorEpisodes
 from remoteenv.agent.vector.vector_launch import open_worlds
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, plan_layout, world_slices
 from remoteenv.agent.vector.vector_results import hold_nones
-from remoteenv.wire.delays.channel_rules import NEWEST, ChannelRules
+from remoteenv.wire.delays.channel_rules import NEWEST
 from remoteenv.wire.delays.delay_specs import DelaySpec
 from remoteenv.wire.messages.handshake import Handshake
+from remoteenv.wire.run_options.options import RunOptions
+from remoteenv.wire.run_options.real_time_modes import ELASTIC
 
 __all__ = ["RemoteVectorEnv", "default_envs_per_process"]
 
@@ -132,7 +134,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         render_mode: str | None = None,
         real_time: bool = False,
         real_time_factor: float = 1.0,
-        real_time_mode: str = "elastic",
+        real_time_mode: str = ELASTIC,
         action_delay: int | DelaySpec = 0,
         obs_delay: int | DelaySpec = 0,
         link_delay: float | DelaySpec | None = None,
@@ -154,6 +156,18 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         **scene_kwargs: Any,
     ) -> None:
         self.startup_timeout = startup_timeout
+        #: How the sims' worlds run, as the arguments ask (made and checked once, here).
+        self.run_options = RunOptions(
+            real_time=real_time,
+            real_time_factor=real_time_factor,
+            real_time_mode=real_time_mode,
+            action_delay=action_delay,
+            obs_delay=obs_delay,
+            link_delay=link_delay,
+            action_delivery=action_delivery,
+            obs_delivery=obs_delivery,
+            delayed_rewards=delayed_rewards,
+        )
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         group = choose_group(launcher, attach, transport=transport, bind_host=bind_host, curve=curve)
@@ -181,13 +195,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
             "seed": seed,
             "env_kwargs": scene_kwargs,
             "render_mode": render_mode,
-            "real_time": real_time,
-            "real_time_factor": real_time_factor,
-            "real_time_mode": real_time_mode,
-            "action_delay": action_delay,
-            "obs_delay": obs_delay,
-            "link_delay": link_delay,
-            "channel": ChannelRules(action_delivery, obs_delivery, delayed_rewards),
+            "run": self.run_options,
         }
         default_layout = asked is None and launcher is None and attach is None and not self.real_time
         self._session, self.envs_per_process = open_worlds(

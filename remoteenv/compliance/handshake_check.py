@@ -22,14 +22,14 @@ from remoteenv.compliance.failures import CheckFailed
 from remoteenv.compliance.values import is_int, is_number, type_name
 from remoteenv.wire.codec.frame_limits import MAX_WORLDS
 from remoteenv.wire.codec.spaces import space_from_wire
-from remoteenv.wire.messages.handshake import worlds_problem
+from remoteenv.wire.messages.handshake import LOCK_STEP, REAL_TIME, worlds_problem
 from remoteenv.wire.wire_errors import short_repr
 
 #: Commands every server answers.
 CORE_COMMANDS = ("handshake", "reset", "step", "render", "close")
 #: Commands of lock-step servers (unless a ``commands`` list leaves them out).
 BATCH_COMMANDS = ("reset_batch", "step_batch")
-STEPPING_MODES = ("lock_step", "real_time")
+STEPPING_MODES = (LOCK_STEP, REAL_TIME)
 
 
 @dataclass(frozen=True)
@@ -51,7 +51,7 @@ class Handshake:
         """The commands the server offers: its ``commands`` list, or those its stepping mode implies."""
         if self.commands is not None:
             return self.commands
-        optional = BATCH_COMMANDS if self.mode == "lock_step" else ("timing",)
+        optional = BATCH_COMMANDS if self.mode == LOCK_STEP else ("timing",)
         return frozenset((*CORE_COMMANDS, *optional))
 
     def lacks(self, *names: str) -> str | None:

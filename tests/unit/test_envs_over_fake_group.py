@@ -214,12 +214,13 @@ class FakeGroup:
     def layout(self) -> SimLayout | None:
         if self._fixed is not None or self.spec is None:
             return self._fixed
-        return SimLayout(self.spec.num_instances, self.spec.worlds_per_instance, self.spec.real_time, "fake")
+        return SimLayout(self.spec.num_instances, self.spec.worlds_per_instance, self.spec.run.real_time, "fake")
 
     def start(self, spec: LaunchSpec) -> None:
         self.spec = spec
         self.sims = [
-            FakeSim(i, spec.worlds_per_instance, spec.real_time, spec.action_delay) for i in range(spec.num_instances)
+            FakeSim(i, spec.worlds_per_instance, spec.run.real_time, spec.run.action_delay)
+            for i in range(spec.num_instances)
         ]
 
     def connect(self, index: int, timeout: float | None) -> SimConnection:

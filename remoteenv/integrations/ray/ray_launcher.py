@@ -291,12 +291,9 @@ class RayLauncher:
             seed=spec.instance_seed(instance),
             env_kwargs=dict(spec.env_kwargs),
             render_mode=spec.render_mode,
-            real_time=spec.real_time,
-            real_time_factor=spec.real_time_factor,
-            real_time_mode=spec.real_time_mode,
-            # Every delay (action, observation, link) travels in the actor's
-            # construction and reaches the sim as a file on its node.
-            delays=spec.delay_file_text(),
+            # Whole: every delay (action, observation, link) reaches the sim
+            # as a file on its node, written by the actor.
+            run=spec.run,
             extra_args=self.extra_args,
             startup_timeout=spec.startup_timeout,
         )

@@ -5,8 +5,8 @@ The actor starts the scene script as its child, bound to TCP on the node's
 address with an OS-chosen port and CURVE on, waits for the child's ready
 file, and reports where it listens. It keeps the child's stderr in a private
 dir on the node for error messages, and writes its delay specs there (they
-arrive as an argument of this actor's construction, so they reach the node
-through Ray; see :mod:`remoteenv.wire.delays.delay_file`). The child watches the actor as its
+arrive whole, in the run options of this actor's construction, so they reach
+the node through Ray; see :mod:`remoteenv.wire.delays.delay_file`). The child watches the actor as its
 parent (``--parent-pid``): if the actor dies, however it dies, the child
 exits within about a second (see :mod:`remoteenv.sim.process.orphan`).
 
@@ -36,6 +36,7 @@ from remoteenv.agent.launch.sim_command import scene_command, wait_ready, write_
 from remoteenv.agent.launch.sim_process import SimProcess
 from remoteenv.wire.addresses import is_loopback
 from remoteenv.wire.files.keys import check_key, write_public_keys, write_secret_key
+from remoteenv.wire.run_options.options import RunOptions
 
 #: Seconds a stopping child gets between SIGTERM and SIGKILL.
 STOP_GRACE_S = 2.0
@@ -54,11 +55,11 @@ class SimSpec:
         worlds: MuJoCo worlds the sim hosts.
         seed: seed of the sim's first world (world w gets seed + w), or None.
         env_kwargs: JSON-able keyword arguments of the scene's env class.
-        render_mode, real_time, real_time_factor: as for :class:`remoteenv.Launcher`;
-            real_time_mode: as for :class:`~remoteenv.agent.launch.sim_group.LaunchSpec`.
-        delays: the text of the sim's delay file (every delay spec's wire form,
-            :meth:`remoteenv.agent.launch.sim_group.LaunchSpec.delay_file_text`), None
-            without delays; the actor writes it next to its sim.
+        render_mode: as for :class:`remoteenv.Launcher`.
+        run: the sim's run options
+            (:class:`~remoteenv.wire.run_options.options.RunOptions`, as the
+            launch's :class:`~remoteenv.agent.launch.sim_group.LaunchSpec` holds
+            them); the actor writes their delays into a delay file next to its sim.
         extra_args: more command-line arguments for the scene script.
         startup_timeout: seconds to wait for the child's ready file.
     """
@@ -69,10 +70,7 @@ class SimSpec:
     seed: int | None = None
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     render_mode: str | None = None
-    real_time: bool = False
-    real_time_factor: float = 1.0
-    real_time_mode: str = "elastic"
-    delays: str | None = None
+    run: RunOptions = field(default_factory=RunOptions)
     extra_args: tuple[str, ...] = ()
     startup_timeout: float = 60.0
 
@@ -226,10 +224,8 @@ class SimActor:
             private_dir=self.workdir,
             seed=spec.seed,
             render_mode=spec.render_mode,
-            real_time=spec.real_time,
-            real_time_factor=spec.real_time_factor,
-            real_time_mode=spec.real_time_mode,
-            delay_file=write_sim_delay_file(self.workdir, instance, spec.delays),
+            run=spec.run,
+            delay_file=write_sim_delay_file(self.workdir, instance, spec.run.delay_file_text()),
             curve_files=(names["curve_secret"], names["curve_clients"]),
             allow_remote=not is_loopback(address),
             extra_args=spec.extra_args,

@@ -22,6 +22,7 @@ from remoteenv.latency.twin.recorder import LatencyRecorder, RecordedEpisode
 from remoteenv.latency.twin.recording_file import save_recording
 from remoteenv.latency.twin.replay import make_twin
 from remoteenv.latency.twin.return_stats import DEFAULT_RELATIVE_TOLERANCE, compare_returns, ks_distance
+from remoteenv.wire.run_options.real_time_modes import ELASTIC
 
 #: A policy: observation in, action out. A ``reset()`` method, if it has one,
 #: is called at each episode's start (for policies that remember, e.g. their last action).
@@ -79,7 +80,7 @@ def run_real_time(
     episodes: int = 10,
     seed: int = 0,
     real_time_factor: float = 1.0,
-    real_time_mode: str = "elastic",
+    real_time_mode: str = ELASTIC,
     max_episode_steps: int | None = None,
     wrap: Wrap | None = None,
     rounding: str = "nearest",
@@ -247,7 +248,7 @@ def compare_real_time_and_replay(
     episodes: int = 10,
     seed: int = 0,
     real_time_factor: float = 1.0,
-    real_time_mode: str = "elastic",
+    real_time_mode: str = ELASTIC,
     max_episode_steps: int | None = None,
     wrap: Wrap | None = None,
     recording_dir: str | os.PathLike[str] | None = None,

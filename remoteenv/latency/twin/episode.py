@@ -9,6 +9,7 @@ import numpy as np
 
 from remoteenv.latency.twin.trace import twin_latency, twin_values
 from remoteenv.wire.delays.delay_specs import Trace
+from remoteenv.wire.run_options.real_time_modes import ELASTIC
 
 
 @dataclass
@@ -48,7 +49,7 @@ class RecordedEpisode:
     terminated: bool = False
     truncated: bool = False
     rounding: str = "nearest"
-    mode: str = "elastic"
+    mode: str = ELASTIC
     action_substeps: list[int] = field(default_factory=list)
     obs_digests: list[str] = field(default_factory=list)
     unreplayable: str | None = None

@@ -18,6 +18,7 @@ from remoteenv.latency.twin.digest import obs_digest
 from remoteenv.latency.twin.episode import RecordedEpisode
 from remoteenv.latency.twin.recording_file import save_recording
 from remoteenv.latency.twin.trace import ROUNDINGS, write_trace_file
+from remoteenv.wire.run_options.real_time_modes import ELASTIC
 
 
 class EpisodeLog:
@@ -31,7 +32,7 @@ class EpisodeLog:
             after an episode ended).
     """
 
-    def __init__(self, rounding: str = "nearest", mode: str = "elastic") -> None:
+    def __init__(self, rounding: str = "nearest", mode: str = ELASTIC) -> None:
         if rounding not in ROUNDINGS:
             raise ValueError(f"rounding must be one of {ROUNDINGS}, got {rounding!r}")
         self.rounding = rounding
@@ -115,9 +116,9 @@ def check_real_time(env: Any, who: str) -> None:
 
 
 def real_time_mode(env: Any) -> str:
-    """The regime an env's handshake names (``"elastic"`` when it names none)."""
+    """The regime an env's handshake names (elastic when it names none)."""
     handshake = getattr(getattr(env, "unwrapped", env), "handshake", None)
-    return getattr(handshake, "real_time_mode", None) or "elastic"
+    return getattr(handshake, "real_time_mode", None) or ELASTIC
 
 
 class LatencyRecorder(gym.Wrapper):

@@ -17,6 +17,7 @@ from remoteenv.latency.twin.exact_twin import ExactTwin, check_replayable
 from remoteenv.latency.twin.recording_file import is_recording, load_recording
 from remoteenv.latency.twin.trace import decision_ticks
 from remoteenv.wire.delays.delay_specs import Trace
+from remoteenv.wire.messages.handshake import LOCK_STEP
 
 
 class LockStepTwin(gym.Wrapper):
@@ -60,7 +61,7 @@ class LockStepTwin(gym.Wrapper):
         if handshake is not None:
             stepping = handshake["stepping"]
             expected = None if trace.is_zero else trace.to_wire()
-            if stepping.get("mode") != "lock_step" or stepping.get("action_delay_spec") != expected:
+            if stepping.get("mode") != LOCK_STEP or stepping.get("action_delay_spec") != expected:
                 raise ValueError(
                     "LockStepTwin needs a lock-step env launched with action_delay=<this trace> and no "
                     "observation delay; make it with remoteenv.latency.twin.make_twin"

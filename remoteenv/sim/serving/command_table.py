@@ -23,10 +23,12 @@ from remoteenv.sim.serving.attributes import AttributeCommands
 from remoteenv.sim.serving.commands import Commands, Handler
 from remoteenv.sim.serving.stepping_modes import stepping_and_commands
 from remoteenv.sim.stepping.interfaces import Stepping
+from remoteenv.sim.stepping.real_time import Clock
 from remoteenv.sim.transport.channels import Channel, PipeChannel
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.sim.transport.drivers import Drivers
 from remoteenv.wire import protocol
+from remoteenv.wire.run_options.options import RunOptions
 from remoteenv.wire.wire_errors import INVALID_ACTION, PROTOCOL, SCENE, InvalidAction, short_repr
 
 
@@ -69,14 +71,16 @@ def build_table(
     instance: int,
     stop: Callable[[], None],
     pipe: PipeChannel | None,
-    **stepping_options: Any,
+    run: RunOptions,
+    *,
+    seed: int | None,
+    clock: Clock,
 ) -> tuple[Stepping, CommandTable, Drivers]:
     """The stepping strategy, command table and driver rule of a server of
-    ``envs``. ``stop`` ends serving (``close``); ``pipe`` is the launcher's
-    channel, if any; ``stepping_options`` are
-    :func:`~remoteenv.sim.serving.stepping_modes.stepping_and_commands`'s
-    (``real_time``, ``real_time_factor``, the delays, ``seed``, ``clock``)."""
-    stepping, mode_commands = stepping_and_commands(envs, instance, **stepping_options)
+    ``envs`` run as ``run`` says. ``stop`` ends serving (``close``); ``pipe`` is
+    the launcher's channel, if any; ``seed`` and ``clock`` are
+    :func:`~remoteenv.sim.serving.stepping_modes.stepping_and_commands`'s."""
+    stepping, mode_commands = stepping_and_commands(envs, instance, run, seed=seed, clock=clock)
     common = Commands(envs, stepping, instance, stop, launcher_channel=pipe)
     handlers: dict[str, Handler] = common.handlers()
     handlers.update(AttributeCommands(envs, instance).handlers())

@@ -34,8 +34,7 @@ from remoteenv.sim.transport.limits import EXPENSIVE_COMMANDS, EXPENSIVE_PER_PAS
 from remoteenv.sim.transport.router import open_router
 from remoteenv.wire import protocol
 from remoteenv.wire.addresses import is_loopback
-from remoteenv.wire.delays.channel_rules import ChannelRules
-from remoteenv.wire.delays.delay_specs import DelaySpec
+from remoteenv.wire.run_options.options import RunOptions
 from remoteenv.wire.wire_errors import PROTOCOL
 
 log = logging.getLogger(__name__)
@@ -58,16 +57,10 @@ class RemoteControlledAgent:
             died). None disables the check.
         ready_file: once bound, write ``{"endpoint", "pid", "instance"}`` as JSON
             here (atomically), so the launcher knows where and that we listen.
-        real_time, real_time_factor: run physics paced to the wall clock
-            (:mod:`remoteenv.sim.stepping.real_time`); the factor is simulated seconds
-            per wall-clock second.
-        real_time_mode: the real-time regime, ``"elastic"`` or ``"fixed_step"``.
-        action_delay, obs_delay: lock-step only: delays (control ticks, an int
-            or a spec) of actions and observations (:mod:`remoteenv.sim.stepping.lock_step`).
-        channel: lock-step only: delivery rules and delayed rewards
-            (:class:`~remoteenv.wire.delays.channel_rules.ChannelRules`; None: the default).
-        link_delay: real time only: emulated extra link delay per action (wall
-            seconds, a number or a spec; :mod:`remoteenv.sim.stepping.real_time`).
+        run: how the worlds run (:class:`~remoteenv.wire.run_options.options.RunOptions`):
+            lock-step (:mod:`remoteenv.sim.stepping.lock_step`, with its delays
+            and channel rules) or real time (:mod:`remoteenv.sim.stepping.real_time`:
+            physics paced to the wall clock, its factor, regime and emulated link).
         seed: launch seed of world 0 (world ``w``: ``seed + w``), seeding the
             delay streams until a reset brings a seed.
         allow_remote: permit binding a non-loopback interface.
@@ -92,13 +85,7 @@ class RemoteControlledAgent:
         instance: int = 0,
         parent_pid: int | None = None,
         ready_file: str | None = None,
-        real_time: bool = False,
-        real_time_factor: float = 1.0,
-        real_time_mode: str = "elastic",
-        action_delay: DelaySpec | int = 0,
-        obs_delay: DelaySpec | int = 0,
-        link_delay: DelaySpec | float | None = None,
-        channel: ChannelRules | None = None,
+        run: RunOptions = RunOptions(),
         seed: int | None = None,
         allow_remote: bool = False,
         curve_secret_key: bytes | None = None,
@@ -118,7 +105,8 @@ class RemoteControlledAgent:
         self.instance = instance
         self.parent_pid = parent_pid
         self.private_dir = private_dir
-        self.real_time = real_time
+        self.run = run
+        self.real_time = run.real_time
         self.clock = clock
         self.orphaned = False
         self._pipe_ended = False
@@ -128,13 +116,7 @@ class RemoteControlledAgent:
             instance,
             self.stop,
             self._pipe,
-            real_time=real_time,
-            real_time_factor=real_time_factor,
-            real_time_mode=real_time_mode,
-            action_delay=action_delay,
-            obs_delay=obs_delay,
-            link_delay=link_delay,
-            channel=channel,
+            run,
             seed=seed,
             clock=clock,
         )

@@ -20,9 +20,6 @@ from collections.abc import Iterable, Sequence
 from typing import Any, Protocol
 
 from remoteenv.sim.scene.base_env import BaseEnv
-
-# The lock-step world's stepper has lived here; this import path keeps working.
-from remoteenv.sim.stepping.lock_step import LockStepper
 from remoteenv.sim.transport.channels import Channel, Outgoing
 
 
@@ -82,4 +79,4 @@ class Stepping(Protocol):
         ...
 
 
-__all__ = ["LockStepper", "Stepping", "WorldStepper"]
+__all__ = ["Stepping", "WorldStepper"]

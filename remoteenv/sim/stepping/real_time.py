@@ -94,10 +94,9 @@ from collections.abc import Iterator, Sequence
 from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
-from remoteenv.sim.stepping.real_time_world import Clock, RealTimeStepper
+from remoteenv.sim.stepping.real_time_world import REAL_TIME_OPTIONS, Clock, RealTimeStepper
 from remoteenv.sim.transport.channels import Channel, Outgoing
-from remoteenv.wire.delays.delay_specs import DelaySpec
-from remoteenv.wire.run_options.real_time_modes import ELASTIC
+from remoteenv.wire.run_options.options import RunOptions
 
 
 class RealTimeStepping:
@@ -105,33 +104,23 @@ class RealTimeStepping:
 
     Args:
         envs: the worlds, one :class:`RealTimeStepper` each.
-        real_time_factor: simulated seconds per wall-clock second (> 0).
+        run: the real-time options of every world (factor, regime, emulated
+            link; see :class:`RealTimeStepper`); each world draws its link
+            delays from its own stream.
         clock: where wall time comes from (seconds, monotonic).
-        link_delay: emulated extra link delay per action (wall seconds; see
-            :class:`RealTimeStepper`); each world draws from its own stream.
         seed: launch seed of world 0 (world ``w``: ``seed + w``) for the link streams.
-        mode: the regime of every world, ``"elastic"`` or ``"fixed_step"``.
     """
 
     def __init__(
         self,
         envs: Sequence[BaseEnv],
-        real_time_factor: float = 1.0,
+        run: RunOptions = REAL_TIME_OPTIONS,
         clock: Clock = time.monotonic,
-        link_delay: DelaySpec | float | None = None,
         seed: int | None = None,
-        mode: str = ELASTIC,
     ) -> None:
         self.clock = clock
         self._worlds = [
-            RealTimeStepper(
-                env,
-                real_time_factor=real_time_factor,
-                clock=clock,
-                link_delay=link_delay,
-                seed=None if seed is None else seed + w,
-                mode=mode,
-            )
+            RealTimeStepper(env, run, clock=clock, seed=None if seed is None else seed + w)
             for w, env in enumerate(envs)
         ]
 
