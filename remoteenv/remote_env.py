@@ -116,6 +116,10 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
     arguments, with a fresh sim (see :mod:`remoteenv.agent.session.pickling`).
 
     Attributes:
+        run_options: the run options the arguments above make
+            (:class:`~remoteenv.wire.run_options.options.RunOptions`: real time, its
+            factor and regime, the delays and their rules), checked once and sent
+            whole to the sims (attached sims run what they were launched with).
         latency_stats: :class:`remoteenv.agent.session.latency_stats.LatencyStats` of every step so
             far: action latency (mean/p50/p99/max, seconds and ticks), wall
             round trip, late actions, pacing overruns. With ``real_time`` or

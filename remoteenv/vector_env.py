@@ -117,6 +117,10 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
     constructor arguments, with fresh sims.
 
     Attributes:
+        run_options: the run options the arguments above make
+            (:class:`~remoteenv.wire.run_options.options.RunOptions`: real time, its
+            factor and regime, the delays and their rules), checked once and sent
+            whole to the sims (attached sims run what they were launched with).
         latency_stats: :class:`remoteenv.agent.session.latency_stats.LatencyStats` of every
             vector step so far: one wall round trip per call, and with
             ``real_time`` or ``action_delay`` each world's action latency.
