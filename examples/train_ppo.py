@@ -1,13 +1,15 @@
 """Train PPO on a registered remote env (default remoteenv/CartPole-v0), save it, evaluate it.
 
-A compact PPO (clipped surrogate, GAE, separate actor and critic networks) in
+A compact PPO (clipped surrogate, GAE, actor and critic networks) in
 plain torch on the CPU, for any remote env id whose observations are a Box,
 an image or a Dict of them and whose actions are Discrete (a categorical
 policy) or a Box (a Gaussian policy, actions clipped to the bounds). The
 network reads the observation space: flat values go to MLPs as they are; an
-image (uint8 ``H x W x C``, e.g. a camera ``obs_mode="pixels"``) first goes
-through a small CNN; a Dict (``{"state", "pixels"}``) through one input each,
-their features side by side. The worlds run in sim
+image (uint8 ``H x W x C``, e.g. a camera ``obs_mode="pixels"``, stacked
+frames too) first goes through a small CNN, one shared by actor and critic;
+a Dict (``{"state", "pixels"}``) through one input each, their features side
+by side. Flat observations get separate actor and critic MLPs. ``--json``
+writes the run's figures. The worlds run in sim
 processes (RemoteVectorEnv; by default one process hosts all 8 and steps them
 from one request); the agent sees a Gymnasium vector env.
 
@@ -27,6 +29,8 @@ from one request); the agent sees a Gymnasium vector env.
     python examples/train_ppo.py --env my_arm:my_arm/MyArm-v0 --budget 100000 --save my_arm_ppo.pt
     python examples/train_ppo.py --eval-only --save my_arm_ppo.pt  # load and evaluate again
     python examples/train_ppo.py --env-kwargs '{"obs_mode": "state_pixels"}' --budget 200000
+    python examples/train_ppo.py --env-kwargs '{"obs_mode": "pixels", "frame_stack": 4}' --budget 300000 \\
+        --reward-scale 0.01 --ent-coef 0.01 --torch-threads 2          # the camera recipe, docs/cameras.md
 
 ``--env`` takes any registered id; ``module:id`` imports ``module`` first
 (an env package of your own); ``--env-kwargs`` is a JSON map of the env's
@@ -37,6 +41,7 @@ torch==2.13.0 tqdm``).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -70,8 +75,9 @@ def mlp(n_in: int, n_out: int, out_gain: float) -> nn.Sequential:
 
 
 def is_image(shape: tuple[int, ...], dtype: Any) -> bool:
-    """An image: uint8 ``H x W x C`` with 1, 3 or 4 channels (as SB3 reads one)."""
-    return np.dtype(dtype) == np.uint8 and len(shape) == 3 and shape[-1] in (1, 3, 4)
+    """An image: uint8 ``H x W x C``, any number of channels (a camera's stacked frames too),
+    as SB3's CNN policies read one."""
+    return np.dtype(dtype) == np.uint8 and len(shape) == 3
 
 
 def describe_obs_space(space: gym.Space) -> dict[str, Any]:
@@ -115,7 +121,7 @@ class Encoder(nn.Module):
         parts = []
         for key, x in inputs.items():
             if key in self.images:  # N x H x W x C uint8 -> N x C x H x W in [0, 1]
-                parts.append(self.images[key](x.permute(0, 3, 1, 2).float() / 255.0))
+                parts.append(self.images[key](x.permute(0, 3, 1, 2).float().mul_(1 / 255)))
             else:
                 parts.append(x.reshape(len(x), -1).float())
         return parts[0] if len(parts) == 1 else torch.cat(parts, dim=-1)
@@ -147,13 +153,17 @@ def describe_action_space(space: gym.Space) -> dict[str, Any]:
 
 class ActorCritic(nn.Module):
     """A categorical (Discrete) or diagonal Gaussian (Box) policy, and a value
-    function; each reads the observation through its own :class:`Encoder`."""
+    function. On flat observations each reads them through its own
+    :class:`Encoder`; with images they share one (its CNN is most of the
+    compute; CleanRL's Atari PPO shares it too), and both losses train it."""
 
     def __init__(self, obs: dict[str, Any], action: dict[str, Any]) -> None:
         super().__init__()
         self.obs, self.action = obs, action
         self.discrete = action["kind"] == "discrete"
-        self.actor_in, self.critic_in = Encoder(obs), Encoder(obs)
+        self.shared = any(entry["image"] for entry in obs["inputs"].values())
+        self.actor_in = Encoder(obs)
+        self.critic_in = self.actor_in if self.shared else Encoder(obs)
         self.actor = mlp(self.actor_in.size, action["n"] if self.discrete else action["dim"], out_gain=0.01)
         self.critic = mlp(self.critic_in.size, 1, out_gain=1.0)
         if not self.discrete:
@@ -165,7 +175,16 @@ class ActorCritic(nn.Module):
         return self.critic(self.critic_in(obs)).squeeze(-1)
 
     def dist(self, obs: dict[str, torch.Tensor]) -> torch.distributions.Distribution:
-        logits = self.actor(self.actor_in(obs))
+        return self._dist(self.actor(self.actor_in(obs)))
+
+    def dist_and_value(self, obs: dict[str, torch.Tensor]) -> tuple[torch.distributions.Distribution, torch.Tensor]:
+        """Both heads; a shared encoder runs once."""
+        if not self.shared:
+            return self.dist(obs), self.value(obs)
+        features = self.actor_in(obs)
+        return self._dist(self.actor(features)), self.critic(features).squeeze(-1)
+
+    def _dist(self, logits: torch.Tensor) -> torch.distributions.Distribution:
         if self.discrete:
             return torch.distributions.Categorical(logits=logits)
         return torch.distributions.Independent(torch.distributions.Normal(logits, self.log_std.exp()), 1)
@@ -192,7 +211,7 @@ class ActorCritic(nn.Module):
 # ---------------------------------------------------------------- training
 
 
-def train(args: argparse.Namespace) -> tuple[ActorCritic, bool]:
+def train(args: argparse.Namespace) -> tuple[ActorCritic, bool, dict[str, Any]]:
     kwargs = args.env_kwargs
     if args.vectorization == "remote":  # RemoteVectorEnv, the id's vector entry point
         envs = gym.make_vec(
@@ -206,11 +225,12 @@ def train(args: argparse.Namespace) -> tuple[ActorCritic, bool]:
         envs.close()
 
 
-def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorCritic, bool]:
+def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorCritic, bool, dict[str, Any]]:
     torch.manual_seed(args.seed)
     n, T = envs.num_envs, args.rollout_steps
     layout = describe_obs_space(envs.single_observation_space)
     model = ActorCritic(layout, describe_action_space(envs.single_action_space))
+    model.to(memory_format=torch.channels_last)  # the images arrive channel-last: ~2x faster convolutions
     act_shape = () if model.discrete else (model.action["dim"],)
     optim = torch.optim.Adam(model.parameters(), lr=args.lr, eps=1e-5)
     # NEXT_STEP autoreset: the step after a done only resets that env; that
@@ -241,9 +261,9 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
         for t in range(T):
             o = as_inputs(obs, layout, n)
             with torch.no_grad():
-                d = model.dist(o)
+                d, value = model.dist_and_value(o)
                 action = d.sample()
-                buf_logp[t], buf_val[t] = d.log_prob(action), model.value(o)
+                buf_logp[t], buf_val[t] = d.log_prob(action), value
             for key, x in o.items():
                 buf_obs[key][t] = x
             buf_act[t] = action
@@ -263,9 +283,10 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
                     final = {key: np.stack([f[key] for f in finals]) for key in layout["inputs"]}
                 else:
                     final = np.stack(list(infos["final_obs"][cut]))
-                with torch.no_grad():
-                    reward[cut] += args.gamma * model.value(as_inputs(final, layout, int(cut.sum()))).numpy()
-            buf_rew[t] = torch.as_tensor(reward, dtype=torch.float32)
+                with torch.no_grad():  # the value is in scaled reward units
+                    bootstrap = model.value(as_inputs(final, layout, int(cut.sum()))).numpy()
+                    reward[cut] += args.gamma * bootstrap / args.reward_scale
+            buf_rew[t] = torch.as_tensor(reward * args.reward_scale, dtype=torch.float32)
             buf_done[t] = torch.as_tensor(done, dtype=torch.float32)
             for i in np.flatnonzero(done):
                 recent.append(float(ep_return[i]))
@@ -298,12 +319,12 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
         for _ in range(args.epochs):
             for idx in torch.randperm(len(b_act)).split(args.minibatch):
                 mb_obs = {key: x[idx] for key, x in b_obs.items()}
-                d = model.dist(mb_obs)
+                d, value = model.dist_and_value(mb_obs)
                 ratio = torch.exp(d.log_prob(b_act[idx]) - b_logp[idx])
                 a = b_adv[idx]
                 a = (a - a.mean()) / (a.std() + 1e-8)
                 policy_loss = -torch.min(ratio * a, ratio.clamp(1 - args.clip, 1 + args.clip) * a).mean()
-                value_loss = 0.5 * (model.value(mb_obs) - b_ret[idx]).pow(2).mean()
+                value_loss = 0.5 * (value - b_ret[idx]).pow(2).mean()
                 loss = policy_loss + args.vf_coef * value_loss - args.ent_coef * d.entropy().mean()
                 optim.zero_grad()
                 loss.backward()
@@ -333,7 +354,16 @@ def _train(envs: gym.vector.VectorEnv, args: argparse.Namespace) -> tuple[ActorC
         f"{verdict}: mean return of the last 20 episodes {mean20:.2f} after {steps} steps, "
         f"{episodes} episodes, {elapsed:.1f} s wall ({steps / elapsed:.0f} steps/s)"
     )
-    return model, reached or args.target is None
+    summary = {
+        "steps": steps,
+        "episodes": episodes,
+        "updates": update,
+        "train_wall_s": round(elapsed, 1),
+        "steps_per_s": round(steps / elapsed),
+        "mean_return_last_20": mean20,
+        "reached_target": reached,
+    }
+    return model, reached or args.target is None, summary
 
 
 # ---------------------------------------------------------------- saving and evaluation
@@ -354,7 +384,7 @@ def load(path: str) -> tuple[ActorCritic, str, dict[str, Any]]:
     return model, saved["env_id"], saved.get("env_kwargs", {})
 
 
-def evaluate(model: ActorCritic, env_id: str, episodes: int, seed: int, env_kwargs: dict[str, Any]) -> None:
+def evaluate(model: ActorCritic, env_id: str, episodes: int, seed: int, env_kwargs: dict[str, Any]) -> dict[str, float]:
     """The greedy policy for ``episodes`` lock-step episodes: mean return and length."""
     env = gym.make(env_id, **env_kwargs)
     try:
@@ -375,6 +405,12 @@ def evaluate(model: ActorCritic, env_id: str, episodes: int, seed: int, env_kwar
         f"evaluation ({episodes} lock-step episodes, greedy): return {np.mean(returns):.2f} "
         f"+- {np.std(returns):.2f}, length {np.mean(lengths):.1f}"
     )
+    return {
+        "episodes": episodes,
+        "return_mean": float(np.mean(returns)),
+        "return_std": float(np.std(returns)),
+        "length_mean": float(np.mean(lengths)),
+    }
 
 
 def evaluate_real_time(
@@ -423,6 +459,31 @@ def evaluate_real_time(
         env.close()
 
 
+def write_json(args: argparse.Namespace, trained: Any, evaluation: dict[str, float], load_before: Any) -> None:
+    """The run's command, training and evaluation figures and load averages, as JSON at ``args.json``."""
+    record = {
+        "command": " ".join(sys.argv),
+        "env": args.env,
+        "env_kwargs": args.env_kwargs,
+        "budget": args.budget,
+        "num_envs": args.num_envs,
+        "seed": args.seed,
+        "hyperparameters": {
+            key: getattr(args, key)
+            for key in ("rollout_steps", "epochs", "minibatch", "lr", "ent_coef", "reward_scale", "torch_threads")
+        },
+        "training": trained,
+        "evaluation": evaluation,
+        "load_average_before": [round(x, 2) for x in load_before],
+        "load_average_after": [round(x, 2) for x in os.getloadavg()],
+        "cpus": os.cpu_count(),
+    }
+    with open(args.json, "w", encoding="utf-8") as f:
+        json.dump(record, f, indent=2)
+        f.write("\n")
+    print(f"wrote {os.path.abspath(args.json)}")
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument(
@@ -447,16 +508,27 @@ def main() -> int:
     p.add_argument("--clip", type=float, default=0.2)
     p.add_argument("--vf-coef", type=float, default=0.5)
     p.add_argument("--ent-coef", type=float, default=0.0)
+    p.add_argument(
+        "--reward-scale",
+        type=float,
+        default=1.0,
+        help="multiply rewards by this for learning (value targets near 1; returns are logged unscaled)",
+    )
+    p.add_argument("--torch-threads", type=int, default=1, help="torch's CPU threads (1: the sims keep the rest)")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--log-every", type=int, default=10, help="updates between log lines")
     p.add_argument("--save", default=None, help="where to save the policy (default: <Name>_ppo.pt)")
     p.add_argument("--eval-only", action="store_true", help="skip training; load --save and evaluate")
     p.add_argument("--eval-episodes", type=int, default=5)
     p.add_argument("--think-ms", default="", help="real-time evaluation at these think times, ms (e.g. 0,10,20)")
+    p.add_argument("--json", default=None, help="also write the run's figures (training, evaluation, load) here")
     args = p.parse_args()
-    torch.set_num_threads(1)  # small nets: threads only add overhead next to the sims
+    if not args.reward_scale > 0:
+        p.error(f"--reward-scale must be > 0, got {args.reward_scale}")
+    torch.set_num_threads(args.torch_threads)  # small nets: by default one, the sims keep the other CPUs
 
-    ok = True
+    ok, trained = True, None
+    load_before = os.getloadavg()
     args.env_kwargs = json_map(args.env_kwargs, "--env-kwargs") if args.env_kwargs else {}
     if args.eval_only:
         if args.save is None:
@@ -471,9 +543,11 @@ def main() -> int:
         if args.target is None:
             args.target = spec.reward_threshold
         args.save = args.save or f"{spec.name.lower()}_ppo.pt"
-        model, ok = train(args)
+        model, ok, trained = train(args)
         save(model, args.save, given, args.env_kwargs)
-    evaluate(model, args.env, args.eval_episodes, args.seed + 1000, args.env_kwargs)
+    evaluation = evaluate(model, args.env, args.eval_episodes, args.seed + 1000, args.env_kwargs)
+    if args.json:
+        write_json(args, trained, evaluation, load_before)
     if args.think_ms:
         think = [float(x) for x in args.think_ms.split(",")]
         evaluate_real_time(model, args.env, think, max(1, min(args.eval_episodes, 2)), args.seed, args.env_kwargs)

@@ -38,6 +38,7 @@ _LAZY = {
     "RemoteEnvError": "remoteenv.agent.errors",
     "RemoteEnvTimeout": "remoteenv.agent.errors",
     "LaunchError": "remoteenv.agent.errors",
+    "LimitError": "remoteenv.agent.errors",
     "SceneError": "remoteenv.agent.errors",
     "SceneArgumentError": "remoteenv.agent.errors",
     "SceneAttributeError": "remoteenv.agent.errors",
@@ -73,6 +74,7 @@ if TYPE_CHECKING:
     from remoteenv.agent.errors import (
         InvalidActionError,
         LaunchError,
+        LimitError,
         RemoteEnvError,
         RemoteEnvTimeout,
         RemoteProtocolError,
@@ -115,6 +117,7 @@ __all__ = [
     "InvalidActionError",
     "LaunchError",
     "Launcher",
+    "LimitError",
     "OpenAIRemoteEnv",
     "PROTOCOL_VERSION",
     "RemoteEnvError",

@@ -38,10 +38,17 @@ from remoteenv.agent.session.reset_args import is_int_seed
 from remoteenv.agent.session.session_attributes import SessionAttributes
 from remoteenv.agent.session.sim_session import choose_group, scene_label
 from remoteenv.agent.vector.pool_api import PoolAPI
+from remoteenv.agent.vector.sim_placement import SimPlacement, check_place_sims
+from remoteenv.agent.vector.torch_threads import AUTO, TorchThreads, check_torch_threads
 from remoteenv.agent.vector.vector_episodes import VectorEpisodes
 from remoteenv.agent.vector.vector_launch import open_worlds
-from remoteenv.agent.vector.vector_layout import default_envs_per_process, plan_layout, world_slices
-from remoteenv.agent.vector.vector_results import hold_nones
+from remoteenv.agent.vector.vector_layout import (
+    cost_may_change_layout,
+    default_envs_per_process,
+    plan_layout,
+    world_slices,
+)
+from remoteenv.agent.vector.vector_results import hold_big_ints, hold_nones
 from remoteenv.wire.delays.channel_rules import NEWEST
 from remoteenv.wire.delays.delay_specs import DelaySpec
 from remoteenv.wire.messages.handshake import Handshake
@@ -65,9 +72,11 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
             each sim process; ``ceil(N / K)`` processes are launched. Default
             ``max(8, ceil(N / cpu_count))`` capped at N: on a 2-core machine
             one process up to N = 8, then two up to N = 16; the fastest splits measured
-            there (see :func:`default_envs_per_process`). Worlds the sim reports
-            as costly (its handshake's ``world_cost_s``, e.g. camera images)
-            are then relaunched once, one process per CPU.
+            there (see :func:`default_envs_per_process`). Where what a world
+            costs could change K (e.g. N = 8 on 2 CPUs), the first sim measures one
+            world's whole tick (physics and every hook, however the scene
+            renders: :attr:`world_cost_s`); costly worlds (e.g. camera
+            images) are then relaunched once, one process per CPU.
             Must be 1 with ``real_time``.
         autoreset_mode: Gymnasium's :class:`~gymnasium.vector.AutoresetMode`
             (or its string): ``NEXT_STEP`` (default; the step after an episode
@@ -105,6 +114,15 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         batch_size: worlds :meth:`recv` returns (EnvPool's asynchronous API,
             :class:`~remoteenv.agent.vector.pool_api.PoolAPI`, lock-step only);
             default ``num_envs``.
+        torch_threads: ``"auto"`` (default): when torch is loaded in this
+            process, lower its CPU threads once to the CPUs this env's sims
+            leave free (at least one), with a warning that says so, unless
+            ``OMP_NUM_THREADS`` is set (:mod:`~remoteenv.agent.vector.torch_threads`);
+            None: leave torch alone; an int: set that many threads.
+        place_sims: ``"auto"`` (default): the sims this env starts on this
+            machine run as batch work, pinned one to a CPU when they fit, in
+            lock step only (:mod:`~remoteenv.agent.vector.sim_placement`);
+            None: leave them to the OS scheduler.
 
     World ``i`` is world ``i % K`` of process ``i // K``. ``reset(seed=s)``
     seeds world ``i`` with ``s + i``, so a vector env and N single envs with
@@ -121,6 +139,8 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
             (:class:`~remoteenv.wire.run_options.options.RunOptions`: real time, its
             factor and regime, the delays and their rules), checked once and sent
             whole to the sims (attached sims run what they were launched with).
+        world_cost_s: what one world's whole control tick costs its sim on one
+            thread (seconds), where the default layout measured it; else None.
         latency_stats: :class:`remoteenv.agent.session.latency_stats.LatencyStats` of every
             vector step so far: one wall round trip per call, and with
             ``real_time`` or ``action_delay`` each world's action latency.
@@ -157,9 +177,13 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         launcher: SimGroup | None = None,
         attach: Any = None,
         batch_size: int | None = None,
+        torch_threads: int | str | None = AUTO,
+        place_sims: str | None = AUTO,
         **scene_kwargs: Any,
     ) -> None:
         self.startup_timeout = startup_timeout
+        check_torch_threads(torch_threads)
+        check_place_sims(place_sims)
         #: How the sims' worlds run, as the arguments ask (made and checked once, here).
         self.run_options = RunOptions(
             real_time=real_time,
@@ -202,7 +226,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
             "run": self.run_options,
         }
         default_layout = asked is None and launcher is None and attach is None and not self.real_time
-        self._session, self.envs_per_process = open_worlds(
+        self._session, self.envs_per_process, self.world_cost_s = open_worlds(
             group,
             scene_label(type(self).__name__, self.scene),
             self.scene,
@@ -212,6 +236,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
             regroup=(lambda: choose_group(None, None, transport=transport, bind_host=bind_host, curve=curve))
             if default_layout
             else None,
+            measure_cost=default_layout and cost_may_change_layout(self.num_envs),
         )
         #: ``(first, end)`` world indices of each process.
         self.slices: list[tuple[int, int]] = world_slices(self.num_envs, self.envs_per_process)
@@ -227,6 +252,11 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         self.latency_stats = LatencyStats()
         self._pauser = Pauser(self._session)
         self._reach = SceneReach(self._session)
+        self._torch_threads = TorchThreads(torch_threads, self._session.local_sims)
+        self._torch_threads.apply()
+        own = launcher is None and attach is None and self._session.local_sims == len(self._session.pids)
+        self._placement = SimPlacement(place_sims, own_sims=own, real_time=self.real_time)
+        self._placement.apply(self._session.pids)
 
     def _set_spaces(self, hs: Handshake) -> None:
         self.single_observation_space = hs.observation_space
@@ -275,13 +305,17 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         int seeds world ``i`` with ``seed + i``; a list gives one seed (or None)
         per world. Other options go to every reset world's scene."""
         self._episodes.check_idle()
+        self._torch_threads.apply()
+        self._placement.apply(self._session.pids)
         if is_int_seed(seed):
             super().reset(seed=int(seed))  # type: ignore[arg-type]
         return self._episodes.reset(seed, options, self._add_info)
 
     def _add_info(self, vector_infos: dict[str, Any], env_info: dict[str, Any], env_num: int) -> dict[str, Any]:
-        """Gymnasium's merge of one world's info, and :func:`~remoteenv.agent.vector.vector_results.hold_nones`."""
-        return super()._add_info(hold_nones(vector_infos, env_info, self.num_envs), env_info, env_num)
+        """Gymnasium's merge of one world's info, after :func:`~remoteenv.agent.vector.vector_results.hold_nones`
+        and :func:`~remoteenv.agent.vector.vector_results.hold_big_ints`."""
+        held = hold_big_ints(hold_nones(vector_infos, env_info, self.num_envs), env_info, self.num_envs)
+        return super()._add_info(held, env_info, env_num)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every world once (or autoreset it, see ``autoreset_mode``)."""

@@ -88,6 +88,13 @@ class SceneArgumentError(LaunchError, TypeError):
     source shows it, else when the sim process reports it."""
 
 
+class LimitError(LaunchError, ValueError):
+    """Something asked for is beyond a bound remoteenv keeps (memory a launch
+    would take, the size of its arguments), refused before it is built
+    (a launch failure, kind ``"launch"``, and a ``ValueError``); the message
+    gives the figures and what to ask for instead."""
+
+
 class SimDiedError(RemoteEnvError):
     """The sim process exited or was killed while the agent needed it (kind ``"died"``)."""
 
@@ -110,6 +117,13 @@ class RemoteProtocolError(RemoteEnvError):
     """A peer broke the wire protocol, or refused ours (kind ``"protocol"``)."""
 
     KIND = wire_errors.PROTOCOL
+
+
+class BatchTooLargeError(RemoteProtocolError):
+    """A sim hosts more worlds than one batch reply can carry the observations
+    of (kind ``"protocol"``); :attr:`worlds_that_fit` says how many would."""
+
+    worlds_that_fit: int = 0
 
 
 class InvalidActionError(RemoteEnvError, ValueError):
@@ -141,8 +155,10 @@ class UnsendableValueError(RemoteEnvError, TypeError):
 
 
 __all__ = [
+    "BatchTooLargeError",
     "InvalidActionError",
     "LaunchError",
+    "LimitError",
     "RemoteEnvError",
     "RemoteEnvTimeout",
     "RemoteProtocolError",

@@ -12,6 +12,7 @@ import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
+from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.cli.optional import is_optional, missing_message
 
 #: Command name -> module in remoteenv.cli, in the order ``--help`` lists them.
@@ -52,6 +53,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(missing_message(exc.name or "", f"python -m remoteenv {args.command}"), file=sys.stderr)
         return 2
+    except RemoteEnvError as exc:
+        # A sim refused what the command asked (its scene's arguments, the
+        # memory it would take, ...): the reason, on one line; details are in
+        # the exception's text for code that calls the API directly.
+        print(f"python -m remoteenv {args.command}: error: {first_line(exc)}", file=sys.stderr)
+        return 1
+
+
+def first_line(exc: BaseException, limit: int = 1000) -> str:
+    """The first line of ``exc``'s message (at most ``limit`` characters)."""
+    text = str(exc).strip().splitlines()
+    return (text[0] if text else type(exc).__name__)[:limit]
 
 
 if __name__ == "__main__":

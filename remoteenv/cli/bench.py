@@ -1,7 +1,10 @@
 """``python -m remoteenv bench``: throughput (default), ``--batched`` (batched stepping
 next to EnvPool and the physics limit), ``--real-time`` pacing, ``--soak``, ``--sb3``
 (SB3 PPO on remote CartPole next to SubprocVecEnv), ``--pixels`` (camera
-observations in vector envs next to Gymnasium's of the same in-process task)."""
+observations in vector envs next to Gymnasium's of the same in-process task),
+``--action-timing`` (real-time steps whose action acted before it was sent),
+``--train-loop`` (a PPO-shaped training loop on each vector env, learner on the
+same CPUs, next to EnvPool and Gymnasium's)."""
 
 from __future__ import annotations
 
@@ -19,6 +22,8 @@ BENCHMARKS = {
     "sb3_ppo": "--sb3",
     "startup_time": "--startup",
     "pixels": "--pixels",
+    "action_timing": "--action-timing",
+    "train_loop": "--train-loop",
 }
 
 
@@ -33,7 +38,11 @@ def add_parser(sub: Any) -> None:
         "--soak: a long run that reports agent and sim memory. "
         "--sb3: SB3 PPO on remote CartPole next to the same PPO on SubprocVecEnv and DummyVecEnv. "
         "--pixels: the camera CartPole's RemoteVectorEnv next to Gymnasium's Async/SyncVectorEnv of the same "
-        "task in process (--hog for a CPU hog beside it).",
+        "task in process (--hog for a CPU hog beside it). "
+        "--action-timing: real-time steps whose action acted before it was sent, thinking a third of a tick "
+        "and with the sim stopped while the agent thinks, in both regimes. "
+        "--train-loop: the envs inside a PPO-shaped training loop, learner on the same CPUs, next to EnvPool and "
+        "Gymnasium's Sync/AsyncVectorEnv.",
     )
     mode = p.add_mutually_exclusive_group()
     for name, flag in BENCHMARKS.items():

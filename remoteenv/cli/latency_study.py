@@ -11,9 +11,10 @@ run repeats from its seed; the policy follows the observation: an MLP for
 values, a CNN for an image, multi-input for a Dict, the actions in flight a
 separate input beside images) and evaluates the deterministic policy at the
 delay it was trained under, beside fixed reference controllers. Then it runs
-trained policies in real time with a think
-time, records the latency every action had, replays the recordings in
-lock-step, and compares the two return distributions.
+trained policies in real time with a think time, records each episode,
+replays every recording in its exact twin (the same actions applied at the
+same physics substeps, without the clock) and reports how many episodes the
+twin reproduced bit for bit, with the first differing step of any other.
 
 Outputs in ``--out``: ``delay_effect.json`` (every record, rewritten after
 each finished run; ``--resume`` continues an interrupted study),
@@ -29,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import signal
 import tempfile
 from typing import Any
@@ -117,7 +117,9 @@ def _config(args: argparse.Namespace) -> Any:
         kwargs: dict[str, Any] = {"continuous": True} if args.env == DEFAULT_ENV else {}
     else:
         kwargs = json_map(args.env_kwargs, "--env-kwargs")
-    delays = int_list(args.delays, "--delays") if args.delays.strip() else []
+    from remoteenv.delays import MAX_DELAY_TICKS
+
+    delays = int_list(args.delays, "--delays", MAX_DELAY_TICKS) if args.delays.strip() else []
     random_delays = random_models(args.random_delays) if args.random_delays.strip() else []
     try:
         return StudyConfig(
@@ -198,9 +200,10 @@ def _study(args: argparse.Namespace, config: Any, json_path: str) -> int:
     from remoteenv.latency.study.results import markdown_table, plot, write_json
     from remoteenv.latency.study.runner import run_study
     from remoteenv.latency.study.twin_check import run_twin_check
+    from remoteenv.wire.files.owned_dirs import remove_dir
 
     scratch = tempfile.mkdtemp(prefix="remoteenv-study-policies-")
-    watch_dir(scratch)
+    scratch_id = watch_dir(scratch)
     try:
         policy_dir = args.policies or scratch
         references = reference_returns(config)
@@ -224,6 +227,7 @@ def _study(args: argparse.Namespace, config: Any, json_path: str) -> int:
                 f"{check['identical']} of {check['total']} episodes identical ({check['steps']} steps)"
             )
     finally:
-        shutil.rmtree(scratch, ignore_errors=True)
+        if scratch_id is not None:
+            remove_dir(scratch, scratch_id)
         forget_dir(scratch)
     return 0

@@ -1,16 +1,20 @@
 """``python -m remoteenv latency-sweep``: a policy's return across delays, over seeds.
 
-For every delay in ``--delays`` and every seed in ``--seeds`` it runs
-``--episodes`` episodes of the env with a fixed policy and records each
-episode's return and length. ``--mode`` says what a delay of ``d`` means:
+For every delay in --delays and every seed in --seeds it runs --episodes
+episodes of the env with a fixed policy and records each episode's return
+and length. The policy is a builtin controller or a TorchScript file
+(--policy), or a plain Python controller (--controller module:function, or
+a .py file, optionally file.py:function, default name "policy"): a function
+from observation to action, or a class whose no-argument instance is one; a
+reset() method, if it has one, is called at each episode's start.
+--mode says what a delay of d means:
 
-- ``action_delay``: lock-step, ``action_delay=d`` ticks (or, with
-  ``--random``, ``Uniform(0, d)``);
-- ``obs_delay``: lock-step, ``obs_delay=d`` ticks (likewise);
-- ``real_time``: ``real_time=True`` and the agent thinks ``d`` control ticks
-  of wall time (``d * dt`` seconds) before each action, so the latency the
-  world sees is about ``d`` ticks plus the real one (the measured mean is
-  reported as ``latency_ticks``).
+  action_delay  lock-step, action_delay=d ticks (or, with --random, Uniform(0, d));
+  obs_delay     lock-step, obs_delay=d ticks (likewise);
+  real_time     real_time=True and the agent thinks d control ticks of wall
+                time (d * dt seconds) before each action, so the latency the
+                world sees is about d ticks plus the real one (the measured
+                mean is reported as latency_ticks).
 
 Lock-step runs repeat exactly: seed ``s`` seeds the first reset of its run
 (scene and delay streams), later episodes continue the streams.
@@ -41,6 +45,7 @@ from remoteenv.latency.sweep import (
     MODES,
     SweepEnv,
     SweepFiles,
+    load_controller,
     load_policy,
     plot,
     run_sweep,
@@ -52,14 +57,21 @@ def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "latency-sweep",
         help="a policy's return across action/observation delays or real-time think times",
-        description=__doc__.split("\n\n")[1] if __doc__ else None,
+        description="\n\n".join(__doc__.split("\n\n")[1:3]) if __doc__ else None,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("env", help="a Gymnasium id (remoteenv/CartPole-v0), a shipped scene name or a scene script path")
-    p.add_argument(
+    which = p.add_mutually_exclusive_group(required=True)
+    which.add_argument(
         "--policy",
-        required=True,
         help=f"a builtin controller ({', '.join(BUILTIN_POLICIES)}) or a TorchScript file "
         "(torch.jit.save of a module mapping a float32 obs batch to an action batch)",
+    )
+    which.add_argument(
+        "--controller",
+        help="a plain Python controller: module:function (importable, e.g. remoteenv.controllers:cartpole_continuous) "
+        "or a .py file (path.py or path.py:function; default function name 'policy'); a class is instantiated "
+        "with no arguments",
     )
     p.add_argument("--delays", default="0,1,2,3,4", help="comma-separated delays in control ticks (default 0..4)")
     p.add_argument("--mode", choices=MODES, default="action_delay", help="what a delay means (default action_delay)")
@@ -125,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
     if args.action_history and args.policy in BUILTIN_POLICIES:
         raise SystemExit(
             "--action-history changes the observation; the builtin controllers take the env's own: "
-            "use it with a TorchScript --policy"
+            "use it with a TorchScript --policy or a --controller"
         )
     if args.episodes < 1:
         raise SystemExit("--episodes must be >= 1")
@@ -136,9 +148,9 @@ def run(args: argparse.Namespace) -> int:
     json_map(args.env_kwargs, "--env-kwargs")
     if not args.no_plot:
         require("matplotlib", "latency-sweep's plot (or pass --no-plot)")
-    if args.policy not in BUILTIN_POLICIES and os.path.isfile(args.policy):
+    if args.policy is not None and args.policy not in BUILTIN_POLICIES and os.path.isfile(args.policy):
         require("torch", "a TorchScript --policy")
-    policy = load_policy(args.policy)
+    policy = load_policy(args.policy) if args.policy is not None else load_controller(args.controller)
     files = SweepFiles(args.out)  # before the first sim starts
     config = {k: v for k, v in vars(args).items() if k != "run"}
     rows, wall = run_sweep(
@@ -148,7 +160,12 @@ def run(args: argparse.Namespace) -> int:
     kind = f"Uniform(0, d) {args.mode}" if args.random else args.mode
     xlabel = "think time d (ticks)" if args.mode == "real_time" else f"{kind} d (ticks)"
     if not args.no_plot:
-        plot(summary, os.path.join(args.out, "sweep.png"), f"{args.env}, {args.policy}: {kind}", xlabel)
+        plot(
+            summary,
+            os.path.join(args.out, "sweep.png"),
+            f"{args.env}, {args.policy or args.controller}: {kind}",
+            xlabel,
+        )
     print(
         f"{'delay':>5}  {'mean return':>11}  {'std (seeds)':>11}  {'latency ticks':>13}  "
         f"{'action age':>10}  {'never acted':>11}"

@@ -146,7 +146,11 @@ def run(args: argparse.Namespace) -> int:
     clone = remoteenv_source_tree()
     if clone is not None:
         print(f"  pip install {clone}    # remoteenv itself: it is not installed here, only imported from there")
-    print(f"  pip install -e {root}\n  cd {root} && pytest\n  python -m remoteenv demo {args.name}:{env_id}")
+    # The recipe of the package's README and docs/env-package.md: the test extra
+    # brings pytest into this environment, and `python -m pytest` runs that one.
+    print(f'  pip install -e "{root}[test]"    # this package, editable, and pytest')
+    print(f"  cd {root} && python -m pytest")
+    print(f"  python -m remoteenv demo {args.name}:{env_id}")
     return 0
 
 

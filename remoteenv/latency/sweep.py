@@ -26,6 +26,8 @@ it ended).
 from __future__ import annotations
 
 import csv
+import importlib
+import importlib.util
 import io
 import json
 import os
@@ -92,6 +94,45 @@ def load_policy(name: str) -> Policy:
     return policy
 
 
+def load_controller(spec: str) -> Policy:
+    """A plain Python controller: ``module:function`` or ``file.py[:function]``
+    (see :mod:`remoteenv.cli.latency_sweep`); a one-line SystemExit naming ``spec`` if it cannot be had."""
+    where, _, name = spec.rpartition(":") if ":" in spec else (spec, "", "")
+    if where.endswith(".py") or spec.endswith(".py"):
+        path = where if where.endswith(".py") else spec
+        name = (name if where.endswith(".py") else "") or "policy"
+        if not os.path.isfile(path):
+            raise SystemExit(f"--controller: {path[:200]!r} is not a file")
+        module_spec = importlib.util.spec_from_file_location(f"remoteenv_controller_{abs(hash(path))}", path)
+        if module_spec is None or module_spec.loader is None:
+            raise SystemExit(f"--controller: cannot load {path[:200]!r} as Python")
+        module = importlib.util.module_from_spec(module_spec)
+        try:
+            module_spec.loader.exec_module(module)
+        except Exception as exc:  # the user's file raised while loading
+            raise SystemExit(f"--controller: {path[:200]!r} raised {type(exc).__name__}: {str(exc)[:200]}") from None
+        where = path
+    else:
+        if not where or not name:
+            raise SystemExit(f"--controller must be module:function or a .py file, got {spec[:200]!r}")
+        try:
+            module = importlib.import_module(where)
+        except ImportError as exc:
+            raise SystemExit(f"--controller: cannot import {where[:200]!r}: {str(exc)[:200]}") from None
+    target = getattr(module, name, None)
+    if target is None:
+        raise SystemExit(f"--controller: {where[:200]!r} has no {name[:100]!r}")
+    if isinstance(target, type):
+        try:
+            target = target()
+        except Exception as exc:
+            raise SystemExit(f"--controller: {name[:100]}() raised {type(exc).__name__}: {str(exc)[:200]}") from None
+    if not callable(target):
+        raise SystemExit(f"--controller: {where[:200]}:{name[:100]} is not callable (observation -> action)")
+    fn: Policy = target
+    return fn
+
+
 @dataclass(frozen=True)
 class SweepEnv:
     """How to make the env of each delay point.
@@ -150,8 +191,11 @@ class SweepEnv:
 def run_point(env: Any, policy: Policy, seed: int, episodes: int, think_s: float) -> list[dict[str, Any]]:
     """``episodes`` episodes from ``reset(seed=seed)``; one row per episode."""
     rows = []
+    reset = getattr(policy, "reset", None)
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed if episode == 0 else None)
+        if callable(reset):
+            reset()
         total, length, latencies, ages, acted = 0.0, 0, [], [], 0
         done = False
         while not done:
@@ -348,6 +392,7 @@ __all__ = [
     "load_policy",
     "plot",
     "progress",
+    "load_controller",
     "run_point",
     "run_sweep",
     "summarize",

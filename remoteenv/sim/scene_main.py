@@ -12,6 +12,7 @@ from typing import Any
 from remoteenv.sim.process.log import log_to_stderr
 from remoteenv.sim.process.pacing_levers import GC_MODES, apply_levers
 from remoteenv.sim.scene.base_env import BaseEnv
+from remoteenv.sim.scene.world_builds import WorldsDoNotFit, build_worlds
 from remoteenv.sim.serving.sim_server import RemoteControlledAgent
 from remoteenv.wire.delays.channel_rules import DELIVERY_RULES, NEWEST, ChannelRules
 from remoteenv.wire.delays.delay_file import read_delay_file
@@ -19,7 +20,14 @@ from remoteenv.wire.delays.delay_specs import SECONDS, TICKS, DelaySpec, as_dela
 from remoteenv.wire.files.keys import read_key, read_keys
 from remoteenv.wire.run_options.options import RunOptions
 from remoteenv.wire.run_options.real_time_modes import ELASTIC, REAL_TIME_MODES
-from remoteenv.wire.wire_errors import EXIT_SCENE_ARGS, SCENE_ARGS_MARKER, ProtocolError, short_repr
+from remoteenv.wire.wire_errors import (
+    EXIT_RESOURCES,
+    EXIT_SCENE_ARGS,
+    RESOURCES_MARKER,
+    SCENE_ARGS_MARKER,
+    ProtocolError,
+    short_repr,
+)
 
 
 def _delay_argument(text: str, unit: str) -> DelaySpec:
@@ -201,16 +209,21 @@ def run_scene(
     env_kwargs: dict[str, Any] = json.loads(args.env_kwargs)
     if not isinstance(env_kwargs, dict):
         sys.exit(f"--env-kwargs must be a JSON map, got {args.env_kwargs!r}")
+    # A scratch world (measuring what one costs) opens no viewer window.
+    scratch_kwargs = dict(env_kwargs)
     if args.render_mode is not None:
         env_kwargs["render_mode"] = args.render_mode
     try:
-        envs = [env_factory(**env_kwargs) for _ in range(args.worlds)]
+        envs = build_worlds(lambda: env_factory(**env_kwargs), args.worlds, f"sim instance {args.instance}")
     except TypeError as exc:
         if "keyword argument" not in str(exc):
             raise
         # The launcher turns this exit status into a TypeError in the agent.
         print(f"{SCENE_ARGS_MARKER} {exc}", file=sys.stderr)
         sys.exit(EXIT_SCENE_ARGS)
+    except WorldsDoNotFit as exc:  # the launcher raises it as a LimitError, one line
+        print(f"{RESOURCES_MARKER} {exc}", file=sys.stderr)
+        sys.exit(EXIT_RESOURCES)
     if args.seed is not None:
         for w, env in enumerate(envs):
             env.seed_rng(args.seed + w)
@@ -232,6 +245,7 @@ def run_scene(
         curve_client_keys=client_keys,
         private_dir=args.private_dir,
         pipe_fd=args.pipe_fd,
+        world_factory=lambda: env_factory(**scratch_kwargs),
     )
     if args.rt_spin_s is not None:
         server.deadline_spin_s = max(0.0, float(args.rt_spin_s))

@@ -100,18 +100,20 @@ version mismatch), ``"invalid_action"``, ``"scene"`` (the env code raised),
 
 Commands (version 1)
 --------------------
-``handshake`` ``{"protocol": int}`` -> ``{"protocol", "env_id", "instance",
-"pid", "num_worlds", "observation_space", "action_space", "metadata",
-"stepping", "commands"}``. The server refuses a protocol version it does not speak,
+``handshake`` ``{"protocol": int, "world_cost": bool (optional)}`` -> ``{"protocol",
+"env_id", "instance", "pid", "num_worlds", "observation_space", "action_space",
+"metadata", "stepping", "commands"}``. The server refuses a protocol version it does not speak,
 naming both versions. ``commands`` (optional; a list of str) names every
 command the server answers; a client that finds no such field assumes
 ``reset_batch``/``step_batch`` exist exactly when ``stepping.mode`` is
 ``"lock_step"`` and ``timing`` exactly when it is ``"real_time"``. ``metadata`` holds ``render_modes``, ``render_fps``,
 ``dt`` (seconds of simulated time per env step), ``timestep`` (seconds per
 physics substep), ``frame_skip`` and, optionally, ``world_cost_s`` (wall
-seconds one world's control tick costs the server on one thread: physics and
-rendering its camera observation; a hint for how many worlds a process
-should host); ``stepping`` holds ``mode``
+seconds one world's whole control tick costs the server on one thread: the
+physics and every hook of the scene, images included, measured on a scratch
+world; a hint for how many worlds a process should host). A server measures
+it only when the request carries ``"world_cost": true`` (it takes a few ticks'
+time) and may answer without it (then the client keeps its layout); ``stepping`` holds ``mode``
 (``"lock_step"`` or ``"real_time"``) and that mode's parameters: in lock-step
 ``action_delay`` (ticks; the largest of a random model) and, with delays
 beyond a constant action delay, ``obs_delay`` (the largest, ticks),
@@ -146,7 +148,10 @@ drives the worlds may close a sim (see Drivers).
 ``timing`` ``{"clear": bool}`` -> ``{"worlds": [map, ...]}`` (real-time sims
 only): per world, ``pacing_error_s`` and ``apply_delay_s`` summaries
 (``count``, ``mean``, ``p50``, ``p99``, ``max``, wall seconds), ``overruns``,
-``substeps``, ``period_s`` (and ``link_delay_s``, the emulated link delays
+``substeps``, ``period_s``, ``clock_slips`` and ``slipped_s`` (times the
+world's clock slipped because it fell more than a second behind, and the
+wall seconds it dropped; see :mod:`remoteenv.sim.stepping.real_time`; the
+reference server sends them) and ``link_delay_s`` (the emulated link delays
 drawn, when the reference server emulates one); ``clear`` resets them after
 replying. In real time a ``step`` reply is sent when its action has been in
 force for one control tick (see :mod:`remoteenv.sim.stepping.real_time`).
@@ -265,17 +270,17 @@ Drivers
 One connection drives each world (a connection is the local pipe, or one
 ZeroMQ peer, known by its routing id: a client keeps its routing id when it
 reconnects). A sim with a local pipe is driven by the pipe, every world and
-for good. Otherwise nobody drives a world until a connection resets it
-(``reset``, ``reset_batch``), and the connection that reset a world last
-drives it. A ``state`` error answers ``step`` or ``step_batch`` on a world
-another connection drives; ``reset`` or ``reset_batch`` from anything but
-the pipe of a sim that has one; and ``close``, ``pause`` or ``resume`` from
-a connection that does not drive every world somebody drives (the sim's
-owner: its pipe, else the connection driving its worlds). Every other
-command is open to every connection. A client that wants to drive a world
-resets it first. This keeps a second client from displacing a driver's
-steps or stopping its sim; it does not tell users apart (without a pipe a
-reset takes a world over): who may connect at all is up to the transport
+for good. Otherwise nobody drives a world until a connection resets or
+steps it; that connection then drives it until its connection ends (the
+sim's socket monitor reports the disconnect). A ``state`` error answers
+``reset``, ``reset_batch``, ``step`` or ``step_batch`` on a world another
+connection drives; and ``close``, ``pause`` or ``resume`` from a connection
+that does not drive every world somebody drives (the sim's owner: its pipe,
+else the connection driving its worlds). Every other command is open to
+every connection. A client that wants to drive a world resets it first.
+This keeps a second client from displacing a driver's steps, taking its
+worlds over or stopping its sim; it does not tell users apart: who may
+connect at all is up to the transport
 (an ipc socket in a private dir, CURVE keys).
 
 Values

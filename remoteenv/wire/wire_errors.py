@@ -29,6 +29,11 @@ ERROR_KINDS = frozenset({PROTOCOL, INVALID_ACTION, SCENE, STATE, ATTRIBUTE, UNSE
 #: stderr, which the launcher raises as a ``TypeError`` (see ``run_scene``).
 EXIT_SCENE_ARGS = 3
 SCENE_ARGS_MARKER = "remoteenv: the scene's env factory refused its keyword arguments:"
+#: Exit status of a sim process whose worlds would not fit in memory; it writes
+#: :data:`RESOURCES_MARKER` and the reason (one line, with the figures) to
+#: stderr, which the launcher raises as a ``LimitError``.
+EXIT_RESOURCES = 4
+RESOURCES_MARKER = "remoteenv: the sim refused to build its worlds:"
 
 #: Longest text of an error message built from a request's content (characters).
 MAX_ECHO_CHARS = 200

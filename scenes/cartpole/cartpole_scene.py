@@ -12,6 +12,10 @@ image (uint8 ``(image_size, image_size, 3)``), ``"state_pixels"`` a Dict
 ``{"state": <the 4 numbers>, "pixels": <the image>}``; rendered in the sim,
 without multisampling and shadows unless ``camera_quality=True``
 (docs/cameras.md). The default ``"state"`` is the 4 numbers alone.
+``camera_kind`` (``"rgb"``, ``"depth"``, ``"segmentation"``, ``"rgbd"`` or a
+list of kinds), ``cameras`` (``"agent"``, ``"side"`` or both) and
+``frame_stack`` (the last k frames along the channel axis) choose the images;
+several images make a flat Dict keyed ``"<camera>_<kind>"``.
 
 Run by the launcher as ``python cartpole_scene.py --address ... --seed ...``.
 """
@@ -51,10 +55,20 @@ class CartPoleEnv(BaseEnv):
         obs_mode: str = "state",
         image_size: int = 64,
         camera_quality: bool = False,
+        camera_kind: str | Sequence[str] = "rgb",
+        cameras: str | Sequence[str] = "agent",
+        frame_stack: int = 1,
     ) -> None:
+        if not isinstance(continuous, (bool, np.bool_)):
+            raise ValueError(f"CartPoleEnv: continuous must be True or False, got {str(continuous)[:40]!r}")
         self.continuous = bool(continuous)
-        cameras = camera_observation(
-            obs_mode, Camera("agent", width=int(image_size), height=int(image_size)), quality=bool(camera_quality)
+        kind = camera_kind if isinstance(camera_kind, str) else tuple(camera_kind)
+        names = (cameras,) if isinstance(cameras, str) else tuple(cameras)
+        observed = camera_observation(
+            obs_mode,
+            [Camera(name, width=image_size, height=image_size, kind=kind) for name in names],
+            quality=camera_quality,
+            frame_stack=frame_stack,
         )
         action_space: spaces.Space = (
             spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32) if self.continuous else spaces.Discrete(2)
@@ -71,7 +85,7 @@ class CartPoleEnv(BaseEnv):
             render_mode=render_mode,
             width=width,
             height=height,
-            cameras=cameras,
+            cameras=observed,
         )
         self._terminated = False
         self._pole = self.model.body("pole").id

@@ -10,7 +10,7 @@ Pixels: ``obs_mode="pixels"`` makes the observation the ``overhead``
 camera's image (uint8 ``(image_size, image_size, 3)``), ``"state_pixels"`` a
 Dict ``{"state": <the 10 numbers>, "pixels": <the image>}``; rendered in the
 sim without multisampling and shadows unless ``camera_quality=True``
-(docs/cameras.md).
+(docs/cameras.md). ``camera_kind`` and ``frame_stack`` as for CartPole.
 
 Run by the launcher as ``python reacher_scene.py --address ... --seed ...``.
 """
@@ -47,9 +47,15 @@ class ReacherEnv(BaseEnv):
         obs_mode: str = "state",
         image_size: int = 64,
         camera_quality: bool = False,
+        camera_kind: str | Sequence[str] = "rgb",
+        frame_stack: int = 1,
     ) -> None:
+        kind = camera_kind if isinstance(camera_kind, str) else tuple(camera_kind)
         cameras = camera_observation(
-            obs_mode, Camera("overhead", width=int(image_size), height=int(image_size)), quality=bool(camera_quality)
+            obs_mode,
+            Camera("overhead", width=image_size, height=image_size, kind=kind),
+            quality=camera_quality,
+            frame_stack=frame_stack,
         )
         super().__init__(
             MODEL_PATH,

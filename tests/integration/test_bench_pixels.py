@@ -9,6 +9,7 @@ import sys
 
 import pytest
 
+from remoteenv.agent.vector.vector_layout import default_envs_per_process
 from remoteenv.benchmarks.pixels import parse_cases, ratios
 
 
@@ -27,6 +28,19 @@ def test_a_tiny_pixel_benchmark_writes_every_contender_and_the_ratios(tmp_path):
         "RemoteVectorEnv / SyncVectorEnv",
     }
     assert set(result["render_cost_ms"]) == {"default", "cheap", "msaa only", "shadows only"}
+
+
+def test_the_scene_that_renders_in_its_hook_gets_the_costly_layout_in_the_benchmark(tmp_path):
+    out = tmp_path / "hook.json"
+    cmd = [sys.executable, "-m", "remoteenv", "bench", "--pixels", "--pixels-render-in-hook", "--pixels-cases", "32x4"]
+    cmd += ["--pixels-rounds", "1", "--pixels-duration", "0.1", "--json", str(out)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    result = json.loads(out.read_text())
+    assert result["render_in_hook"] is True
+    remote = next(r for r in result["rows"] if r["name"] == "RemoteVectorEnv")
+    assert remote["envs_per_process"] == default_envs_per_process(4, float("inf"))  # measured as costly
+    assert [r["name"] for r in result["rows"]] == ["SyncVectorEnv", "AsyncVectorEnv", "RemoteVectorEnv"]
 
 
 def test_cases_and_ratios():

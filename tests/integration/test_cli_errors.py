@@ -14,6 +14,7 @@ import pytest
 
 SWEEP = ["latency-sweep", "remoteenv/CartPole-v0", "--policy", "cartpole_discrete", "--no-plot", "--episodes", "1"]
 HUGE = str(2**70)
+DEMO = ["demo", "cartpole", "--episodes", "1", "--env-kwargs"]
 
 
 @pytest.fixture
@@ -45,6 +46,27 @@ CASES = {
     "demo-seed-not-a-number": (["demo", "cartpole", "--seed", "2**70"], "--seed"),
     "sweep-episodes-not-a-number": (SWEEP[:-1] + ["x", "--delays", "0"], "--episodes"),
     "unknown-command": (["nosuchcommand"], "nosuchcommand"),
+    # Issue 35, item 7: scene kwargs the scene refuses, bench and study bounds.
+    "demo-env-kwargs-unknown-key": (DEMO + ['{"bogus": 1}'], "unexpected keyword argument 'bogus'"),
+    "demo-env-kwargs-reacher-unknown-key": (
+        ["demo", "reacher", "--episodes", "1", "--env-kwargs", '{"bogus": 1}'],
+        "unexpected keyword argument 'bogus'",
+    ),
+    "demo-env-kwargs-nan-image-size": (DEMO + ['{"obs_mode": "pixels", "image_size": NaN}'], "must be an int"),
+    "demo-env-kwargs-nan-continuous": (DEMO + ['{"continuous": NaN}'], "continuous must be True or False"),
+    "demo-env-kwargs-obs-mode": (DEMO + ['{"obs_mode": "pixles"}'], "obs_mode must be one of"),
+    "demo-env-kwargs-camera-quality": (
+        DEMO + ['{"obs_mode": "pixels", "camera_quality": "no"}'],
+        "camera quality must be True or False",
+    ),
+    "demo-env-kwargs-100-kB": (DEMO + ['{"obs_mode": "' + "x" * 100_000 + '"}'], "more than the 65536"),
+    "bench-pixels-cases-100000x1": (["bench", "--pixels", "--pixels-cases", "100000x1"], "--pixels-cases 100000x1"),
+    "bench-pixels-cases-4097x1": (["bench", "--pixels", "--pixels-cases", "4097x1"], "--pixels-cases 4097x1"),
+    "bench-pixels-cases-64x100000": (["bench", "--pixels", "--pixels-cases", "64x100000"], "ask for at most"),
+    "bench-pixels-duration-nan": (["bench", "--pixels", "--pixels-duration", "nan"], "--pixels-duration"),
+    "bench-pixels-duration-inf": (["bench", "--pixels", "--pixels-duration", "inf"], "--pixels-duration"),
+    "bench-pixels-rounds-10**7": (["bench", "--pixels", "--pixels-rounds", "10000000"], "--pixels-rounds"),
+    "study-delays-100000": (["latency-study", "--delays", "1,2,100000", "--out", "{tmp}/study"], "--delays"),
 }
 
 

@@ -133,3 +133,55 @@ def test_each_world_of_a_real_time_vector_env_replays_exactly():
     second = envs.episodes[1][1]  # world 1's episode after an unseeded autoreset
     replay = replay_episode(cartpole_continuous, ENV_ID, second, KWARGS, max_episode_steps=6)
     assert first_difference(second, replay) is None
+
+
+def test_a_policy_that_reads_link_delay_s_replays_exactly_from_the_file_alone(tmp_path):
+    """The twin is built from the recording alone (no kwargs) and reports the recorded link delays."""
+    from remoteenv.delays import Uniform
+
+    link = Uniform(0.001, 0.012, unit="s")
+
+    def policy(obs: np.ndarray, info: dict) -> np.ndarray:
+        return cartpole_continuous(obs) + 20.0 * float(info.get("link_delay_s", 0.0))
+
+    def play(env, obs, steps):
+        digests, rewards, info = [], [], {}
+        for _ in range(steps):
+            obs, reward, terminated, truncated, info = env.step(policy(obs, info))
+            digests.append(obs), rewards.append(float(reward))
+            if terminated or truncated:
+                break
+        return digests, rewards, info
+
+    env = LatencyRecorder(gym.make(ENV_ID, real_time=True, link_delay=link, max_episode_steps=25, **KWARGS))
+    try:
+        obs, _ = env.reset(seed=21)
+        real_obs, real_rewards, last = play(env, obs, 25)
+        assert "link_delay_s" in last and 0.001 <= last["link_delay_s"] <= 0.012
+    finally:
+        env.close()
+    path = env.save(tmp_path / "linked.json")
+    episode, _ = load_recording(path)
+    assert episode.env is not None and episode.env.max_episode_steps == 25 and episode.link_delays is not None
+    twin = make_twin(ENV_ID, path)  # nothing but the file
+    try:
+        assert twin.unwrapped.handshake["stepping"]["link_delay_spec"] == link.to_wire()
+        obs, _ = twin.reset_to_start()
+        twin_obs, twin_rewards, twin_last = play(twin, obs, 30)
+    finally:
+        twin.close()
+    assert twin_rewards == real_rewards and twin.truncated and len(twin_obs) == 25
+    assert all(np.array_equal(a, b) for a, b in zip(real_obs, twin_obs))
+    assert twin_last["link_delay_s"] == last["link_delay_s"]
+    with pytest.raises(ValueError, match="continuous=False contradicts"):
+        make_twin(ENV_ID, path, continuous=False)
+
+
+def test_link_delay_s_appears_only_with_an_emulated_link():
+    env = gym.make(ENV_ID, real_time=True, **KWARGS)
+    try:
+        obs, _ = env.reset(seed=0)
+        *_, info = env.step(cartpole_continuous(obs))
+    finally:
+        env.close()
+    assert "link_delay_s" not in info and "latency_s" in info

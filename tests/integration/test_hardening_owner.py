@@ -8,6 +8,11 @@ launching pipe or, without one, over ZeroMQ itself.
 
 from __future__ import annotations
 
+import json
+import os
+import signal
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -74,3 +79,56 @@ def test_a_second_client_cannot_step_a_lock_step_vector_sim_over_zeromq():
         assert obs.shape == (2, 4)
     finally:
         env.close()
+
+
+def test_a_second_tcp_client_cannot_take_over_the_world_of_an_agent_attached_to_a_launched_sim(tmp_path, wait_gone):
+    # Issue 35, item 4: a reset from another client took the driver role of a
+    # real-time sim started with `launch`, locking out the attached agent. Now
+    # a driven world stays its driver's until the driver's connection ends.
+    out = tmp_path / "launch.json"
+    launch = subprocess.Popen(
+        [sys.executable, "-m", "remoteenv", "launch", "cartpole", "--transport", "tcp", "--real-time"],
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "MUJOCO_GL": "egl"},
+    )
+    pids: list[int] = []
+    try:
+        deadline = time.monotonic() + 120
+        while not out.exists():
+            assert launch.poll() is None, launch.stderr.read()  # type: ignore[union-attr]
+            assert time.monotonic() < deadline, "launch wrote no launch-info file"
+            time.sleep(0.05)
+        instances = json.loads(out.read_text())["instances"]
+        pids = [s["pid"] for s in instances]
+        agent = OpenAIRemoteEnv.attach(out, timeout=20.0)
+        try:
+            agent.reset(seed=0)
+            other = ZmqConnection(instances[0]["endpoint"], timeout=20.0)
+            try:
+                for cmd, args in (("reset", {"seed": 1}), ("step", {"action": 0}), ("close", {})):
+                    with pytest.raises(StateError, match="driven by another connection"):
+                        other.request(cmd, **args)
+            finally:
+                other.close()
+            for _ in range(5):
+                _, _, terminated, _, _ = agent.step(agent.action_space.sample())  # the agent still drives
+                if terminated:
+                    agent.reset()
+        finally:
+            agent.close()
+        # The attached agent's connection ended: the world is free for the next one.
+        late = OpenAIRemoteEnv.attach(out, timeout=20.0)
+        try:
+            late.reset(seed=2)
+            late.step(late.action_space.sample())
+        finally:
+            late.close()
+    finally:
+        if launch.poll() is None:
+            launch.send_signal(signal.SIGTERM)
+        launch.wait(timeout=60)
+        launch.stderr.close()  # type: ignore[union-attr]
+    assert all(wait_gone(p, 30.0) for p in pids)

@@ -60,18 +60,19 @@ def test_a_second_client_cannot_displace_the_drivers_steps():
         env.close()
 
 
-def test_without_a_launching_pipe_the_last_resetter_drives():
+def test_without_a_launching_pipe_a_driven_world_stays_its_drivers():
+    # Issue 35, item 4: before, the other client's reset took the world over.
     env = OpenAIRemoteEnv(scene_path("cartpole"), transport="ipc", real_time=True, timeout=10.0, startup_timeout=120.0)
     try:
         env.reset(seed=0)
         other = ZmqConnection(env.launcher.sims[0].endpoint, timeout=10.0)
         try:
-            with pytest.raises(StateError, match="driven by another connection"):
-                other.request("step", action=0)
-            other.request("reset")  # a reset takes the world over
-            assert other.request("step", action=0)["ok"]
+            for cmd, args in (("step", {"action": 0}), ("reset", {})):
+                with pytest.raises(StateError, match="driven by another connection"):
+                    other.request(cmd, **args)
         finally:
             other.close()
+        env.step(env.action_space.sample())  # the driver drives on
     finally:
         env.close()
 

@@ -91,7 +91,9 @@ def test_delayed_rewards_end_the_episode_when_the_terminal_observation_arrives()
     assert n == plain_n + 3  # the terminal observation is 3 ticks on its way
     assert total == plain_total  # every tick's reward arrives, with its observation
     np.testing.assert_array_equal(obs[-1], plain_obs[-1])  # the episode ends on the terminal observation
-    assert info["obs_delay_ticks"] == 3 and info["sim_time"] == info["obs_sim_time"]  # the physics froze
+    # The physics froze at the terminal tick, 3 steps ago; sim_time ran on (the agent could not know).
+    assert info["obs_delay_ticks"] == 3 and info["sim_time"] == pytest.approx(info["obs_sim_time"] + 3 * 0.02)
+    assert info["sim_time"] == pytest.approx(n * 0.02)
 
 
 def test_the_default_keeps_the_reward_and_end_of_the_tick_that_ran():

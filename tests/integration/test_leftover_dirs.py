@@ -5,7 +5,7 @@ is terminated (SIGTERM, as ``multiprocessing.Pool.terminate`` does) or killed
 The window is the launcher's ``stop_all``: the sim has been told to stop (so
 it does not tidy up for an agent it still sees alive), and the dir is not yet
 removed. The tests stop the agent right there, deterministically: its
-``shutil.rmtree`` is replaced by one that says so and waits. Every agent runs
+dir removal (``remove_dir``) is replaced by one that says so and waits. Every agent runs
 with ``TMPDIR`` in the test's own dir, so only its dirs are looked at.
 
 Timing is part of the behaviour (the orphan guard tidies up after the
@@ -30,7 +30,7 @@ import pytest
 
 GONE_WITHIN_S = 10.0
 
-#: Replaces rmtree in the launcher's stop_all: announce the removal (a line on
+#: Replaces the dir removal in the launcher's stop_all: announce it (a line on
 #: stdout, or a marker file) and wait to be terminated.
 STALL = textwrap.dedent(
     """
@@ -38,12 +38,12 @@ STALL = textwrap.dedent(
     import remoteenv.agent.launch.sim_process as sim_process
 
     def stall(marker=None):
-        def rmtree(path, *args, **kwargs):
+        def remove_dir(path, *args, **kwargs):
             if marker:
                 open(marker, "w").close()
             print("removing", path, flush=True)
             time.sleep(600)
-        sim_process.shutil.rmtree = rmtree
+        sim_process.remove_dir = remove_dir
     """
 )
 

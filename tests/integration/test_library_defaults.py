@@ -79,3 +79,34 @@ def test_torchrl_gym_wrapper_refuses_the_default_and_says_why():
             torchrl_envs.GymWrapper(envs)
     finally:
         envs.close()
+
+
+@pytest.mark.parametrize("obs_mode", ["state_pixels", "pixels"])
+def test_torchrl_camera_observations_roll_out_across_episode_ends(obs_mode):
+    """A Dict observation (state and image) and an image alone through the
+    adapter: the rollout goes on across episode ends (TorchRL's SAME_STEP path
+    raised "generator raised StopIteration" at the first on a Dict), and the keys
+    are those TorchRL's GymEnv gives: "pixels", and "observation" for the state."""
+    pytest.importorskip("torchrl")
+    from torchrl.envs import GymEnv
+    from torchrl.envs.utils import check_env_specs
+
+    from remoteenv.torchrl import make_torchrl_env
+
+    env = make_torchrl_env(ID, num_envs=2, max_episode_steps=5, seed=0, obs_mode=obs_mode, image_size=24)
+    single = GymEnv(ID, obs_mode=obs_mode, image_size=24)
+    try:
+        check_env_specs(env)
+        assert set(env.observation_spec.keys()) == set(single.observation_spec.keys())
+        rollout = env.rollout(12, break_when_any_done=False)
+        assert tuple(rollout.batch_size) == (2, 12)
+        assert rollout["next", "pixels"].shape == (2, 12, 24, 24, 3)
+        done = rollout["next", "done"].squeeze(-1).numpy()
+        assert done.sum() >= 4  # episodes ended and the rollout went on
+        if obs_mode == "state_pixels":
+            i, t = np.argwhere(done[:, :-1])[0]
+            last, first = rollout["next", "observation"][i, t].numpy(), rollout["observation"][i, t + 1].numpy()
+            assert not np.array_equal(last, first)  # the next step starts a new episode
+    finally:
+        env.close()
+        single.close()

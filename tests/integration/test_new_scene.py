@@ -99,7 +99,7 @@ def test_editable_package_works_in_the_folder_it_was_made_in(tmp_path):
         timeout=60,
     )
     assert made.returncode == 0, made.stderr
-    assert f"pip install -e {tmp_path / 'ball_plate'}" in made.stdout
+    assert f'pip install -e "{tmp_path / "ball_plate"}[test]"' in made.stdout
     subprocess.run(
         [sys.executable, "-m", "pip", "--python", str(python), "install", "--quiet", "--no-deps"]
         + ["--no-build-isolation", "-e", str(tmp_path / "ball_plate")],
@@ -207,3 +207,62 @@ def test_pixels_writes_a_camera_scene_whose_tests_read_the_registration(tmp_path
     )
     assert probe.stdout.strip() == "uint8 (64, 64, 3)", probe.stdout + probe.stderr
     _assert_generated_tests_pass("tests", pkg, env)
+
+
+# Issue 35, item 9: the scaffold's tests hold for any scene, its next steps are
+# its README's and the guide's, and its spaces make Gymnasium's checker quiet.
+
+
+def test_the_printed_next_steps_are_the_readmes_and_the_guides(tmp_path, capsys):
+    # Before: "pip install -e DIR" (no pytest in the environment) and a bare "pytest".
+    pkg = tmp_path / "pkg"
+    assert cli_main(["new-scene", "ball_plate", "--dir", str(pkg)]) == 0
+    printed = [line.split("#")[0].strip() for line in capsys.readouterr().out.splitlines()]
+    assert f'pip install -e "{pkg}[test]"' in printed
+    assert f"cd {pkg} && python -m pytest" in printed
+    assert not any(c == "pytest" or c.startswith("pytest ") or c.endswith("&& pytest") for c in printed)
+    readme = (pkg / "README.md").read_text()
+    guide = (Path(__file__).resolve().parents[2] / "docs" / "env-package.md").read_text()
+    assert 'pip install -e ".[test]"' in readme and 'pip install -e "my_arm[test]"' in guide
+    assert "python -m pytest" in readme and "cd my_arm && python -m pytest" in guide
+
+
+def test_the_generated_tests_pass_for_a_scene_that_terminates(tmp_path):
+    # Before: test_an_episode_runs_to_the_time_limit asserted the episode never
+    # terminates, and failed for any scene with a termination condition.
+    pkg = tmp_path / "pkg"
+    write_package("stop_mass", pkg)
+    scene = pkg / "src" / "stop_mass" / "stop_mass_scene.py"
+    text = scene.read_text()
+    plain = 'return self._obs(), reward, False, {"distance": distance}'
+    assert plain in text
+    scene.write_text(text.replace(plain, 'return self._obs(), reward, self.data.time > 1.0, {"distance": distance}'))
+    env = dict(os.environ, PYTHONPATH=ROOT)  # the package's pytest config puts src/ on the path
+    _assert_generated_tests_pass("tests", pkg, env)
+
+
+def test_the_generated_scene_passes_the_env_checker_without_a_warning(tmp_path):
+    # Before: Box(-inf, inf) observations made check_env warn twice.
+    pkg = tmp_path / "pkg"
+    write_package("quiet_mass", pkg)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-W",
+            "error",
+            "-c",
+            "import gymnasium as gym, quiet_mass\n"
+            "from gymnasium.utils.env_checker import check_env\n"
+            "e = gym.make(quiet_mass.ENV_ID)\n"
+            "check_env(e.unwrapped, skip_render_check=True)\n"
+            "print(e.observation_space)\n"
+            "e.close()",
+        ],
+        cwd=tmp_path,
+        env=dict(os.environ, PYTHONPATH=os.pathsep.join([str(pkg / "src"), ROOT]), MUJOCO_GL="egl"),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr[-3000:]
+    assert "inf" not in done.stdout

@@ -171,8 +171,8 @@ def test_the_default_layout_spreads_costly_worlds_over_more_processes():
         for kwargs in ({}, {"obs_mode": "pixels", "image_size": 32}):
             made.append(gym.make_vec(ENV_ID, num_envs=8, vectorization_mode="vector_entry_point", **kwargs).unwrapped)
         state, pixels = made
-        cost_state = state._session.handshake.world_cost_s
-        cost_pixels = pixels._session.handshake.world_cost_s
+        cost_state = state.world_cost_s
+        cost_pixels = pixels.world_cost_s
         assert 0 < cost_state < cost_pixels  # rendering a camera image costs more than CartPole's physics
         for env, cost in ((state, cost_state), (pixels, cost_pixels)):
             assert env.envs_per_process == min(8, default_envs_per_process(8, cost))
@@ -217,3 +217,140 @@ def test_a_camera_the_model_lacks_fails_the_start_naming_the_cameras_it_has(tmp_
     script.write_text(BAD_CAMERA_SCENE)
     with pytest.raises(LaunchError, match=r"camera 'top' is not in the model; its cameras are \['side', 'agent'\]"):
         OpenAIRemoteEnv(str(script))
+
+
+# ------------------------------------------------------------ frame stacks, modalities, geometry (issue 36)
+
+
+def test_frame_stacks_on_the_batched_path_follow_each_worlds_episodes():
+    """frame_stack=3 through the vector env (one image alone: the shared-memory
+    rows): each image holds the world's last three frames, oldest first, and a
+    world that autoresets starts its stack again from its first frame."""
+    n, size = 2, 24
+    stacked = gym.make_vec(
+        ENV_ID,
+        num_envs=n,
+        vectorization_mode="vector_entry_point",
+        envs_per_process=n,
+        obs_mode="pixels",
+        image_size=size,
+        frame_stack=3,
+        max_episode_steps=4,
+    )
+    single = gym.make_vec(
+        ENV_ID,
+        num_envs=n,
+        vectorization_mode="vector_entry_point",
+        envs_per_process=n,
+        obs_mode="pixels",
+        image_size=size,
+        max_episode_steps=4,
+    )
+    try:
+        assert stacked.single_observation_space.shape == (size, size, 9)
+        obs, _ = stacked.reset(seed=[3, 4])
+        frame, _ = single.reset(seed=[3, 4])
+        frames = [frame, frame, frame]  # after a reset: the first frame three times
+        for t in range(7):
+            np.testing.assert_array_equal(obs, np.concatenate(frames[-3:], axis=-1), err_msg=f"step {t}")
+            actions = np.array([t % 2, (t + 1) % 2])
+            obs, _, _, truncated, _ = stacked.step(actions)
+            frame, _, _, truncated_single, _ = single.step(actions)
+            assert (truncated == truncated_single).all()
+            frames.append(frame)
+            if t == 4:  # the step after the 4-step limit: NEXT_STEP autoreset of both worlds
+                frames = [frame, frame, frame]
+    finally:
+        stacked.close()
+        single.close()
+
+
+def test_depth_segmentation_and_two_cameras_as_one_flat_dict_that_sb3_trains_on():
+    sb3 = pytest.importorskip("stable_baselines3")
+    from remoteenv.sb3 import make_sb3_vec_env
+
+    two = {"obs_mode": "state_pixels", "image_size": 36, "cameras": ["agent", "side"]}
+    env = gym.make(ENV_ID, **two)
+    try:
+        assert set(env.observation_space.spaces) == {"state", "agent_rgb", "side_rgb"}
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # two rgb cameras: SB3's checker has nothing to say
+            sb3.common.env_checker.check_env(env, warn=True, skip_render_check=True)
+    finally:
+        env.close()
+    kwargs = {**two, "camera_kind": "rgbd"}
+    env = gym.make(ENV_ID, **kwargs)
+    try:
+        space = env.observation_space
+        assert set(space.spaces) == {"state", "agent_rgb", "agent_depth", "side_rgb", "side_depth"}
+        assert space["agent_depth"] == gym.spaces.Box(0.0, np.inf, (36, 36, 1), np.float32)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            sb3.common.env_checker.check_env(env, warn=True, skip_render_check=True)
+        # SB3 only notes that the float32 depth images are no uint8 images in [0, 255] (they go to the MLP)
+        notes = [str(w.message) for w in caught]
+        assert notes and all("_depth is an image but" in note for note in notes), notes
+        obs, _ = env.reset(seed=0)
+        assert space.contains(obs)
+    finally:
+        env.close()
+    venv = make_sb3_vec_env(ENV_ID, num_envs=2, seed=0, **kwargs)
+    try:
+        model = sb3.PPO("MultiInputPolicy", venv, n_steps=16, batch_size=16, n_epochs=1, seed=0)
+        model.learn(32)  # tiny: that SB3 takes the flat Dict, not what it learns
+        assert set(model.policy.features_extractor.extractors) == set(space.spaces)
+    finally:
+        venv.close()
+
+
+def test_vec_normalize_on_state_pixels_normalises_the_state_alone():
+    """SB3's VecNormalize turns every Dict entry into normalised floats unless told
+    which: norm_obs_keys=["state"] keeps the images uint8 images."""
+    vec_env = pytest.importorskip("stable_baselines3.common.vec_env")
+    from remoteenv.sb3 import make_sb3_vec_env
+
+    venv = vec_env.VecNormalize(
+        make_sb3_vec_env(ENV_ID, num_envs=2, seed=0, obs_mode="state_pixels", image_size=24), norm_obs_keys=["state"]
+    )
+    try:
+        obs = venv.reset()
+        assert obs["pixels"].dtype == np.uint8 and obs["state"].dtype == np.float32
+        assert venv.observation_space["pixels"].dtype == np.uint8
+    finally:
+        venv.close()
+
+
+def test_each_worlds_camera_geometry_projects_the_cart_onto_its_pixels():
+    """Per world: the agent reads K and cam2world with call("camera_geometry") and
+    projects the cart (x from the state) and a point up the pole to the pixels
+    where the segmentation shows those geoms."""
+    size, n = 120, 2
+    envs = gym.make_vec(
+        ENV_ID,
+        num_envs=n,
+        vectorization_mode="vector_entry_point",
+        envs_per_process=n,
+        obs_mode="state_pixels",
+        image_size=size,
+        camera_kind=("rgb", "segmentation"),
+    )
+    model = mujoco.MjModel.from_xml_path(MODEL)
+    try:
+        obs, _ = envs.reset(seed=0, options={"low": 0.1, "high": 0.1})
+        for _ in range(3):
+            obs, *_ = envs.step(np.array([1, 0]))
+        geometry = envs.call("camera_geometry")
+        assert len(geometry) == n
+        for w in range(n):
+            K, pose = geometry[w]["agent"]["intrinsics"], geometry[w]["agent"]["cam2world"]
+            x, theta = float(obs["state"][w, 0]), float(obs["state"][w, 2])
+            for geom, point in (
+                ("cart", (x, -0.12, 0.0)),
+                ("pole", (x + 0.7 * np.sin(theta), 0.0, 0.7 * np.cos(theta))),
+            ):
+                camera = np.linalg.inv(pose) @ np.array([*point, 1.0])
+                u, v = (K @ camera[:3])[:2] / camera[2]
+                assert obs["agent_segmentation"][w, int(v), int(u), 0] == model.geom(geom).id, (w, geom)
+        assert not np.allclose(obs["state"][0, 0], obs["state"][1, 0])  # two worlds, two cart positions
+    finally:
+        envs.close()

@@ -138,3 +138,42 @@ def test_two_readers_of_one_publisher_are_told_apart():
                 next(second)
         first.close()
         second.close()
+
+
+def _reference_frame(qpos, qvel, quality: bool) -> np.ndarray:
+    """CartPole's side camera rendered here from a state: cheaply (no multisampling,
+    no shadows) or at the MJCF's quality."""
+    import mujoco
+
+    import remoteenv
+
+    model = mujoco.MjModel.from_xml_path(
+        os.path.join(os.path.dirname(remoteenv.scene_path("cartpole")), "cartpole.xml")
+    )
+    if not quality:
+        model.vis.quality.offsamples, model.vis.quality.shadowsize = 0, 0
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = qpos, qvel
+    mujoco.mj_forward(model, data)
+    with mujoco.Renderer(model, height=H, width=W) as renderer:
+        renderer.update_scene(data, camera="side")
+        return renderer.render().copy()
+
+
+@pytest.mark.parametrize("quality", [False, True])
+def test_frames_are_cheap_by_default_and_at_the_mjcf_quality_when_asked(quality):
+    """Streamed frames render without multisampling and shadows unless quality=True
+    (at 64x64 about 50x cheaper under software OpenGL): each episode's first frame
+    is bit for bit MuJoCo's own render of its state at that quality."""
+    kwargs = {} if not quality else {"quality": True}
+    with launch_publishers(
+        "cartpole", num_instances=1, items_per_instance=4, seed=2, episode_steps=2, width=W, height=H, **kwargs
+    ) as pubs:
+        items = list(RemoteIterableDataset.from_publishers(pubs))
+    firsts = [item for item in items if item["step"] == 0]  # right after a reset: the state is the labels'
+    assert len(firsts) == 2
+    for item in firsts:
+        labels = item["labels"]
+        np.testing.assert_array_equal(item["frame"], _reference_frame(labels["qpos"], labels["qvel"], quality))
+        other = _reference_frame(labels["qpos"], labels["qvel"], not quality)
+        assert not np.array_equal(item["frame"], other)  # the two qualities differ visibly

@@ -95,6 +95,7 @@ def test_sb3_ppo_on_the_camera_cartpole(tmp_path, obs_mode, network):
 def test_torch_ppo_on_the_camera_cartpole(tmp_path, obs_mode):
     kwargs = f'{{"obs_mode": "{obs_mode}", "image_size": 36}}'
     args = ["--budget", "128", "--num-envs", "2", "--rollout-steps", "64", "--eval-episodes", "1"]
+    args += ["--reward-scale", "0.01", "--ent-coef", "0.01", "--torch-threads", "2"]  # the pixel recipe's settings
     out = _run("train_ppo.py", [*args, "--env-kwargs", kwargs, "--save", "cam.pt"], tmp_path, [])
     assert out.returncode == 1, out.stderr[-3000:]  # 128 steps do not reach CartPole's target
     assert "did NOT reach the target 475" in out.stdout
@@ -104,3 +105,9 @@ def test_torch_ppo_on_the_camera_cartpole(tmp_path, obs_mode):
     again = _run("train_ppo.py", ["--eval-only", "--save", "cam.pt", "--eval-episodes", "1"], tmp_path, [])
     assert again.returncode == 0, again.stderr[-3000:]
     assert [line for line in again.stdout.splitlines() if line.startswith("evaluation")] == first
+
+
+def test_torch_ppo_refuses_a_reward_scale_that_is_not_positive(tmp_path):
+    out = _run("train_ppo.py", ["--reward-scale", "0", "--budget", "64"], tmp_path, [])
+    assert out.returncode == 2
+    assert "--reward-scale must be > 0, got 0.0" in out.stderr

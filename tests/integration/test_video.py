@@ -73,3 +73,48 @@ def test_demo_record_without_moviepy_names_the_video_extra(tmp_path, monkeypatch
         cli_main(["demo", "cartpole", "--episodes", "1", "--record", str(tmp_path / "out")])
     assert "pip install 'remoteenv[video]'" in str(exit_.value.code)
     assert not (tmp_path / "out").exists()
+
+
+def test_record_video_of_the_agents_camera(tmp_path):
+    """RenderObservation: render() is the observation's image (the newest frame of
+    a stack, scaled up), so RecordVideo records what the agent saw, not the scene's
+    600x400 side view."""
+    from remoteenv.integrations.camera_video import RenderObservation
+
+    env = gym.make("remoteenv/CartPole-v0", obs_mode="pixels", image_size=32, frame_stack=2)
+    assert env.unwrapped.render_mode is None  # the scene renders nothing itself
+    env = gym.wrappers.RecordVideo(
+        RenderObservation(env, scale=2), str(tmp_path), episode_trigger=lambda e: True, name_prefix="agent"
+    )
+    try:
+        obs, _ = env.reset(seed=0)
+        for _ in range(6):
+            obs, *_ = env.step(1)
+            frame = env.render()
+            assert frame.shape == (64, 64, 3) and frame.dtype == np.uint8
+            np.testing.assert_array_equal(frame[::2, ::2], obs[..., -3:])  # the newest frame, each pixel 2x2
+    finally:
+        env.close()
+    assert os.listdir(tmp_path) == ["agent-episode-0.mp4"]
+    assert _is_mp4(os.path.join(tmp_path, "agent-episode-0.mp4"))
+
+
+def test_render_observation_shows_depth_and_segmentation_of_a_dict():
+    from remoteenv.integrations.camera_video import RenderObservation
+
+    kwargs = {"obs_mode": "state_pixels", "image_size": 24, "camera_kind": ["rgb", "depth", "segmentation"]}
+    for key, check in (
+        (None, lambda frame, obs: np.array_equal(frame, obs["agent_rgb"])),  # the rgb image by default
+        ("agent_depth", lambda frame, obs: (frame[..., 0] == frame[..., 2]).all() and frame.max() == 255),
+        (
+            "agent_segmentation",
+            lambda frame, obs: ((obs["agent_segmentation"][..., 0] < 0) == (frame == 0).all(-1)).all(),
+        ),
+    ):
+        env = RenderObservation(gym.make("remoteenv/CartPole-v0", **kwargs), key=key)
+        try:
+            obs, _ = env.reset(seed=0)
+            frame = env.render()
+            assert frame.shape == (24, 24, 3) and frame.dtype == np.uint8 and check(frame, obs), key
+        finally:
+            env.close()

@@ -78,3 +78,58 @@ def test_the_plain_id_trains_after_one_call_in_the_driver(cluster, vectorize) ->
         assert built == [("RemoteVectorEnv" if vectorize == "vector_entry_point" else "SyncVectorEnv", 2)]
     finally:
         algo.stop()
+
+
+def _one_iteration(env_config: dict, vectorize: str = "vector_entry_point", connector=None) -> tuple[dict, list]:
+    """One tiny PPO iteration on CartPole with ``env_config``: the result, and
+    each runner's env observation space."""
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+    import remoteenv.rllib
+
+    remoteenv.rllib.register_envs()
+    config = (
+        PPOConfig()
+        .environment("remoteenv/CartPole-v0", env_config={"seed": 0, **env_config})
+        .env_runners(
+            num_env_runners=1,
+            num_envs_per_env_runner=2,
+            gym_env_vectorize_mode=vectorize,
+            env_to_module_connector=connector,
+        )
+        .training(train_batch_size_per_learner=64, minibatch_size=32, num_epochs=1)
+    )
+    algo = config.build_algo()
+    try:
+        result = algo.train()  # tiny: that it samples and learns, not what it learns
+        spaces = algo.env_runner_group.foreach_env_runner(
+            lambda r: r.env.single_observation_space, local_env_runner=False
+        )
+        return result, spaces
+    finally:
+        algo.stop()
+
+
+@pytest.mark.parametrize("vectorize", ["vector_entry_point", "sync"])
+def test_ppo_samples_and_trains_on_camera_images(cluster, vectorize) -> None:
+    """RLlib's default CNN takes float images: the runners get the uint8 camera
+    images scaled to float32 in [0, 1] (64x64: a size with a default CNN)."""
+    import numpy as np
+
+    result, spaces = _one_iteration({"obs_mode": "pixels", "image_size": 64}, vectorize)
+    assert result["env_runners"]["num_env_steps_sampled"] >= 64
+    assert result["learners"]["default_policy"]["num_module_steps_trained"] > 0
+    (space,) = spaces
+    assert space.shape == (64, 64, 3) and space.dtype == np.float32 and space.high.max() == 1.0
+
+
+def test_a_dict_observation_trains_with_rllibs_flatten_connector(cluster) -> None:
+    """RLlib's default models take one Box: a Dict (state beside the image)
+    trains once RLlib's own FlattenObservations connector flattens it."""
+    from ray.rllib.connectors.env_to_module import FlattenObservations
+
+    result, _ = _one_iteration(
+        {"obs_mode": "state_pixels", "image_size": 16},
+        connector=lambda env, spaces, device: FlattenObservations(),
+    )
+    assert result["env_runners"]["num_env_steps_sampled"] >= 64

@@ -183,3 +183,61 @@ def test_a_missing_module_that_is_no_optional_package_still_raises(monkeypatch):
     monkeypatch.setattr(keys_command, "run", run)
     with pytest.raises(ModuleNotFoundError):
         main(["keys", "somewhere"])
+
+
+def test_latency_sweep_runs_a_plain_python_controller_from_a_module_or_a_file(tmp_path, monkeypatch):
+    monkeypatch.setattr(latency_sweep, "make_env", lambda args, delay: _FakeEnv())
+    monkeypatch.setattr(latency_sweep, "checked_env", lambda args, delay: _FakeEnv())
+    script = tmp_path / "my_controller.py"
+    script.write_text(
+        "import numpy as np\n"
+        "calls = []\n"
+        "def policy(obs):\n"
+        "    calls.append(1)\n"
+        "    return np.zeros(1, np.float32)\n"
+        "class Remembering:\n"
+        "    resets = 0\n"
+        "    def reset(self):\n"
+        "        Remembering.resets += 1\n"
+        "    def __call__(self, obs):\n"
+        "        return np.zeros(1, np.float32)\n"
+    )
+    for controller in [
+        "remoteenv.controllers:cartpole_continuous",
+        str(script),
+        f"{script}:Remembering",
+    ]:
+        out = tmp_path / controller.replace("/", "_").replace(":", "_")
+        argv = ["latency-sweep", "cartpole", "--controller", controller, "--no-plot", "--delays", "0,1"]
+        assert main([*argv, "--episodes", "2", "--seeds", "0", "--out", str(out)]) == 0
+        assert len((out / "sweep.csv").read_text().splitlines()) == 1 + 2 * 2
+        assert "controller" in (out / "sweep.json").read_text()
+
+
+@pytest.mark.parametrize(
+    ("controller", "message"),
+    [
+        ("no_such_module_xyz:f", "cannot import 'no_such_module_xyz'"),
+        ("remoteenv.controllers:nothing_here", "has no 'nothing_here'"),
+        ("remoteenv.controllers:CARTPOLE_DT", "is not callable"),
+        ("missing.py", "'missing.py' is not a file"),
+        ("remoteenv.controllers", "must be module:function or a .py file"),
+    ],
+)
+def test_latency_sweep_names_a_controller_it_cannot_load_in_one_line(tmp_path, monkeypatch, controller, message):
+    monkeypatch.setattr(latency_sweep, "make_env", _no_sims)
+    monkeypatch.setattr(latency_sweep, "checked_env", _no_sims)
+    with pytest.raises(SystemExit, match=message) as exc:
+        main(["latency-sweep", "cartpole", "--controller", controller, "--no-plot", "--out", str(tmp_path / "o")])
+    assert "\n" not in str(exc.value)
+
+
+def test_every_command_help_ends_its_sentences(capsys):
+    """No help description stops mid-sentence (ends with ':') or describes the rounded replay."""
+    for command in ["demo", "bench", "check", "launch", "keys", "new-scene", "latency-sweep", "latency-study"]:
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        text = capsys.readouterr().out
+        description = text.split("\n\npositional arguments:")[0].split("\n\noptions:")[0].strip()
+        assert not description.endswith(":"), (command, description[-80:])
+        assert "replays the recordings in\nlock-step" not in text and "in lock-step, and compares" not in text

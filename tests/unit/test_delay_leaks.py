@@ -14,6 +14,14 @@ correlation is 0 in expectation; ``|corr| <= 0.01`` is asserted. The
 the delay drawn for the action just sent, which the engine keeps for
 debugging as ``sent_delay_ticks``) is the control: the same statistic must
 find it.
+
+The second half does the same for the sim's lock-step stepper itself, on a
+stand-in world, in every combination of delayed rewards, observation delay
+and delivery rule, over every key its replies carry (and each key's change
+since the previous step). A termination is not a delay: under delayed
+rewards it must stay unknown until the terminal observation arrives, which
+the last test checks exactly, by running each episode twice (terminating
+at tick ``N`` and not) and requiring identical replies until ``x_N`` arrives.
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ import pytest
 from remoteenv.delays import Uniform
 from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delay_line import OBS_STREAM, LockStepDelays, delay_rng
+from remoteenv.wire.run_options.options import RunOptions
 
 K = 8
 STEPS = 100_000
@@ -118,9 +127,8 @@ def run(rules: ChannelRules, steps: int = STEPS) -> tuple[list[dict[str, Any]], 
     return rows, action_pairs, obs_pairs
 
 
-def within_age_corr(values: np.ndarray, pairs: list[tuple[int, int, int]]) -> float:
-    """Correlation of ``values[row]`` with the delays of ``pairs``, the delays
-    centred and scaled within each age (see the module docstring)."""
+def within_age_z(pairs: list[tuple[int, int, int]]) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of ``pairs`` and their delays centred and scaled within each age."""
     p = np.asarray(pairs)
     rows, ages, delays = p[:, 0], p[:, 1], p[:, 2].astype(float)
     z = np.zeros_like(delays)
@@ -129,6 +137,14 @@ def within_age_corr(values: np.ndarray, pairs: list[tuple[int, int, int]]) -> fl
         sd = delays[sel].std()
         if sd > 0:
             z[sel] = (delays[sel] - delays[sel].mean()) / sd
+    return rows, z
+
+
+def within_age_corr(values: np.ndarray, pairs: list[tuple[int, int, int]] | tuple[np.ndarray, np.ndarray]) -> float:
+    """Correlation of ``values[row]`` with the delays of ``pairs``, the delays
+    centred and scaled within each age (see the module docstring); ``pairs``
+    may be :func:`within_age_z`'s result."""
+    rows, z = pairs if isinstance(pairs, tuple) else within_age_z(pairs)
     f = values[rows]
     if f.std() == 0:
         return 0.0
@@ -161,3 +177,194 @@ def test_no_reported_value_correlates_with_an_undelivered_delay(rule):
     pooled, newest = within_age_corr(old, action_pairs), within_age_corr(old, lag0)
     print(f"  former latency_ticks     {pooled:+.4f} (age 0 only: {newest:+.4f})")
     assert pooled > 0.1 and newest > 0.5
+
+
+# ---------------------------------------------------------------------------
+# Every key the sim's lock-step stepper reports, in every combination of
+# delayed rewards, observation delay and delivery rule, terminations included.
+
+FS = 4  # substeps per tick of the toy world
+OBS_DELAYS = {"no obs delay": 0, "obs U(0,8)": Uniform(0, K)}
+COMBOS = [(delayed, obs, rule) for delayed in (False, True) for obs in OBS_DELAYS for rule in ("newest", "in_order")]
+
+
+def combo_id(combo: tuple[bool, str, str]) -> str:
+    delayed, obs, rule = combo
+    return f"{'delayed' if delayed else 'immediate'} rewards, {obs}, {rule}"
+
+
+class ToyWorld:
+    """Stands in for a BaseEnv under the lock-step stepper: observation = the
+    tick's number, a random reward, the scene's own info keys, and a
+    termination either at random (``p_end`` per tick) or at tick ``end_at``."""
+
+    def __init__(self, rng: np.random.Generator, p_end: float = 0.0, end_at: int | None = None) -> None:
+        from types import SimpleNamespace
+
+        self.model = SimpleNamespace(opt=SimpleNamespace(timestep=DT / FS))
+        self.frame_skip = FS
+        self.dt = DT
+        self.data = SimpleNamespace(time=0.0)
+        self.rng, self.p_end, self.end_at = rng, p_end, end_at
+        self.tick = 0
+
+    def reset(self, *, seed: int | None, options: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
+        self.data.time = 0.0
+        self.tick = 0
+        return 0.0, {}
+
+    def default_action(self) -> Any:
+        return None
+
+    def step(self, action: Any) -> tuple[Any, float, bool, dict[str, Any]]:
+        self.tick += 1
+        for _ in range(FS):
+            self.data.time += self.model.opt.timestep
+        reward = float(self.rng.normal())
+        if self.p_end:
+            terminated = bool(self.rng.random() < self.p_end)
+        else:
+            terminated = self.tick == self.end_at
+        return float(self.tick), reward, terminated, {"scene_tick": self.tick, "scene_reward": reward}
+
+
+def make_stepper(combo: tuple[bool, str, str], world: ToyWorld) -> Any:
+    from remoteenv.sim.stepping.lock_step import LockStepper
+
+    delayed, obs, rule = combo
+    run = RunOptions(
+        action_delay=Uniform(0, K),
+        obs_delay=OBS_DELAYS[obs],
+        action_delivery=rule,
+        obs_delivery=rule,
+        delayed_rewards=delayed,
+    )
+    return LockStepper(world, run)  # type: ignore[arg-type]
+
+
+def reply_values(reply: dict[str, Any]) -> dict[str, float]:
+    """Every value of a reply as a number: each info key (None as -1, with a
+    ``<key> is None`` companion), the observation, reward and flag."""
+    out = {
+        "returned obs": float(reply["obs"]),
+        "reward": float(reply["reward"]),
+        "terminated": float(reply["terminated"]),
+    }
+    for key, value in reply["info"].items():
+        out[key] = -1.0 if value is None else float(value)
+        out[f"{key} is None"] = float(value is None)
+    return out
+
+
+#: Not reported: the delay drawn for the action just sent, which the statistic must find.
+CONTROL = "control: delay drawn for the action just sent"
+
+
+def run_stepper(combo: tuple[bool, str, str], steps: int) -> tuple[list[dict[str, float]], list, list]:
+    """``steps`` steps of the sim's lock-step stepper on the toy world (episodes
+    ending at random); per step every reported value and its change since the
+    previous step (and the :data:`CONTROL`), and the (step, age, delay) pairs of
+    the undelivered action and observation delays (re-drawn from the documented streams)."""
+    from remoteenv.wire.delays.delay_line import ACTION_STREAM
+
+    world = ToyWorld(np.random.default_rng(0), p_end=0.01)
+    stepper = make_stepper(combo, world)
+    obs_spec = OBS_DELAYS[combo[1]]
+    action_rng, obs_rng = delay_rng(SEED, ACTION_STREAM), delay_rng(SEED, OBS_STREAM)
+    action_draws = obs_draws = 0
+    rows: list[dict[str, float]] = []
+    action_pairs: list[tuple[int, int, int]] = []
+    obs_pairs: list[tuple[int, int, int]] = []
+    seed: int | None = SEED
+    while len(rows) < steps:
+        stepper.reset(seed=seed, options=None)
+        seed = None  # later episodes continue the streams
+        actions: list[tuple[int, int]] = []
+        observations: list[tuple[int, int]] = []
+        previous: dict[str, float] = {}
+        t, done = 0, False
+        while not done and len(rows) < steps:
+            t += 1
+            ticks_before = world.tick
+            reply = stepper.step(t)
+            sent_delay = int(Uniform(0, K).sample(action_rng, action_draws))
+            actions.append((t, sent_delay))
+            action_draws += 1
+            if world.tick > ticks_before:  # a physics tick ran: it drew an observation delay
+                o = 0 if not isinstance(obs_spec, Uniform) else int(obs_spec.sample(obs_rng, obs_draws))
+                obs_draws += isinstance(obs_spec, Uniform)
+                observations.append((t, o))
+            actions = [(s, d) for s, d in actions if s + d > t]
+            observations = [(n, o) for n, o in observations if n + o > t]
+            values = reply_values(reply)
+            row = dict(values)
+            for key, value in values.items():
+                row[f"change of {key}"] = value - previous.get(key, value)
+            previous = values
+            row[CONTROL] = float(sent_delay)
+            action_pairs += [(len(rows), t - s, d) for s, d in actions]
+            obs_pairs += [(len(rows), t - n, o) for n, o in observations]
+            rows.append(row)
+            done = bool(reply["terminated"])
+    return rows, action_pairs, obs_pairs
+
+
+@pytest.mark.parametrize("combo", COMBOS, ids=combo_id)
+def test_no_key_the_stepper_reports_correlates_with_an_undelivered_delay(combo):
+    rows, action_pairs, obs_pairs = run_stepper(combo, STEPS // 2)
+    keys = sorted({k for r in rows for k in r})
+    # Every key of the reply is here (the scene's and the delays' and the timing keys).
+    for key in ("sim_time", "obs_sim_time", "action_delay_ticks", "latency_ticks", "late", "scene_reward"):
+        assert key in keys
+    hidden = [within_age_z(pairs) for pairs in (action_pairs, obs_pairs) if pairs]
+    found = {}
+    for key in keys:
+        values = np.array([r.get(key, 0.0) for r in rows], dtype=float)
+        found[key] = tuple(within_age_corr(values, z) for z in hidden)
+    control = found.pop(CONTROL)[0]
+    worst = max(found, key=lambda k: max(abs(c) for c in found[k]))
+    print(f"\n{combo_id(combo)}: worst {worst} {found[worst]}, control {control:+.3f}")
+    assert max(abs(c) for c in found[worst]) <= 0.01, f"{worst} leaks: {found[worst]}"
+    assert control > 0.1  # the statistic finds a value that does depend on an undelivered delay
+
+
+def run_to(combo: tuple[bool, str, str], seed: int, end_at: int | None, steps: int) -> list[tuple[dict, float]]:
+    """One episode on the toy world ending at tick ``end_at`` (None: never), at
+    most ``steps`` steps: each reply with the world's own clock after it."""
+    world = ToyWorld(np.random.default_rng(seed), end_at=end_at)
+    stepper = make_stepper(combo, world)
+    stepper.reset(seed=seed, options=None)
+    out = []
+    for t in range(1, steps + 1):
+        reply = stepper.step(t)
+        out.append((reply, float(world.data.time)))
+        if reply["terminated"]:
+            break
+    return out
+
+
+@pytest.mark.parametrize("combo", COMBOS, ids=combo_id)
+def test_no_key_tells_a_termination_before_its_observation_arrives(combo):
+    """The same episode twice, alike up to tick ``N`` and the delays drawn: once
+    terminating at ``N``, once not. Until the step that delivers ``x_N`` (and
+    while the running twin has delivered nothing newer), a delayed agent
+    cannot tell them apart, so every value reported must be identical. The
+    world's own clock (what ``sim_time`` reported before: it stops when the
+    physics freezes) is the control: the comparison finds it."""
+    compared = frozen = 0
+    control_differs = False
+    for seed in range(60):
+        end = 5 + seed % 30
+        ended, running = run_to(combo, seed, end, 200), run_to(combo, seed, None, 200)
+        for (a, clock_a), (b, clock_b) in zip(ended, running):
+            if a["terminated"] or float(b["obs"]) > end:
+                break
+            assert a == b, f"seed {seed}, step {a['info'].get('sim_time')}: {a} != {b}"
+            compared += 1
+            if float(a["info"]["sim_time"]) > end * DT + 1e-9:
+                frozen += 1
+                control_differs = control_differs or clock_a != clock_b
+    assert compared > 500
+    delayed, obs, _ = combo
+    if delayed and OBS_DELAYS[obs] != 0:  # the physics froze while the terminal observation travelled
+        assert frozen > 50 and control_differs

@@ -95,7 +95,7 @@ class FakeSim:
             result = getattr(self, f"_{cmd}")(msg)
         except LookupError as exc:
             return protocol.pack(protocol.error_reply(msg["seq"], "state", str(exc)))
-        return protocol.pack({"seq": msg["seq"], "ok": True, **result})
+        return protocol.pack({"seq": msg["seq"], "ok": True, **result}, big_ints=True)  # as a sim's replies
 
     def _handshake(self, msg: dict[str, Any]) -> dict[str, Any]:
         stepping = (
@@ -538,3 +538,42 @@ def test_vector_env_refuses_sims_that_cannot_host_its_worlds():
     group.sims[0].worlds = group.sims[0].worlds[:2]
     with pytest.raises(RemoteEnvError, match=r"hosts 2 world\(s\), not 3"):
         make_vector(3, group)
+
+
+# ------------------------------------------------------------ big integers in infos (issue 35, item 6)
+
+
+@pytest.mark.parametrize("autoreset_mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_big_integers_in_a_vector_envs_infos_reach_the_user_as_python_ints(monkeypatch, autoreset_mode):
+    # Before: Gymnasium's merge typed a new int key int64, and 2**70 raised OverflowError.
+    plain_step = Walker.step
+
+    def step(self: Walker, action: int, timed: bool) -> tuple[np.ndarray, float, bool, dict[str, Any]]:
+        obs, reward, terminated, info = plain_step(self, action, timed)
+        big = {"big": 2**70 + self.pos, "huge": -(2**510), "u64": 2**64 - 1, "nested": {"deep": 2**100}}
+        info.update({k: v for k, v in big.items() if self.steps % 2 == 1 or k != "big"})
+        info["mixed"] = 2**70 if self.pos > 0 else 5  # a small int first, then a big one, or the reverse
+        return obs, reward, terminated, info
+
+    monkeypatch.setattr(Walker, "step", step)
+    env = RemoteVectorEnv(SCENE, 3, launcher=FakeGroup(), envs_per_process=3, autoreset_mode=autoreset_mode)
+    try:
+        env.reset(seed=0)
+        seen_big = 0
+        for _ in range(4):
+            _, _, _, _, infos = env.step(np.array([1, 0, 1]))
+            seen_big += "big" in infos
+            for key in [k for k in ("big", "huge", "u64", "mixed") if k in infos]:
+                assert infos[key].dtype == object, key
+                assert all(type(v) is int for v in present(infos, key)), key
+            assert set(present(infos, "huge")) == {-(2**510)} and set(present(infos, "u64")) == {2**64 - 1}
+            assert set(present(infos["nested"], "deep")) == {2**100}
+            assert set(present(infos, "mixed")) <= {2**70, 5}
+        assert seen_big
+    finally:
+        env.close()
+
+
+def present(infos: dict[str, Any], key: str) -> list[Any]:
+    """The values of ``key`` of the worlds whose info has it (Gymnasium's ``_key`` mask)."""
+    return [v for v, there in zip(infos[key], infos[f"_{key}"]) if there]

@@ -15,7 +15,12 @@ from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
 from remoteenv.sim.stepping.real_time import RealTimeStepper
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.wire.run_options.options import RunOptions
-from remoteenv.wire.run_options.real_time_modes import REPLAY_OPTION, replay_options, split_replay
+from remoteenv.wire.run_options.real_time_modes import (
+    MAX_REPLAY_STEP_TICKS,
+    REPLAY_OPTION,
+    replay_options,
+    split_replay,
+)
 from tests.unit.test_real_time_stepper import FRAME_SKIP, T0, FakeClock, TickWorld, run_until
 
 
@@ -119,6 +124,20 @@ def test_a_replay_answers_every_step_at_once_exactly_as_the_clock_did(mode):
             assert got["info"][key] == real["info"][key], key
     assert twin_world.applied == real_applied  # the same switches at the same substeps
     assert replies[-1]["terminated"]
+    # Issue 35, item 4: the clock renders every tick; the replay only the ticks its replies carry.
+    assert world.observed == list(range(1, 10))
+    assert twin_world.observed == [r["info"]["tick"] for r in replies]
+
+
+def test_a_replayed_step_may_run_at_most_max_replay_step_ticks():
+    twin, _, clock = make("elastic")
+    limit = MAX_REPLAY_STEP_TICKS * FRAME_SKIP
+    begin(
+        twin, clock, replay_options(None, "elastic", [limit, 2 * limit + FRAME_SKIP + 2])
+    )  # step 0 replies at limit + FRAME_SKIP, one substep run
+    assert twin.submit(0, "a", None, None) is not None  # exactly the bound
+    with pytest.raises(RequestError, match=f"more than the {MAX_REPLAY_STEP_TICKS} ticks"):
+        twin.submit(1, "b", None, None)
 
 
 def test_a_replay_refuses_a_step_beyond_the_recording_and_a_schedule_of_another_regime():

@@ -55,6 +55,8 @@ class TickWorld:
         self.ticks = 0
         #: (substep index, action) of every prepare_step call.
         self.applied: list[tuple[int, Any]] = []
+        #: The ticks whose observation was rendered (finish_tick's observe, or observe).
+        self.observed: list[int] = []
         return np.zeros(1), {"reset": True}
 
     def default_action(self) -> Any:
@@ -74,7 +76,16 @@ class TickWorld:
         return np.array([float(self.ticks)]), float(self.ticks), self.ticks == self.end_tick, {"tick": self.ticks}
 
     # BaseEnv's post_step with the observation check; the stepper calls this one.
-    finish_tick = post_step
+    # ``observe`` (rendering, in a scene with cameras) is counted in ``observed``.
+    def finish_tick(self, action: Any, *, observe: bool = True) -> tuple[Any, float, bool, dict[str, Any]]:
+        result = self.post_step(action)
+        if observe:
+            self.observed.append(self.ticks)
+        return result
+
+    def observe(self, state: Any) -> Any:
+        self.observed.append(self.ticks)
+        return state
 
 
 def make(world: TickWorld | None = None, factor: float = 1.0) -> tuple[RealTimeStepper, TickWorld, FakeClock]:

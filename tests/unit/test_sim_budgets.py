@@ -28,9 +28,19 @@ OWNER, OTHER, THIRD = b"\x00owner", b"\x00other", b"\x00third"
 
 
 class FakeFrame(bytes):
-    """A received body part: a buffer with ``more`` (False: the last part)."""
+    """A received body part: a buffer with ``more`` (False: the last part) and
+    ``get(zmq.SRCFD)``, its connection's descriptor (:data:`FDS` by routing id)."""
 
     more = False
+    fd = 0
+
+    def get(self, option: int) -> int:
+        assert option == zmq.SRCFD
+        return self.fd
+
+
+#: The connection descriptor each routing id's frames come on.
+FDS: dict[bytes, int] = {OWNER: 11, OTHER: 12, THIRD: 13}
 
 
 class FakeRouter:
@@ -40,6 +50,7 @@ class FakeRouter:
         self.queued = collections.deque(queued)
         self.sent: list[tuple[bytes, dict[str, Any]]] = []
         self._body: bytes | None = None
+        self._routing_id = b""
 
     def getsockopt(self, option: int) -> int:
         if option == zmq.EVENTS:
@@ -49,9 +60,12 @@ class FakeRouter:
     def recv(self, flags: int = 0, copy: bool = True) -> Any:
         if self._body is None:
             routing_id, self._body = self.queued.popleft()
+            self._routing_id = routing_id
             return routing_id
         body, self._body = self._body, None
-        return FakeFrame(body)
+        frame = FakeFrame(body)
+        frame.fd = FDS.get(self._routing_id, 0)
+        return frame
 
     def send_multipart(self, parts: list[bytes]) -> None:
         self.sent.append((parts[0], protocol.unpack(parts[1])))
@@ -70,6 +84,21 @@ def ids(frames: list[tuple[bytes, Any]]) -> list[tuple[bytes, int]]:
 
 
 # ---------------------------------------------------------------- the channel's policy
+
+
+def test_a_peer_whose_connection_ended_is_reported_gone_once_by_routing_id():
+    # Issue 35, item 4: the driver rule releases a world when its driver's
+    # connection ends (the socket monitor's DISCONNECTED, by descriptor).
+    router = FakeRouter([(OWNER, request(1, "step")), (OTHER, request(2, "render"))])
+    ended: list[int] = []
+    gone: list[bytes] = []
+    channel = ZmqChannel(router, owners=lambda: {OWNER}, disconnected=lambda: ended[:], gone=gone.append)
+    channel.receive_nowait()
+    ended.append(FDS[OWNER])
+    channel.receive_nowait()
+    ended.clear()
+    channel.receive_nowait()
+    assert gone == [OWNER]
 
 
 def test_the_drivers_frames_come_first_then_the_others_in_arrival_order():

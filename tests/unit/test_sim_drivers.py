@@ -1,7 +1,7 @@
 """The driver rule, in-process: one connection drives each world in both
-stepping modes; only it may step the world, and only the connection driving
-the worlds (the sim's owner: its launching pipe, else the last to reset
-them) may close the sim. Connections are ``(channel, routing id)`` pairs
+stepping modes; only it may reset or step the world, and only the connection
+driving the worlds (the sim's owner: its launching pipe, else the first to
+reset them, until its connection ends) may close the sim. Connections are ``(channel, routing id)`` pairs
 passed to ``handle`` directly; no request crosses a socket.
 """
 
@@ -98,17 +98,43 @@ def test_with_a_pipe_no_zeromq_client_may_reset_step_or_close(make, mode):
     assert call(server, pipe, "close")["ok"] and not server.running
 
 
-def test_a_reset_takes_a_world_over_and_the_owner_must_drive_every_world(make):
+def test_a_driven_world_stays_its_drivers_and_the_owner_must_drive_every_world(make):
+    # Issue 35, item 4: a reset no longer takes a world over (it did: a second
+    # tcp client locked the agent attached to a launched sim out of its world).
     server = make("lock_step")
     a, b = zmq_peers(server)
     assert call(server, a, "reset", world=0, seed=0)["ok"]
     assert call(server, b, "reset", world=1, seed=0)["ok"]
     assert refused(call(server, a, "close")) and refused(call(server, b, "close"))  # each drives one world
     assert refused(call(server, a, "step", world=1, action=1))
-    assert call(server, a, "reset", world=1, seed=0)["ok"]  # a takes world 1 over
+    assert refused(call(server, a, "reset", world=1, seed=0))  # b's world stays b's
+    assert call(server, b, "step", world=1, action=1)["ok"]
+    server.drivers.release(b)  # b's connection ends (the socket monitor's notice; see test_hardening_owner)
+    assert server.drivers.driver(1) is None
+    assert call(server, a, "reset", world=1, seed=0)["ok"]  # now a may take it
     assert refused(call(server, b, "step", world=1, action=1))
     assert call(server, a, "step", world=1, action=1)["ok"]
     assert call(server, a, "close")["ok"] and not server.running
+
+
+@pytest.mark.parametrize("mode", ["lock_step", "real_time"])
+def test_a_step_on_a_world_nobody_drives_makes_its_sender_the_driver(make, mode):
+    # After a disconnect notice that came between an agent's timeout and its
+    # reconnect (same routing id), its next step takes its worlds back.
+    server = make(mode, worlds=1)
+    a, b = zmq_peers(server)
+    assert call(server, a, "reset", world=0, seed=0)["ok"]
+    server.drivers.release(a)
+    call(server, a, "step", world=0, action=1)  # real time answers later (None now)
+    assert server.drivers.driver(0) == a
+    assert refused(call(server, b, "reset", world=0, seed=0))
+
+
+def test_the_launching_pipe_is_never_released(make):
+    server = make("lock_step", pipe=True)
+    pipe = (server.channels[1], None)
+    server.drivers.release(pipe)
+    assert server.drivers.driver(0) == pipe
 
 
 def test_batches_follow_the_driver_rule(make):
@@ -145,6 +171,7 @@ def test_nobody_drives_a_fresh_world_and_the_routing_ids_of_drivers_are_known():
     drivers.take([0], ("zmq", b"a"), "reset")
     drivers.take([1], ("zmq", b"b"), "reset")
     assert drivers.routing_ids == {b"a", b"b"}
+    drivers.release(("zmq", b"b"))
     drivers.take([1], ("zmq", b"a"), "reset")
     assert drivers.routing_ids == {b"a"}
     piped = Drivers(2, 0, launcher_channel="pipe")

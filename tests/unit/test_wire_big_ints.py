@@ -37,3 +37,14 @@ def test_an_integer_too_long_is_refused_both_ways():
         protocol.unpack(frame, big_ints=True)
     with pytest.raises(protocol.ProtocolError, match="bytes"):
         protocol.unpack(msgpack.packb({"value": msgpack.ExtType(2, b"")}), big_ints=True)
+
+
+def test_a_batch_with_an_integer_beyond_int64_in_its_infos_goes_as_maps():
+    # Issue 35, item 6: a column is int64; before, 2**70 raised OverflowError in the sim's encoding.
+    from remoteenv.wire.messages.batch_encoding import columnar_infos
+
+    assert "columns" in columnar_infos([{"a": 2**63 - 1}, {"a": -(2**63)}])
+    for big in (2**63, -(2**63) - 1, 2**70, 2**510):
+        packed = columnar_infos([{"a": 1}, {"a": big}])
+        assert packed == {"maps": [{"a": 1}, {"a": big}]}
+        assert protocol.unpack(protocol.pack({"info": packed}, big_ints=True), big_ints=True)["info"] == packed

@@ -4,12 +4,18 @@ Started by the agent (:mod:`remoteenv.agent.launch.dir_reaper`) as a script
 (``python -I -S dir_reaper_main.py AGENT_PID``) that imports only the
 standard library, in a session of its own, with its stdin the read end of a
 pipe whose write end only the agent holds. The agent writes a record for
-each private dir it creates (``+<path>\\0``) and removes (``-<path>\\0``).
+each private dir it creates (``+<dev>:<ino>:<path>\\0``, the dir's identity
+and path) and removes (``-<path>\\0``); ``=\\0`` forgets every dir (the agent
+then names those registered now, after its pipe was full).
 
 It watches the agent through a pidfd (Linux 5.3+; else the end of file on
 its stdin, which comes when the agent's process ends). Once the agent is
 gone, however it ended (SIGKILL included, before any sim existed), it reads
-what is left in the pipe and removes every dir still registered, then exits.
+what is left in the pipe and removes every dir still registered, then exits:
+only the dir with the registered identity, through descriptors, opening
+nothing that could block (a FIFO planted at the path is refused, not
+opened) and following no symlink (:mod:`remoteenv.wire.files.owned_dirs`,
+loaded by path: this script imports nothing else of remoteenv).
 The sims' own orphan guards still end the sims and tidy their files; this
 process covers the moments before a sim exists (the private dir made, the
 zygote still importing) and dirs no sim owns.
@@ -19,23 +25,53 @@ from __future__ import annotations
 
 import os
 import select
-import shutil
 import signal
 import sys
+from types import ModuleType
 
 #: Longest record accepted (a path longer than any the kernel takes).
 MAX_RECORD = 8192
 
 
-def parse(buffer: bytes, dirs: set[str]) -> bytes:
-    """Apply the complete records of ``buffer`` to ``dirs``; return the incomplete rest."""
+def _load_owned_dirs() -> ModuleType:
+    """:mod:`remoteenv.wire.files.owned_dirs`: imported, or loaded from its file when
+    this script runs by path (``-I -S``: the package is not importable then)."""
+    try:
+        from remoteenv.wire.files import owned_dirs
+
+        return owned_dirs
+    except ImportError:
+        import importlib.util
+
+        here = os.path.dirname(os.path.abspath(__file__))
+        path = os.path.join(here, os.pardir, os.pardir, "wire", "files", "owned_dirs.py")
+        spec = importlib.util.spec_from_file_location("remoteenv_owned_dirs", path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+
+owned_dirs = _load_owned_dirs()
+
+
+def parse(buffer: bytes, dirs: dict[str, tuple[int, int]]) -> bytes:
+    """Apply the complete records of ``buffer`` to ``dirs`` (path -> identity);
+    return the incomplete rest."""
     *records, rest = buffer.split(b"\0")
     for record in records:
-        path = os.fsdecode(record[1:])
-        if record[:1] == b"+" and os.path.isabs(path):
-            dirs.add(path)
-        elif record[:1] == b"-":
-            dirs.discard(path)
+        kind = record[:1]
+        if kind == b"+":
+            dev, _, rest_of = record[1:].partition(b":")
+            ino, _, raw_path = rest_of.partition(b":")
+            dir_id = owned_dirs.parse_id(f"{dev.decode(errors='replace')}:{ino.decode(errors='replace')}")
+            path = os.fsdecode(raw_path)
+            if dir_id is not None and os.path.isabs(path):
+                dirs[path] = dir_id
+        elif kind == b"-":
+            dirs.pop(os.fsdecode(record[1:]), None)
+        elif kind == b"=":
+            dirs.clear()
     return b"" if len(rest) > MAX_RECORD else rest
 
 
@@ -48,7 +84,7 @@ def _pidfd(pid: int) -> int:
 
 def reap(agent_pid: int, stdin: int = 0) -> int:
     """Watch ``agent_pid`` (our parent) and the records on ``stdin``; remove the dirs once it is gone."""
-    dirs: set[str] = set()
+    dirs: dict[str, tuple[int, int]] = {}
     buffer = b""
     agent = _pidfd(agent_pid)
     if agent >= 0 and os.getppid() != agent_pid:  # checked after opening: the pidfd cannot name another
@@ -82,8 +118,8 @@ def reap(agent_pid: int, stdin: int = 0) -> int:
             if not data:
                 break
             buffer = parse(buffer + data, dirs)
-    for path in dirs:
-        shutil.rmtree(path, ignore_errors=True)
+    for path, dir_id in dirs.items():
+        owned_dirs.remove_dir(path, dir_id)
     return 0
 
 

@@ -186,7 +186,8 @@ class Launcher:
             raise FileNotFoundError(f"scene script {spec.scene!r} does not exist")
         self.spec = spec
         self._state = LaunchState(workdir=tempfile.mkdtemp(prefix="remoteenv-"))
-        watch_dir(self._state.workdir)  # removed even if this process is killed before any sim exists
+        # Removed even if this process is killed before any sim exists; only this dir, never what replaces it.
+        self._state.workdir_id = watch_dir(self._state.workdir)
         self._finalizer = weakref.finalize(self, stop_all, self._state)
         try:
             for i in range(spec.num_instances):

@@ -20,11 +20,11 @@ import time
 from collections.abc import Sequence
 from typing import Any, Protocol
 
-from remoteenv.agent.errors import RemoteEnvError, SceneArgumentError
+from remoteenv.agent.errors import LimitError, RemoteEnvError, SceneArgumentError
 from remoteenv.wire.delays.delay_file import write_delay_file
 from remoteenv.wire.files.file_reads import UnreadableFile, read_json
 from remoteenv.wire.run_options.options import RunOptions
-from remoteenv.wire.wire_errors import SCENE_ARGS_MARKER
+from remoteenv.wire.wire_errors import RESOURCES_MARKER, SCENE_ARGS_MARKER
 
 #: Largest ready file read (a sim writes its endpoint and pid: well under 1 KiB).
 READY_FILE_LIMIT = 64 << 10
@@ -153,13 +153,19 @@ def startup_failure(sim: StartingSim, what: str, why: str) -> RemoteEnvError:
     """The error for a sim that exited before reporting ready; ``why`` is its
     ``death()`` text, ``what`` names the scene. A
     :class:`~remoteenv.agent.errors.SceneArgumentError` (a ``TypeError``) when
-    the scene refused its keyword arguments (the sim says so on stderr), else
+    the scene refused its keyword arguments (the sim says so on stderr), a
+    :class:`~remoteenv.agent.errors.LimitError` when its worlds would not fit in
+    memory (the same way), else
     a launch error, with a hint when the script exited cleanly without
     serving (it never called ``run_scene``)."""
-    refused = [line for line in sim.stderr_tail().splitlines() if SCENE_ARGS_MARKER in line]
+    tail = sim.stderr_tail().splitlines()
+    refused = [line for line in tail if SCENE_ARGS_MARKER in line]
     if refused:
         reason = refused[-1].split(SCENE_ARGS_MARKER, 1)[1].strip()
         return SceneArgumentError(f"{reason} (sim instance {sim.instance} of {what})", instance=sim.instance)
+    too_many = [line for line in tail if RESOURCES_MARKER in line]
+    if too_many:
+        return LimitError(too_many[-1].split(RESOURCES_MARKER, 1)[1].strip()[:1000], instance=sim.instance)
     raised = scene_exception(sim.stderr_tail(lines=400))
     if raised is not None:  # the scene's own exception first, then how the process ended and its traceback
         ended = why.split("; last lines of its stderr:", 1)[0]

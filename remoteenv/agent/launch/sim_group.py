@@ -33,8 +33,14 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 from remoteenv.agent.connection.sim_connection import SimConnection
+from remoteenv.agent.errors import LimitError
 from remoteenv.wire.files.keys import KeyPair
 from remoteenv.wire.run_options.options import RunOptions
+
+#: Longest JSON text of a launch's env kwargs (characters): they travel on the
+#: sim's command line (a fork request below the zygote's control-message limit,
+#: or an exec argument below the kernel's 128 KiB per argument).
+MAX_ENV_KWARGS_CHARS = 64 * 1024
 
 
 @dataclass(frozen=True)
@@ -72,9 +78,14 @@ class LaunchSpec:
         if self.num_instances < 1 or self.worlds_per_instance < 1:
             raise ValueError("num_instances and worlds_per_instance must be >= 1")
         try:
-            json.dumps(self.env_kwargs)
+            size = len(json.dumps(self.env_kwargs))
         except TypeError as exc:
             raise TypeError(f"env kwargs must be JSON-serializable to reach the scene: {exc}") from None
+        if size > MAX_ENV_KWARGS_CHARS:
+            raise LimitError(
+                f"env kwargs take {size} characters as JSON, more than the {MAX_ENV_KWARGS_CHARS} a sim's "
+                "command line carries: pass large data as a file path the scene reads instead"
+            )
 
     def layout(self, source: str) -> SimLayout:
         """The layout of the sims this spec starts; ``source`` names who started them, for messages."""

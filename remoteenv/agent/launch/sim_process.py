@@ -6,7 +6,6 @@ Runs in the agent process (used by :class:`remoteenv.agent.launch.launcher.Launc
 from __future__ import annotations
 
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -16,6 +15,7 @@ from typing import Protocol
 
 from remoteenv.agent.launch.dir_reaper import forget_dir
 from remoteenv.wire.files.file_reads import read_tail
+from remoteenv.wire.files.owned_dirs import DirId, remove_dir
 
 _STDERR_TAIL_LINES = 20
 
@@ -117,6 +117,8 @@ class LaunchState:
     no reference to the launcher, so the launcher can be garbage collected."""
 
     workdir: str
+    #: The identity of the dir made at ``workdir`` (None: not a dir of ours, nothing is removed).
+    workdir_id: DirId | None = None
     sims: list[SimProcess] = field(default_factory=list)
 
 
@@ -140,7 +142,8 @@ def stop_all(state: LaunchState, grace: float = 2.0) -> None:
         except subprocess.TimeoutExpired:
             kill_group(sim.proc.pid, signal.SIGKILL)
             sim.proc.wait()
-    shutil.rmtree(state.workdir, ignore_errors=True)
+    if state.workdir_id is not None:  # through descriptors: nothing planted there is followed or opened
+        remove_dir(state.workdir, state.workdir_id)
     forget_dir(state.workdir)
     for sim in state.sims:
         # Reap the group even if the sim exited by itself but left children (its orphan guard).

@@ -24,13 +24,13 @@ import zmq
 
 from remoteenv.agent.connection.connect import SimConnection
 from remoteenv.agent.connection.reply_checks import ReplyChecks
-from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.agent.errors import BatchTooLargeError, RemoteEnvError
 from remoteenv.agent.launch.attach import AttachedSims
 from remoteenv.agent.launch.launcher import Launcher
 from remoteenv.agent.launch.restart import RestartBudget
 from remoteenv.agent.launch.sim_group import LaunchSpec, SimGroup
 from remoteenv.agent.session.scene_signature import check_scene_kwargs
-from remoteenv.wire.messages.handshake import Handshake, handshake_request, parse_handshake
+from remoteenv.wire.messages.handshake import BatchTooLarge, Handshake, handshake_request, parse_handshake
 from remoteenv.wire.wire_errors import ProtocolError
 
 #: Seconds to wait for a sim to acknowledge ``close`` (unless ``call_timeouts``
@@ -80,6 +80,8 @@ class SimSession:
         startup_timeout: default handshake timeout in seconds.
         restart_on_failure, max_restarts: see :class:`~remoteenv.agent.launch.restart.RestartBudget`.
         label: how messages name the env, e.g. ``"OpenAIRemoteEnv (cartpole_scene.py)"``.
+        measure_world_cost: ask the first sim's handshake to measure what one
+            world's tick costs (``Handshake.world_cost_s``; a vector env's default layout reads it).
     """
 
     def __init__(
@@ -93,8 +95,10 @@ class SimSession:
         restart_on_failure: bool = False,
         max_restarts: int = 3,
         label: str = "env",
+        measure_world_cost: bool = False,
     ) -> None:
         self.restarts = RestartBudget(restart_on_failure, max_restarts)
+        self.measure_world_cost = measure_world_cost
         if restart_on_failure and not group.owns_sims:
             raise ValueError(
                 "restart_on_failure needs sims this env launched; attached sims belong to the launch command"
@@ -129,7 +133,10 @@ class SimSession:
             for index in range(len(self.group.sims)):
                 self.conns.append(self.group.connect(index, self.timeout))
             timeout = self.timeout_for("handshake")
-            seqs = [conn.send("handshake", **handshake_request()) for conn in self.conns]
+            seqs = [
+                conn.send("handshake", **handshake_request(world_cost=self.measure_world_cost and index == 0))
+                for index, conn in enumerate(self.conns)
+            ]
             self.handshakes = [
                 self._parse(conn, conn.receive(seq, timeout, what="'handshake'")) for conn, seq in zip(self.conns, seqs)
             ]
@@ -193,6 +200,13 @@ class SimSession:
             return []
         return [sim.pid for sim in self.group.sims]
 
+    @property
+    def local_sims(self) -> int:
+        """How many of the sims this session's group started on this machine (0 for attached sims)."""
+        if not self.group.owns_sims:
+            return 0
+        return sum(1 for sim in self.group.sims if sim.node is None)
+
     def timeout_for(self, cmd: str) -> float | None:
         """Seconds to wait for the reply to ``cmd`` (see ``call_timeouts``)."""
         timeouts = self.call_timeouts
@@ -239,6 +253,13 @@ class SimSession:
     def _parse(self, conn: SimConnection, reply: dict[str, Any]) -> Handshake:
         try:
             return parse_handshake(reply)
+        except BatchTooLarge as exc:
+            err = BatchTooLargeError(
+                f"sim instance {conn.instance} at {conn.endpoint} gave {self.label} a handshake it cannot use: {exc}",
+                instance=conn.instance,
+            )
+            err.worlds_that_fit = exc.worlds_that_fit
+            raise err from None
         except ProtocolError as exc:
             raise RemoteEnvError(
                 f"sim instance {conn.instance} at {conn.endpoint} gave {self.label} a handshake it cannot use: {exc}",
@@ -259,6 +280,7 @@ def open_session(
     startup_timeout: float,
     restart_on_failure: bool,
     max_restarts: int,
+    measure_world_cost: bool = False,
     **launch: Any,
 ) -> SimSession:
     """An open session over ``group``, as an env's constructor makes it.
@@ -269,7 +291,7 @@ def open_session(
     each, with ``startup_timeout`` and the ``launch`` options (the spec's other
     fields: ``seed``, ``env_kwargs``, ``render_mode``, ``real_time``,
     ``real_time_factor``, ``real_time_mode``, ``action_delay``, ``obs_delay``, ``link_delay``).
-    ``label`` and the other arguments are :class:`SimSession`'s.
+    ``label`` and the other arguments (``measure_world_cost`` too) are :class:`SimSession`'s.
     """
     spec = (
         None
@@ -285,6 +307,7 @@ def open_session(
         restart_on_failure=restart_on_failure,
         max_restarts=max_restarts,
         label=label,
+        measure_world_cost=measure_world_cost,
     )
     session.open()
     return session

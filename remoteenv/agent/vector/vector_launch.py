@@ -8,9 +8,13 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from remoteenv.agent.errors import BatchTooLargeError, LimitError
 from remoteenv.agent.launch.sim_group import SimGroup
 from remoteenv.agent.session.sim_session import SimSession, open_session
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, world_slices
+from remoteenv.wire.codec.spaces import value_nbytes
+from remoteenv.wire.memory import worlds_problem
+from remoteenv.wire.messages.handshake import worlds_that_fit
 
 
 def open_worlds(
@@ -22,27 +26,65 @@ def open_worlds(
     launch: dict[str, Any],
     *,
     regroup: Callable[[], SimGroup] | None = None,
-) -> tuple[SimSession, int]:
+    measure_cost: bool = False,
+) -> tuple[SimSession, int, float | None]:
     """Start (or take) the sims of ``num_envs`` worlds, ``envs_per_process`` (K,
-    capped at ``num_envs``) each: the open session and the K it runs.
+    capped at ``num_envs``) each: the open session, the K it runs, and what one
+    world's tick costs (seconds; None unless measured).
 
     ``launch``: :func:`~remoteenv.agent.session.sim_session.open_session`'s options.
     ``regroup`` (given for the default layout only): the worlds are placed
-    again from what one costs (the handshake's ``world_cost_s``, see
-    :func:`~remoteenv.agent.vector.vector_layout.default_envs_per_process`):
+    again from what one costs (with ``measure_cost``, the first sim measures
+    one world's whole tick: physics and every hook, however the scene renders,
+    the handshake's ``world_cost_s``, see :mod:`remoteenv.sim.scene.world_cost`
+    and :func:`~remoteenv.agent.vector.vector_layout.default_envs_per_process`):
     if that gives another K, the sims are closed and relaunched once in a
-    group from ``regroup()``.
+    group from ``regroup()``. K is also at most what one batch reply carries
+    the observations of (a process of 8 worlds of 1280x1280 pixels, 39 MB,
+    would be refused: it gets 6): a first launch refused for that is placed
+    again the same way.
     """
     per_process = min(envs_per_process, num_envs)
-    session = open_session(group, label, scene, len(world_slices(num_envs, per_process)), per_process, **launch)
+
+    def start(source: SimGroup, k: int, measure: bool = False) -> SimSession:
+        slices = len(world_slices(num_envs, k))
+        return open_session(source, label, scene, slices, k, measure_world_cost=measure, **launch)
+
+    try:
+        session = start(group, per_process, measure_cost)
+    except BatchTooLargeError as exc:
+        # The default layout put more worlds in a process than one batch reply
+        # carries the observations of: place them again so that each fits.
+        if regroup is None or not 1 <= exc.worlds_that_fit < per_process:
+            raise
+        per_process = exc.worlds_that_fit
+        return _bounded(start(regroup(), per_process), num_envs, label), per_process, None
+    _bounded(session, num_envs, label)
+    handshake = session.handshake
+    cost = handshake.world_cost_s
     if regroup is None:
-        return session, per_process
-    better = min(default_envs_per_process(num_envs, session.handshake.world_cost_s), num_envs)
+        return session, per_process, cost
+    fit = worlds_that_fit(handshake.observation_space)
+    better = min(default_envs_per_process(num_envs, cost), num_envs, max(1, fit))
     if better == per_process:
-        return session, per_process
+        return session, per_process, cost
     session.close()
-    session = open_session(regroup(), label, scene, len(world_slices(num_envs, better)), better, **launch)
-    return session, better
+    return start(regroup(), better), better, cost
+
+
+def _bounded(session: SimSession, num_envs: int, label: str) -> SimSession:
+    """``session``, unless the agent's buffers for ``num_envs`` observations
+    (a batch, the final observations of an autoreset, a shared region: three
+    copies) would not fit in this machine's memory: then closed, and a
+    :class:`~remoteenv.agent.errors.LimitError` with the figures."""
+    each = 3 * value_nbytes(session.handshake.observation_space)
+    problem = worlds_problem(
+        num_envs, each, f"{label}'s observation buffers", "ask for at most {fit} worlds (num_envs) of this observation"
+    )
+    if problem is not None:
+        session.close()
+        raise LimitError(problem)
+    return session
 
 
 __all__ = ["open_worlds"]

@@ -101,6 +101,27 @@ def _finals(result: dict[str, Any]) -> list[Any]:
     return final
 
 
+def hold_big_ints(vector_infos: dict[str, Any], env_info: dict[str, Any], num_envs: int) -> dict[str, Any]:
+    """``vector_infos`` made ready for ``env_info``'s Python ints beyond int64
+    (Gymnasium's merge types a new int key ``int``, and writing 2**70 there
+    raises ``OverflowError``): such a key's array becomes an object array
+    holding each world's value as a Python int. Changes and returns ``vector_infos``."""
+    for key, value in env_info.items():
+        if type(value) is not int or _INT64_MIN <= value <= _INT64_MAX:
+            continue
+        arr = vector_infos.get(key)
+        if arr is None:
+            vector_infos[key] = np.full(num_envs, None, dtype=object)
+        elif isinstance(arr, np.ndarray) and arr.dtype.kind in "iub" and arr.shape == (num_envs,):
+            held = np.empty(num_envs, dtype=object)
+            held[:] = arr.tolist()
+            vector_infos[key] = held
+    return vector_infos
+
+
+_INT64_MIN, _INT64_MAX = -(2**63), 2**63 - 1
+
+
 def hold_nones(vector_infos: dict[str, Any], env_info: dict[str, Any], num_envs: int) -> dict[str, Any]:
     """``vector_infos`` made ready for one more rule than Gymnasium's merge of
     ``env_info`` (one world's): a world's None for a key other worlds gave a

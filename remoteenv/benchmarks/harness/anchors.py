@@ -61,6 +61,37 @@ def make_envpool(task_id: str, num_envs: int, batch_size: int | None = None) -> 
     return envpool.make_gymnasium(task_id, **kwargs)
 
 
+def _proc_stat(pid: int | str) -> list[str] | None:
+    """The fields of ``/proc/<pid>/stat`` after the command name, or None if it is gone."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+
+
+def process_tree(exclude: frozenset[int] = frozenset()) -> set[int]:
+    """This process and every live process below it (read from /proc: Linux;
+    elsewhere this process alone), except the pids in ``exclude`` and what runs below them."""
+    me = os.getpid()
+    try:
+        entries = [e for e in os.listdir("/proc") if e.isdigit()]
+    except OSError:
+        return {me}
+    parent: dict[int, int] = {}
+    for entry in entries:
+        fields = _proc_stat(entry)
+        if fields is not None:
+            parent[int(entry)] = int(fields[1])  # after ")": state, ppid, ...
+    below = {me}
+    grew = True
+    while grew:
+        new = {pid for pid, ppid in parent.items() if ppid in below and pid not in below and pid not in exclude}
+        below |= new
+        grew = bool(new)
+    return below
+
+
 def cpu_seconds(exclude: frozenset[int] = frozenset()) -> float:
     """CPU seconds (user + system) used so far by this process and every live
     process below it (the sims, Gymnasium's or SB3's workers, also those a
@@ -68,29 +99,34 @@ def cpu_seconds(exclude: frozenset[int] = frozenset()) -> float:
     them; descendants are read from /proc (Linux), else left out."""
     total = time.process_time()
     tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-    try:
-        entries = [e for e in os.listdir("/proc") if e.isdigit()]
-    except OSError:
-        return total
-    parent: dict[int, int] = {}
-    used: dict[int, float] = {}
-    for entry in entries:
-        try:
-            with open(f"/proc/{entry}/stat") as f:
-                fields = f.read().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
-            continue
-        # After ")": state, ppid, ...; utime and stime are the 12th and 13th.
-        parent[int(entry)] = int(fields[1])
-        used[int(entry)] = (int(fields[11]) + int(fields[12])) / tick
     me = os.getpid()
-    below = {me}
-    grew = True
-    while grew:
-        new = {pid for pid, ppid in parent.items() if ppid in below and pid not in below and pid not in exclude}
-        below |= new
-        grew = bool(new)
-    return total + sum(used[pid] for pid in below if pid != me)
+    for pid in process_tree(exclude) - {me}:
+        fields = _proc_stat(pid)
+        if fields is not None:  # utime and stime are the 12th and 13th after ")"
+            total += (int(fields[11]) + int(fields[12])) / tick
+    return total
+
+
+def context_switches(pids: set[int]) -> tuple[int, int]:
+    """``(voluntary, involuntary)`` context switches so far of every thread of ``pids``
+    (Linux's ``/proc/<pid>/task/*/status``; (0, 0) elsewhere)."""
+    voluntary = involuntary = 0
+    for pid in pids:
+        try:
+            tasks = os.listdir(f"/proc/{pid}/task")
+        except OSError:
+            continue
+        for task in tasks:
+            try:
+                with open(f"/proc/{pid}/task/{task}/status") as f:
+                    for line in f:
+                        if line.startswith("voluntary_ctxt_switches:"):
+                            voluntary += int(line.split()[1])
+                        elif line.startswith("nonvoluntary_ctxt_switches:"):
+                            involuntary += int(line.split()[1])
+            except (OSError, ValueError, IndexError):
+                continue
+    return voluntary, involuntary
 
 
 class CpuHog:
@@ -118,4 +154,4 @@ class CpuHog:
         self._procs = []
 
 
-__all__ = ["CpuHog", "PhysicsLimit", "cpu_seconds", "make_envpool"]
+__all__ = ["CpuHog", "PhysicsLimit", "context_switches", "cpu_seconds", "make_envpool", "process_tree"]

@@ -11,17 +11,20 @@ what ``AsyncVectorEnv`` pickles to its workers.
 from __future__ import annotations
 
 import importlib.util
+import os
 from typing import Any
 
 import gymnasium as gym
 
 
 def scene_class(scene: str) -> Any:
-    """The env class of shipped scene ``scene`` (``"cartpole"``, ``"reacher"``), loaded from its script."""
+    """The env class of shipped scene ``scene`` (``"cartpole"``, ``"reacher"``) or of the
+    scene script at path ``scene`` (a name ending in ``.py``), loaded from its script."""
     import remoteenv
 
-    path = remoteenv.scene_path(scene)
-    spec = importlib.util.spec_from_file_location(f"_in_process_{scene}_scene", path)
+    path = scene if scene.endswith(".py") else remoteenv.scene_path(scene)
+    name = os.path.splitext(os.path.basename(path))[0]
+    spec = importlib.util.spec_from_file_location(f"_in_process_{name}", path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import importlib
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -36,6 +35,7 @@ from remoteenv.agent.launch.sim_command import scene_command, wait_ready, write_
 from remoteenv.agent.launch.sim_process import SimProcess
 from remoteenv.wire.addresses import is_loopback
 from remoteenv.wire.files.keys import check_key, write_public_keys, write_secret_key
+from remoteenv.wire.files.owned_dirs import identity, remove_dir
 from remoteenv.wire.run_options.options import RunOptions
 
 #: Seconds a stopping child gets between SIGTERM and SIGKILL.
@@ -128,6 +128,7 @@ class SimActor:
         self.node_id: str = node_id
         self.scene = resolve_scene(spec.scene)
         self.workdir = tempfile.mkdtemp(prefix=f"remoteenv-ray-{spec.instance}-")
+        self._workdir_id = identity(self.workdir)
         self._lock = threading.Lock()
         self._sim: SimProcess | None = None
         #: Every child this actor started, by generation (1, 2, ...).
@@ -193,7 +194,8 @@ class SimActor:
         remove the private dir. The actor can be dropped afterwards."""
         with self._lock:
             self._stop_child()
-            shutil.rmtree(self.workdir, ignore_errors=True)
+            if self._workdir_id is not None:  # only the dir made, never what replaced it
+                remove_dir(self.workdir, self._workdir_id)
 
     # ------------------------------------------------------------ internals
 

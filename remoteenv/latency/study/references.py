@@ -32,6 +32,7 @@ import gymnasium as gym
 from remoteenv.latency.action_history import ActionHistory
 from remoteenv.latency.study.design import StudyConfig, random_model
 from remoteenv.latency.study.training import evaluate
+from remoteenv.wire.delays.channel_rules import NEWEST
 
 CARTPOLE_ID = "remoteenv/CartPole-v0"
 
@@ -56,6 +57,9 @@ def _mean_return(config: StudyConfig, policy: Any, action_delay: Any, history: i
     if history:
         env = ActionHistory(env, history, include_alpha=alpha)
     try:
+        check = getattr(policy, "check_env", None)
+        if callable(check):  # refuses, in one line, an env it does not predict
+            check(env)
         returns = evaluate(env, policy, config.eval_episodes, config.eval_seed)
     finally:
         env.close()
@@ -80,7 +84,7 @@ def reference_returns(config: StudyConfig) -> dict[str, Any] | None:
     for name in config.random_delays:
         spec = random_model(name)
         random[LQR][name] = _mean_return(config, cartpole_continuous, spec, 0)
-        expected = CartpoleExpectedPredictor(spec)
+        expected = CartpoleExpectedPredictor(spec, action_delivery=config.env_kwargs.get("action_delivery", NEWEST))
         random[EXPECTED][name] = _mean_return(config, expected, spec, int(spec.high) + 1, alpha=True)
     gains = {LQR: CARTPOLE_GAINS.tolist(), PREDICTOR: CARTPOLE_GAINS.tolist(), EXPECTED: CARTPOLE_SOFT_GAINS.tolist()}
     return {"constant": constant, "random": random, "gains": gains}

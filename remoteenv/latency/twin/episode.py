@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from remoteenv.latency.twin.recorded_env import RecordedEnv
 from remoteenv.latency.twin.trace import twin_latency, twin_values
 from remoteenv.wire.delays.delay_specs import Trace
 from remoteenv.wire.run_options.real_time_modes import ELASTIC
@@ -39,6 +40,10 @@ class RecordedEpisode:
         obs_digests: :func:`~remoteenv.latency.twin.digest.obs_digest` of the
             reset's observation, then of each step's.
         unreplayable: why the exact twin cannot replay this episode (None: it can).
+        link_delays: with an emulated link, each step's ``info["link_delay_s"]``
+            (wall seconds), which the twin reports again; None: no link.
+        env: the env it ran in (:class:`~remoteenv.latency.twin.recorded_env.RecordedEnv`;
+            None: unknown, e.g. a recording of format version 1).
     """
 
     seed: int | None
@@ -53,6 +58,8 @@ class RecordedEpisode:
     action_substeps: list[int] = field(default_factory=list)
     obs_digests: list[str] = field(default_factory=list)
     unreplayable: str | None = None
+    link_delays: list[float] | None = None
+    env: RecordedEnv | None = None
 
     @property
     def steps(self) -> int:

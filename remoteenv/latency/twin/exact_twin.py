@@ -14,15 +14,34 @@ import gymnasium as gym
 
 from remoteenv.latency.twin.digest import obs_digest
 from remoteenv.latency.twin.episode import RecordedEpisode
-from remoteenv.wire.run_options.real_time_modes import replay_options
+from remoteenv.wire.run_options.real_time_modes import MAX_REPLAY_RESETS, MAX_REPLAY_STEP_TICKS, replay_options
+
+#: Seeds a reset takes (Gymnasium's: an int >= 0; remoteenv's wire: below 2**64).
+_SEEDS = range(0, 2**64)
 
 
 def check_replayable(episode: RecordedEpisode) -> None:
-    """Raise a ValueError saying why ``episode`` cannot be replayed exactly, if it cannot."""
+    """Raise a ValueError saying why ``episode`` cannot be replayed exactly, if
+    it cannot (before any sim starts): the recorder named it unreplayable, no
+    seed, or more work than a replay may do (:data:`MAX_REPLAY_RESETS` resets to
+    reach its start, :data:`MAX_REPLAY_STEP_TICKS` ticks in one step)."""
     if episode.unreplayable:
         raise ValueError(f"this episode cannot be replayed exactly: {episode.unreplayable}")
     if episode.seed is None:
         raise ValueError("this episode's reset had no seed: reset real-time runs with a seed to replay them")
+    if isinstance(episode.seed, bool) or not isinstance(episode.seed, int) or episode.seed not in _SEEDS:
+        raise ValueError(f"this episode's seed {str(episode.seed)[:30]} is no reset seed (an int in 0..2**64-1)")
+    if not 0 <= episode.resets_after_seed <= MAX_REPLAY_RESETS:
+        raise ValueError(
+            f"this episode starts {str(episode.resets_after_seed)[:30]} unseeded resets after its seed, more than "
+            f"the {MAX_REPLAY_RESETS} a replay repeats: reset with a seed every so many episodes to keep them replayable"
+        )
+    longest = max(episode.ticks_elapsed, default=0)
+    if longest > MAX_REPLAY_STEP_TICKS:
+        raise ValueError(
+            f"a step of this episode lasted {str(longest)[:30]} ticks, more than the {MAX_REPLAY_STEP_TICKS} "
+            "one replayed step may run"
+        )
     if not episode.action_substeps or len(episode.action_substeps) != episode.steps:
         raise ValueError(f"this episode has {episode.steps} steps but {len(episode.action_substeps)} substeps")
 
@@ -60,7 +79,8 @@ class ExactTwin(gym.Wrapper):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(
-            seed=seed, options=replay_options(options, self.episode.mode, self.episode.action_substeps)
+            seed=seed,
+            options=replay_options(options, self.episode.mode, self.episode.action_substeps, self.episode.link_delays),
         )
         self.obs_digests, self.rewards = [obs_digest(obs)], []
         self.terminated = self.truncated = False

@@ -16,6 +16,7 @@ import gymnasium as gym
 from remoteenv.agent.launch.restart import INFO_RESTARTED
 from remoteenv.latency.twin.digest import obs_digest
 from remoteenv.latency.twin.episode import RecordedEpisode
+from remoteenv.latency.twin.recorded_env import RecordedEnv
 from remoteenv.latency.twin.recording_file import save_recording
 from remoteenv.latency.twin.trace import ROUNDINGS, write_trace_file
 from remoteenv.wire.run_options.real_time_modes import ELASTIC
@@ -32,11 +33,13 @@ class EpisodeLog:
             after an episode ended).
     """
 
-    def __init__(self, rounding: str = "nearest", mode: str = ELASTIC) -> None:
+    def __init__(self, rounding: str = "nearest", mode: str = ELASTIC, env: RecordedEnv | None = None) -> None:
         if rounding not in ROUNDINGS:
             raise ValueError(f"rounding must be one of {ROUNDINGS}, got {rounding!r}")
         self.rounding = rounding
         self.mode = mode
+        #: The env every episode ran in (None: unknown).
+        self.env = env
         self.episodes: list[RecordedEpisode] = []
         self.current: RecordedEpisode | None = None
         self._seed: int | None = None
@@ -55,7 +58,7 @@ class EpisodeLog:
             self._since_seed += 1
         if (info or {}).get(INFO_RESTARTED) and seed is None:
             self._tainted = "an unseeded reset on a restarted sim (its scene RNG state was lost with the old process)"
-        ep = RecordedEpisode(self._seed, self._since_seed, rounding=self.rounding, mode=self.mode)
+        ep = RecordedEpisode(self._seed, self._since_seed, rounding=self.rounding, mode=self.mode, env=self.env)
         ep.unreplayable = self._tainted
         if options:
             ep.unreplayable = "a reset with options (the twin resets with the recorded seed only)"
@@ -69,10 +72,12 @@ class EpisodeLog:
         reward: float,
         replay_substep: int | None = None,
         obs: Any = None,
+        link_delay: float | None = None,
     ) -> None:
         """One real-time step (``latency_ticks`` None: its action never took
         effect; ``replay_substep``: see :attr:`RecordedEpisode.action_substeps`,
-        None if the sim did not report it, which makes the episode unreplayable)."""
+        None if the sim did not report it, which makes the episode unreplayable;
+        ``link_delay``: its ``info["link_delay_s"]``, None without an emulated link)."""
         if self.current is None:
             raise RuntimeError("a real-time step outside an episode: call reset() first")
         ep = self.current
@@ -80,6 +85,10 @@ class EpisodeLog:
         ep.latency_ticks.append(None if latency_ticks is None else float(latency_ticks))
         ep.rewards.append(float(reward))
         ep.obs_digests.append(obs_digest(obs))
+        if link_delay is not None:
+            if ep.link_delays is None:
+                ep.link_delays = [0.0] * (ep.steps - 1)
+            ep.link_delays.append(float(link_delay))
         if replay_substep is None:
             ep.unreplayable = ep.unreplayable or "the sim's replies carry no substep (a server without exact replay)"
         else:
@@ -98,7 +107,15 @@ class EpisodeLog:
         applied = applied and math.isfinite(float(info["latency_ticks"]))
         substep = info.get("action_substep") if applied else info.get("substep")
         latency = float(info["latency_ticks"]) if applied else None
-        self.record(int(info["ticks_elapsed"]), latency, reward, None if substep is None else int(substep), obs)
+        link = info.get("link_delay_s")
+        self.record(
+            int(info["ticks_elapsed"]),
+            latency,
+            reward,
+            None if substep is None else int(substep),
+            obs,
+            None if link is None else float(link),
+        )
 
     def finish(self, terminated: bool, truncated: bool) -> None:
         """The episode in progress ended."""
@@ -137,7 +154,10 @@ class LatencyRecorder(gym.Wrapper):
     step lost to a sim restart (``restart_on_failure``) or that raised, an
     unseeded reset on a restarted sim, a reset with options. Pauses and an
     emulated ``link_delay`` change only when actions arrive, which the
-    substeps record: they replay exactly.
+    substeps record: they replay exactly (and the link's delays, which the
+    twin reports again). The env itself is recorded too (its arguments, time
+    limit, real-time factor and link: :class:`~remoteenv.latency.twin.recorded_env.RecordedEnv`),
+    so :func:`~remoteenv.latency_twin.make_twin` rebuilds it from the file.
 
     Args:
         env: the real-time env.
@@ -152,7 +172,7 @@ class LatencyRecorder(gym.Wrapper):
     def __init__(self, env: gym.Env, rounding: str = "nearest") -> None:
         super().__init__(env)
         check_real_time(env, "LatencyRecorder")
-        self.log = EpisodeLog(rounding, real_time_mode(env))
+        self.log = EpisodeLog(rounding, real_time_mode(env), RecordedEnv.from_env(env))
 
     @property
     def episodes(self) -> list[RecordedEpisode]:

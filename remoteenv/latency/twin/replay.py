@@ -132,7 +132,14 @@ def make_twin(
     <remoteenv.latency.twin.LatencyRecorder.save>` writes it): the exact twin,
     ``ExactTwin(gym.make(env_id, real_time=True,
     real_time_mode=<the recording's>, max_episode_steps=...), episode)``; it
-    refuses an episode that cannot be replayed, saying why.
+    refuses an episode that cannot be replayed, saying why. A recording that
+    knows its env (:attr:`RecordedEpisode.env
+    <remoteenv.latency_twin.RecordedEpisode.env>`, every recording this
+    version writes) is rebuilt from it: its arguments, time limit,
+    ``real_time_factor`` and ``link_delay``; an explicit argument (or
+    ``max_episode_steps``) that contradicts it is refused in one line, and
+    only where and how the sim runs (transport, timeouts, restarts) may be
+    added.
 
     A :class:`~remoteenv.delays.Trace`, its values, or a plain trace file's
     path (:meth:`LatencyRecorder.save_trace
@@ -142,15 +149,20 @@ def make_twin(
     (its steps are ticks).
 
     ``max_episode_steps``: the twin's limit in steps (decisions), as the
-    real-time run counted them; None: the env id's registered limit.
-    ``kwargs`` go to ``gym.make`` (e.g. the scene's own, like ``continuous=True``).
+    real-time run counted them; None: the recording's, else the env id's
+    registered limit. ``kwargs`` go to ``gym.make`` (e.g. the scene's own,
+    like ``continuous=True``, for a recording that does not know its env).
     """
-    if isinstance(trace, (str, os.PathLike)) and is_recording(trace):
-        trace, _ = load_recording(trace)
+    what = "the recorded episode"
+    if isinstance(trace, (str, os.PathLike)):
+        what = f"recording {os.fspath(trace)}"
+        if not os.path.exists(trace):
+            raise FileNotFoundError(f"make_twin: {os.fspath(trace)} does not exist (a recording or trace file)")
+        if is_recording(trace):
+            trace, _ = load_recording(trace)
     if isinstance(trace, RecordedEpisode):
         check_replayable(trace)  # before a sim starts
-        limit: dict[str, Any] = {} if max_episode_steps is None else {"max_episode_steps": max_episode_steps}
-        env = gym.make(env_id, real_time=True, real_time_mode=trace.mode, **limit, **kwargs)
+        env = gym.make(env_id, **exact_twin_kwargs(trace, max_episode_steps, kwargs, what))
         try:
             return ExactTwin(env, trace)
         except BaseException:
@@ -163,4 +175,36 @@ def make_twin(
     return LockStepTwin(env, spec, max_episode_steps)
 
 
-__all__ = ["LockStepTwin", "make_twin"]
+def exact_twin_kwargs(
+    episode: RecordedEpisode, max_episode_steps: int | None, explicit: dict[str, Any], what: str
+) -> dict[str, Any]:
+    """The ``gym.make`` arguments of ``episode``'s exact twin: its recorded env
+    (if known) with the ``explicit`` ones, which may not contradict it."""
+    explicit = dict(explicit)
+    mode = explicit.pop("real_time_mode", episode.mode)
+    if mode != episode.mode:
+        raise ValueError(f"make_twin: real_time_mode={mode!r} contradicts {what} ({episode.mode!r}): drop it")
+    if explicit.pop("real_time", True) is not True:
+        raise ValueError(f"make_twin: the exact twin of {what} runs with real_time=True: drop real_time")
+    out: dict[str, Any] = {"real_time": True, "real_time_mode": episode.mode}
+    recorded = episode.env
+    if recorded is None:
+        out.update(explicit)
+        if max_episode_steps is not None:
+            out["max_episode_steps"] = max_episode_steps
+        return out
+    if recorded.unrecorded and not set(recorded.unrecorded) <= set(explicit):
+        missing = sorted(set(recorded.unrecorded) - set(explicit))
+        raise ValueError(f"make_twin: {what} could not keep {', '.join(missing)}: pass them to make_twin")
+    limit = recorded.max_episode_steps
+    if max_episode_steps is not None and limit is not None and max_episode_steps != limit:
+        raise ValueError(f"make_twin: max_episode_steps={max_episode_steps} contradicts {what} ({limit}): drop it")
+    recorded.check_explicit(explicit, what)
+    out.update(recorded.make_kwargs())
+    out.update(explicit)
+    limit = max_episode_steps if max_episode_steps is not None else limit
+    out["max_episode_steps"] = -1 if limit is None else limit  # -1: no TimeLimit, as recorded
+    return out
+
+
+__all__ = ["LockStepTwin", "exact_twin_kwargs", "make_twin"]

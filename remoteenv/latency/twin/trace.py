@@ -6,7 +6,7 @@ import os
 from collections.abc import Sequence
 
 from remoteenv.wire.delays.delay_specs import MAX_DELAY_TICKS, MAX_VALUES
-from remoteenv.wire.files.safe_writes import write_atomic
+from remoteenv.wire.files.safe_writes import write_user_file
 
 #: How a real-time latency becomes whole ticks: ``"nearest"`` (the tick boundary
 #: nearest to the substep where the action took effect; halves go up) or
@@ -96,7 +96,7 @@ def write_trace_file(path: str | os.PathLike[str], values: Sequence[int], header
         lines.append(" ".join(str(int(v)) for v in values[i : i + hold]))
         i += hold
     path = os.fspath(path)
-    write_atomic(path, "\n".join(lines) + "\n", 0o644)
+    write_user_file(path, "\n".join(lines) + "\n", "trace")
     return path
 
 

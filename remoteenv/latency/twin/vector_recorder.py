@@ -9,6 +9,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
 from remoteenv.agent.launch.restart import INFO_RESTARTED
+from remoteenv.latency.twin.recorded_env import RecordedEnv
 from remoteenv.latency.twin.recorder import EpisodeLog, RecordedEpisode, check_real_time, real_time_mode
 
 
@@ -41,7 +42,8 @@ class LatencyRecorderVector(VectorWrapper):
         mode = AutoresetMode(env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP))
         if mode != AutoresetMode.NEXT_STEP:
             raise ValueError(f"LatencyRecorderVector needs the NEXT_STEP autoreset mode, got {mode}")
-        self.logs = [EpisodeLog(rounding, real_time_mode(env)) for _ in range(self.num_envs)]
+        recorded = RecordedEnv.from_env(env)
+        self.logs = [EpisodeLog(rounding, real_time_mode(env), recorded) for _ in range(self.num_envs)]
         self._restarting = np.zeros(self.num_envs, dtype=bool)
 
     @property
@@ -81,7 +83,7 @@ class LatencyRecorderVector(VectorWrapper):
             if restarted[INFO_RESTARTED]:
                 log.interrupt("the world's sim was restarted: the episode was lost")
                 continue
-            keys = ("ticks_elapsed", "latency_ticks", "action_sim_time", "action_substep", "substep")
+            keys = ("ticks_elapsed", "latency_ticks", "action_sim_time", "action_substep", "substep", "link_delay_s")
             info = {key: _world_value(infos, key, w) for key in keys}
             if info["ticks_elapsed"] is None:
                 raise ValueError(f"world {w}'s step info has no ticks_elapsed: is the vector env real_time=True?")

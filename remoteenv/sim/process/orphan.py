@@ -14,7 +14,11 @@ scene): a daemon thread that notices the parent is gone and, if the main
 thread has not shut down within a grace period, removes this instance's files
 and ends the process. Either way an orphaned sim removes its files from the
 launcher's private dir, and the last one to leave removes the dir itself
-(nobody else will: the launcher that made it is dead).
+(nobody else will: the launcher that made it is dead). Only the dir the
+launcher made is touched: its identity is taken when the sim starts
+(:func:`~remoteenv.wire.files.owned_dirs.identity`; a symlink or anything
+not a dir of this user there means no tidying at all), and every removal goes
+through its descriptor (:mod:`remoteenv.wire.files.owned_dirs`).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ import threading
 import time
 
 from remoteenv.sim.process import orphan_guard
+from remoteenv.wire.files.owned_dirs import DirId, format_id, identity
 
 #: Seconds between two looks at the parent pid (every sim-side loop and the watch).
 CHECK_INTERVAL_S = 0.25
@@ -68,10 +73,11 @@ def parent_gone_within(parent_pid: int, wait_s: float) -> bool:
     return True
 
 
-def remove_private_files(private_dir: str, instance: int) -> None:
+def remove_private_files(private_dir: str, dir_id: DirId | None, instance: int) -> None:
     """Remove this instance's files (``sim-<instance>.*``) from the launcher's
-    private dir, then the dir itself if no other sim's files are left in it."""
-    orphan_guard.remove_instance_files(private_dir, instance)
+    private dir, then the dir itself if no other sim's files are left in it;
+    nothing unless the dir at that path is still ``dir_id``."""
+    orphan_guard.remove_instance_files(private_dir, dir_id, instance)
 
 
 class Guard:
@@ -88,9 +94,10 @@ class Guard:
             self._alive_fd = -1
 
 
-def start_guard(parent_pid: int, private_dir: str | None, instance: int) -> Guard | None:
+def start_guard(parent_pid: int, private_dir: str | None, instance: int, dir_id: DirId | None = None) -> Guard | None:
     """Start the orphan guard for this process (None where it cannot run:
-    not Linux, or no pidfds; :class:`ParentWatch` remains)."""
+    not Linux, or no pidfds; :class:`ParentWatch` remains). ``dir_id``: the
+    identity of ``private_dir`` (None: it tidies nothing there)."""
     if not sys.platform.startswith("linux") or not hasattr(os, "pidfd_open"):
         return None
     read_end, write_end = os.pipe()  # both close-on-exec: only the guard gets the read end
@@ -110,6 +117,7 @@ def start_guard(parent_pid: int, private_dir: str | None, instance: int) -> Guar
                 str(parent_pid),
                 str(os.getpid()),
                 private_dir or "",
+                format_id(dir_id),
                 str(instance),
                 *([] if agent_fd is None else [str(agent_fd)]),
             ],
@@ -135,12 +143,14 @@ class ParentWatch:
         parent_pid: the agent's pid.
         private_dir: the launcher's private dir, or None.
         instance: this sim's instance index (names its files).
+        dir_id: the identity of ``private_dir`` (None: nothing there is tidied).
     """
 
-    def __init__(self, parent_pid: int, private_dir: str | None, instance: int) -> None:
+    def __init__(self, parent_pid: int, private_dir: str | None, instance: int, dir_id: DirId | None = None) -> None:
         self.parent_pid = parent_pid
         self.private_dir = private_dir
         self.instance = instance
+        self.dir_id = dir_id
         self._finished = threading.Event()
         self._thread = threading.Thread(target=self._run, name="remoteenv-parent-watch", daemon=True)
 
@@ -157,7 +167,7 @@ class ParentWatch:
                 if self._finished.wait(GRACE_S):
                     return
                 if self.private_dir:
-                    remove_private_files(self.private_dir, self.instance)
+                    remove_private_files(self.private_dir, self.dir_id, self.instance)
                 os._exit(1)
 
 
@@ -176,11 +186,13 @@ class AgentWatch:
         self.parent_pid = parent_pid
         self.private_dir = private_dir
         self.instance = instance
+        #: The private dir the launcher made, as it is now (before anyone could swap it).
+        self.dir_id = identity(private_dir) if private_dir else None
         self._guard: Guard | None = None
         self._watch: ParentWatch | None = None
         if parent_pid is not None:
-            self._guard = start_guard(parent_pid, private_dir, instance)
-            self._watch = ParentWatch(parent_pid, private_dir, instance)
+            self._guard = start_guard(parent_pid, private_dir, instance, self.dir_id)
+            self._watch = ParentWatch(parent_pid, private_dir, instance, self.dir_id)
             self._watch.start()
 
     def finish(self, *, orphaned: bool, pipe_ended: bool) -> None:
@@ -192,7 +204,7 @@ class AgentWatch:
         wait_s = 0.5 if pipe_ended else 0.0
         gone = orphaned or (self.parent_pid is not None and parent_gone_within(self.parent_pid, wait_s))
         if self.private_dir and gone:
-            remove_private_files(self.private_dir, self.instance)
+            remove_private_files(self.private_dir, self.dir_id, self.instance)
         if self._watch is not None:
             self._watch.finished()
         if self._guard is not None:

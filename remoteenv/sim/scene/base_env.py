@@ -10,15 +10,16 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
 
-from remoteenv.sim.scene.camera_rig import CameraRig
+from remoteenv.sim.scene.camera_rig import CameraRig, cheap_renderer
 from remoteenv.sim.scene.cameras import CameraObservation
 from remoteenv.sim.scene.model_file import model_file
 from remoteenv.sim.scene.obs_check import check_observation
 from remoteenv.sim.scene.per_world_hooks import BatchedHooks
+from remoteenv.sim.scene.scene_cameras import SceneCameras
 from remoteenv.sim.scene.step_check import check_finite_obs, unpack_reset, unpack_step
 
 
-class BaseEnv(BatchedHooks):
+class BaseEnv(BatchedHooks, SceneCameras):
     """One MuJoCo world and the env logic around it.
 
     A scene subclasses this and implements :meth:`reset_model`,
@@ -37,7 +38,9 @@ class BaseEnv(BatchedHooks):
     where it arrives), so subclasses must keep all per-step logic in these hooks.
 
     Cameras (``cameras=``, a :class:`~remoteenv.sim.scene.cameras.CameraObservation`):
-    the hooks keep returning the state obs; :meth:`observe` adds the images (docs/cameras.md).
+    the hooks keep returning the state obs; :meth:`observe` adds the images, and
+    :meth:`camera_geometry` gives the cameras' intrinsics and extrinsics
+    (:class:`~remoteenv.sim.scene.scene_cameras.SceneCameras`, docs/cameras.md).
 
     Truncation (episode time limits) is the agent side's business
     (``gymnasium.make``'s ``max_episode_steps``); ``post_step`` reports only
@@ -98,12 +101,18 @@ class BaseEnv(BatchedHooks):
         self.frame_skip = int(frame_skip)
         #: What the hooks return (the state); the observation adds the cameras' images to it.
         self.state_space = observation_space
-        self.observation_space = observation_space if cameras is None else cameras.space(observation_space)
+        self.observation_space = (
+            observation_space if cameras is None else cameras.space(observation_space, self.model.ngeom)
+        )
         self.action_space = action_space
         #: The renderers of the declared cameras (None: no camera in the observation).
         self.camera_rig = None if cameras is None else CameraRig(self.model, cameras, type(self).__name__)
         self.render_mode = render_mode
         self.width, self.height = int(width), int(height)
+        #: ``render()`` at the MJCF's quality (True, the default: videos) or cheaply, without
+        #: multisampling and shadows (False: what a frame publisher streams unless asked);
+        #: read when the renderer is made, at the first ``render()``.
+        self.render_quality = True
         self._renderer: mujoco.Renderer | None = None
         self._viewer: Any = None
         if render_mode == "human":
@@ -194,24 +203,21 @@ class BaseEnv(BatchedHooks):
         mujoco.mj_resetData(self.model, self._data)
         obs, info = unpack_reset(self.reset_model(options), scene=type(self).__name__)
         self._check_obs(obs, "reset_model")
-        return self.observe(obs), info
+        return self.observe(obs, fresh=True), info
 
-    def finish_tick(self, action: Any) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
+    def finish_tick(self, action: Any, *, observe: bool = True) -> tuple[Any, SupportsFloat, bool, dict[str, Any]]:
         """:meth:`post_step`, its result checked: four values, a scalar reward,
         a bool ``terminated``, a dict info (:mod:`remoteenv.sim.scene.step_check`)
-        and the observation against ``observation_space``."""
+        and the observation against ``observation_space``. ``observe=False``:
+        the hooks' state obs, the cameras not rendered (a tick whose observation
+        nobody receives; :meth:`observe` renders it later if needed)."""
         result = unpack_step(
             self.post_step(action), scene=type(self).__name__, hook="post_step", finite=self.check_finite
         )
         self._check_obs(result[0], "post_step")
-        if self.camera_rig is None:
+        if self.camera_rig is None or not observe:
             return result
         return (self.observe(result[0]), *result[1:])
-
-    def observe(self, state: Any) -> Any:
-        """The observation now from the hooks' state obs: ``state``, or with cameras composed with their images."""
-        rig = self.camera_rig
-        return state if rig is None else rig.observation.compose(state, rig.pixels(self.data))
 
     def _check_obs(self, obs: Any, hook: str) -> None:
         scene = type(self).__name__
@@ -252,7 +258,7 @@ class BaseEnv(BatchedHooks):
         if self.render_mode != "rgb_array":
             return None
         if self._renderer is None:
-            self._renderer = mujoco.Renderer(self.model, height=self.height, width=self.width)
+            self._renderer = cheap_renderer(self.model, self.width, self.height, quality=bool(self.render_quality))
         camera = self.default_camera if self.default_camera is not None else -1
         self._renderer.update_scene(self.data, camera=camera)
         return self._renderer.render().copy()

@@ -3,8 +3,9 @@
 Runs in the sim process. A :class:`CameraRig` renders the images a world's
 :class:`~remoteenv.sim.scene.cameras.CameraObservation` declares from the
 world's ``MjData``: one ``mujoco.Renderer`` per image size (usually one per
-world), made on the first image, closed with the world. Depth images come
-from the same renderer, switched to depth for them.
+world), made on the first image, closed with the world. Depth and
+segmentation images come from the same renderer, switched to them for the
+frame. With frame stacks the rig keeps each image's last frames.
 
 Render quality: unless the declaration asks for ``quality``, the renderer is
 made with ``model.vis.quality.offsamples = 0`` (no multisampling) and
@@ -21,7 +22,11 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from remoteenv.sim.scene.cameras import Camera, CameraObservation
+from remoteenv.sim.scene.camera_geometry import camera_geometry
+from remoteenv.sim.scene.cameras import Camera, CameraObservation, ImageEntry
+
+#: ITU-R BT.601 luma weights (OpenCV's RGB2GRAY) in 1/256ths: 0.299, 0.587, 0.114.
+_LUMA = np.array([77, 150, 29], dtype=np.uint16)
 
 
 class CameraSetupError(ValueError):
@@ -63,7 +68,7 @@ def cheap_renderer(model: mujoco.MjModel, width: int, height: int, quality: bool
 
 
 class CameraRig:
-    """Renders one world's declared camera images.
+    """Renders one world's declared camera images (and stacks their frames).
 
     Args:
         model: the world's model (its cameras checked with :func:`check_cameras`).
@@ -77,6 +82,8 @@ class CameraRig:
         self.observation = observation
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._ids = {camera.name: model.camera(camera.name).id for camera in observation.cameras}
+        #: Each image's last frames, by key (frame stacks only; made at the first observation).
+        self._stacks: dict[str, np.ndarray] = {}
 
     def _renderer(self, camera: Camera) -> mujoco.Renderer:
         key = (camera.width, camera.height)
@@ -86,26 +93,73 @@ class CameraRig:
             self._renderers[key] = renderer
         return renderer
 
-    def image(self, data: mujoco.MjData, camera: Camera, out: np.ndarray | None = None) -> np.ndarray:
-        """``camera``'s image of ``data`` now, into ``out`` if given (its shape and dtype)."""
+    def frame(self, data: mujoco.MjData, entry: ImageEntry, out: np.ndarray | None = None) -> np.ndarray:
+        """One frame of ``entry``'s image of ``data`` now (``(H, W, C)``), into ``out`` if given."""
+        camera = entry.camera
         renderer = self._renderer(camera)
         renderer.update_scene(data, camera=self._ids[camera.name])
-        if camera.kind == "depth":
+        if out is None:
+            out = np.empty(camera.image_shape(entry.kind), dtype=entry.dtype)
+        if entry.kind == "rgb":
+            return renderer.render(out=out)
+        if entry.kind == "gray":
+            rgb = renderer.render().astype(np.uint16)
+            np.copyto(out[..., 0], (rgb @ _LUMA + 128) >> 8, casting="unsafe")
+            return out
+        if entry.kind == "depth":
             renderer.enable_depth_rendering()
             try:
-                return renderer.render(out=out)
+                renderer.render(out=out[..., 0])  # metres along the view axis (MuJoCo converts)
             finally:
                 renderer.disable_depth_rendering()
-        return renderer.render(out=out)
+            return out
+        renderer.enable_segmentation_rendering()
+        try:
+            ids = renderer.render()  # (H, W, 2): object id, object type; -1 where nothing is drawn
+        finally:
+            renderer.disable_segmentation_rendering()
+        np.copyto(out[..., 0], np.where(ids[..., 1] == mujoco.mjtObj.mjOBJ_GEOM, ids[..., 0], -1))
+        return out
 
-    def pixels(self, data: mujoco.MjData, out: Any = None) -> Any:
+    def frames(self, data: mujoco.MjData) -> dict[str, np.ndarray]:
+        """One fresh frame of every image of ``data`` now, by key (nothing stacked)."""
+        return {entry.key: self.frame(data, entry) for entry in self.observation.entries}
+
+    def pixels(self, data: mujoco.MjData, out: Any = None, *, fresh: bool = False) -> Any:
         """The pixels of ``data`` now, as :meth:`CameraObservation.pixels_space`
-        says: one camera's image, or a dict of images by camera name; written
-        into ``out`` (an array, or a dict of arrays, of that form) if given."""
-        cameras = self.observation.cameras
-        if len(cameras) == 1:
-            return self.image(data, cameras[0], out)
-        return {c.name: self.image(data, c, None if out is None else out[c.name]) for c in cameras}
+        says: one image, or a dict of images by key; written into ``out`` (an
+        array, or a dict of arrays, of that form) if given. With frame stacks
+        each image holds its last frames; ``fresh`` (a reset) fills them all
+        with this one."""
+        entries = self.observation.entries
+        if self.observation.single:
+            return self._image(data, entries[0], out, fresh)
+        return {e.key: self._image(data, e, None if out is None else out[e.key], fresh) for e in entries}
+
+    def _image(self, data: mujoco.MjData, entry: ImageEntry, out: np.ndarray | None, fresh: bool) -> np.ndarray:
+        k = self.observation.frame_stack
+        if k == 1:
+            return self.frame(data, entry, out)
+        frame = self.frame(data, entry)
+        stack = self._stacks.get(entry.key)
+        if stack is None or fresh:
+            stack = self._stacks[entry.key] = np.tile(frame, (1, 1, k))
+        else:
+            c = entry.channels
+            stack[..., :-c] = stack[..., c:]  # numpy copies overlapping slices correctly
+            stack[..., -c:] = frame
+        if out is None:
+            return stack.copy()
+        np.copyto(out, stack)
+        return out
+
+    def geometry(self, data: mujoco.MjData) -> dict[str, dict[str, Any]]:
+        """Each camera's intrinsics and extrinsics now, by camera name
+        (:func:`~remoteenv.sim.scene.camera_geometry.camera_geometry`)."""
+        return {
+            c.name: camera_geometry(self.model, data, self._ids[c.name], c.width, c.height)
+            for c in self.observation.cameras
+        }
 
     def close(self) -> None:
         """Release the renderers (a later image makes new ones)."""
@@ -119,16 +173,16 @@ def observe_worlds(envs: Sequence[Any], states: Any, out: np.ndarray | None = No
     :class:`CameraRig`) as they are now, from the state obs their batched hook
     returned (``states``: a stacked array or a list, one per world).
 
-    A single camera's images alone come as one ``(n, *shape)`` array, rendered
+    One image alone (no state) comes as one ``(n, *shape)`` array, rendered
     straight into ``out`` when given (e.g. the shared region's block), else a
     new one; other declarations as a list of per-world observations."""
     observation = envs[0].camera_rig.observation
     n = len(envs)
-    if len(observation.cameras) == 1 and not observation.with_state:
-        camera = observation.cameras[0]
-        images = out[:n] if out is not None else np.empty((n, *camera.shape), dtype=camera.dtype)
+    if observation.single and not observation.with_state:
+        space = observation.pixels_space()
+        images = out[:n] if out is not None else np.empty((n, *space.shape), dtype=space.dtype)
         for i, env in enumerate(envs):
-            env.camera_rig.image(env.data, camera, images[i])
+            env.camera_rig.pixels(env.data, images[i])
         return images
     return [observation.compose(states[i], env.camera_rig.pixels(env.data)) for i, env in enumerate(envs)]
 

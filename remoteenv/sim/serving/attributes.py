@@ -27,7 +27,18 @@ from remoteenv.wire.wire_errors import ATTRIBUTE, PROTOCOL, UNSENDABLE, short_re
 
 #: BaseEnv methods that drive the world: only the server's stepping calls them.
 DRIVING_METHODS = frozenset(
-    {"reset", "step", "substep", "finish_tick", "prepare_step", "post_step", "reset_model", "render", "close"}
+    {
+        "reset",
+        "step",
+        "substep",
+        "finish_tick",
+        "prepare_step",
+        "post_step",
+        "reset_model",
+        "observe",
+        "render",
+        "close",
+    }
 )
 
 

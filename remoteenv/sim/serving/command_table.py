@@ -75,13 +75,16 @@ def build_table(
     *,
     seed: int | None,
     clock: Clock,
+    world_factory: Callable[[], BaseEnv] | None = None,
 ) -> tuple[Stepping, CommandTable, Drivers]:
     """The stepping strategy, command table and driver rule of a server of
     ``envs`` run as ``run`` says. ``stop`` ends serving (``close``); ``pipe`` is
     the launcher's channel, if any; ``seed`` and ``clock`` are
-    :func:`~remoteenv.sim.serving.stepping_modes.stepping_and_commands`'s."""
+    :func:`~remoteenv.sim.serving.stepping_modes.stepping_and_commands`'s;
+    ``world_factory`` makes a scratch world for the handshake's cost
+    measurement (:class:`~remoteenv.sim.serving.commands.Commands`)."""
     stepping, mode_commands = stepping_and_commands(envs, instance, run, seed=seed, clock=clock)
-    common = Commands(envs, stepping, instance, stop, launcher_channel=pipe)
+    common = Commands(envs, stepping, instance, stop, launcher_channel=pipe, world_factory=world_factory)
     handlers: dict[str, Handler] = common.handlers()
     handlers.update(AttributeCommands(envs, instance).handlers())
     handlers.update(mode_commands)

@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
-from remoteenv.sim.scene.world_cost import world_cost
+from remoteenv.sim.scene.world_cost import measured_cost
 from remoteenv.sim.stepping.interfaces import Stepping
 from remoteenv.sim.transport.channels import Channel
 from remoteenv.sim.transport.checks import (
@@ -47,6 +47,8 @@ class Commands:
         instance: this sim process's index (reported in the handshake, named in errors).
         stop: called by ``close`` to end serving once the reply is sent.
         launcher_channel: the launching agent's local pipe, if any.
+        world_factory: makes a scratch world like ``envs[0]``, for measuring what
+            one costs (:func:`~remoteenv.sim.scene.world_cost.measured_cost`); None: estimate it.
 
     One connection drives each world, in both modes (:mod:`remoteenv.sim.transport.drivers`):
     the launching agent's pipe if there is one, else the connection that
@@ -63,8 +65,10 @@ class Commands:
         instance: int,
         stop: Callable[[], None],
         launcher_channel: Channel | None = None,
+        world_factory: Callable[[], BaseEnv] | None = None,
     ) -> None:
         self.envs = envs
+        self.world_factory = world_factory
         self.stepping = stepping
         #: Every command the server answers, sent in the handshake (the server fills it in).
         self.advertised: list[str] = []
@@ -86,6 +90,15 @@ class Commands:
     def handshake(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
         protocol_version(msg.get("protocol"), protocol.PROTOCOL_VERSION, self.instance)
         env = self.envs[0]
+        metadata: dict[str, Any] = {
+            "render_modes": list(env.metadata.get("render_modes", [])),
+            "render_fps": int(round(1.0 / env.dt)),
+            "dt": float(env.dt),
+            "timestep": float(env.model.opt.timestep),
+            "frame_skip": env.frame_skip,
+        }
+        if msg.get("world_cost") is True:
+            metadata["world_cost_s"] = self._world_cost()
         return {
             "protocol": protocol.PROTOCOL_VERSION,
             "env_id": env.env_id,
@@ -94,23 +107,16 @@ class Commands:
             "num_worlds": len(self.envs),
             "observation_space": spaces_codec.space_to_wire(env.observation_space),
             "action_space": spaces_codec.space_to_wire(env.action_space),
-            "metadata": {
-                "render_modes": list(env.metadata.get("render_modes", [])),
-                "render_fps": int(round(1.0 / env.dt)),
-                "dt": float(env.dt),
-                "timestep": float(env.model.opt.timestep),
-                "frame_skip": env.frame_skip,
-                "world_cost_s": self._world_cost(),
-            },
+            "metadata": metadata,
             "stepping": self._worlds[0].describe(),
             "commands": list(self.advertised),
         }
 
     def _world_cost(self) -> float:
-        """World 0's cost per tick (:func:`~remoteenv.sim.scene.world_cost.world_cost`), measured once."""
+        """What one world's control tick costs (:func:`~remoteenv.sim.scene.world_cost.measured_cost`), measured once."""
         cost = getattr(self, "_cost", None)
         if cost is None:
-            cost = self._cost = world_cost(self.envs[0])
+            cost = self._cost = measured_cost(self.envs[0], self.world_factory)
         return cost
 
     def reset(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
@@ -126,7 +132,7 @@ class Commands:
         stepper = self._worlds[world]
         require_reset(stepper.has_reset, world, self.instance)
         action = check_action(self.envs[world].action_space, msg.get("action"))  # the same answer for anyone
-        self.drivers.require((world,), (channel, reply_to), "step")
+        self.drivers.take((world,), (channel, reply_to), "step")
         reply = stepper.submit(msg["seq"], action, channel, reply_to)
         return None if reply is None else describe_scalars(reply)
 

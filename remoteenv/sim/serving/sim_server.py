@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from typing import Any
 
 import zmq
@@ -75,6 +76,9 @@ class RemoteControlledAgent:
             the socket (see "The local pipe" in :mod:`remoteenv.wire.protocol`);
             its end of file stops the server.
         clock: the loop's and real-time stepping's clock (seconds, monotonic).
+        world_factory: makes a scratch world like ``envs[0]`` (never served), for
+            measuring what a world's whole tick costs when a handshake asks
+            (:mod:`remoteenv.sim.scene.world_cost`); None: that cost is estimated.
     """
 
     def __init__(
@@ -93,6 +97,7 @@ class RemoteControlledAgent:
         private_dir: str | None = None,
         pipe_fd: int | None = None,
         clock: Clock = time.monotonic,
+        world_factory: Callable[[], BaseEnv] | None = None,
     ) -> None:
         if not envs:
             raise ValueError("RemoteControlledAgent needs at least one env")
@@ -119,6 +124,7 @@ class RemoteControlledAgent:
             run,
             seed=seed,
             clock=clock,
+            world_factory=world_factory,
         )
         #: Who drives each world (:mod:`remoteenv.sim.transport.drivers`).
         self.drivers = drivers
@@ -133,7 +139,12 @@ class RemoteControlledAgent:
             raise
         self.endpoint: str = self.socket.getsockopt_string(zmq.LAST_ENDPOINT)
         #: The ROUTER's channel: the drivers' frames first, the others' within budgets.
-        self.router = ZmqChannel(self.socket, owners=lambda: drivers.routing_ids)
+        self.router = ZmqChannel(
+            self.socket,
+            owners=lambda: drivers.routing_ids,
+            disconnected=self._gate.take_disconnected,
+            gone=lambda routing_id: drivers.release((self.router, routing_id)),
+        )
         self.channels: list[Channel] = [self.router]
         if self._pipe is not None:
             self.channels.append(self._pipe)
@@ -215,9 +226,12 @@ class RemoteControlledAgent:
                     self._expensive_left -= 1
                 reply = self.handle(msg, channel, reply_to)
             if reply is not None:
-                channel.send(reply_to, pack_reply(reply))
-                if stepping.clock_waiting:  # a reset was answered: its world's clock starts now
+                payload = pack_reply(reply)
+                if stepping.clock_waiting:  # a reset was answered: its world's clock starts as the reply goes
+                    # Read before sending: the reset's reply never reaches the
+                    # agent before substep 0's deadline, so no action can.
                     stepping.start_clocks(self.clock())
+                channel.send(reply_to, payload)
 
     def _send_later(self, outgoing: Outgoing) -> None:
         channel, reply_to, reply = outgoing

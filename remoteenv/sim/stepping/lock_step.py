@@ -42,7 +42,8 @@ class LockStepper:
     ``obs_delay_ticks``, ``obs_sim_time``, ``obs_action_delay_ticks``,
     ``obs_applied_action``, ``latency_ticks``) and real-time mode's timing
     keys with their exact values: ``sim_time`` (the world's time after the
-    tick), ``ticks_elapsed`` = 1, ``latency_s`` = ``latency_ticks * dt`` (None
+    tick; after a delayed-rewards termination it runs on as if the physics
+    did, since the agent cannot know yet that it froze), ``ticks_elapsed`` = 1, ``latency_s`` = ``latency_ticks * dt`` (None
     with it) and ``late`` (the tick ran on an older action than this step's:
     ``action_delay_ticks > 0``). Every one is known once the tick has run: none
     tells a delay that has not elapsed. With ``delayed_rewards`` the reward,
@@ -71,6 +72,7 @@ class LockStepper:
         #: The largest action delay (ticks); the handshake's ``action_delay``.
         self.action_delay = int(action_spec.max)
         self.has_reset = False
+        self._sim_time = 0.0  # the world's time after the last tick (its clock runs on while frozen)
         self._launch_seed = seed
         self._seeded = False
 
@@ -93,8 +95,19 @@ class LockStepper:
         if seed is None and not self._seeded:
             seed = self._launch_seed
         self._seeded = self._seeded or seed is not None
-        self.delays.reset(obs, float(self.env.data.time), self.env.default_action(), seed=seed)
+        self._sim_time = float(self.env.data.time)
+        self.delays.reset(obs, self._sim_time, self.env.default_action(), seed=seed)
         return obs, info
+
+    def _tick_later(self, sim_time: float) -> float:
+        """``sim_time`` one control tick later, added substep by substep as
+        ``mj_step`` adds them, so a frozen world's clock reads bit for bit as a
+        running one's would."""
+        env = self.env
+        timestep = float(env.model.opt.timestep)
+        for _ in range(int(env.frame_skip)):
+            sim_time += timestep
+        return sim_time
 
     def submit(self, seq: int, action: Any, channel: Channel | None, reply_to: Any) -> dict[str, Any]:
         """A ``step`` request: answered at once (see :meth:`step`)."""
@@ -112,17 +125,19 @@ class LockStepper:
             if delays.frozen:
                 _, record = delays.observe_frozen()
                 tick_reward, tick_terminated, tick_info = 0.0, True, {}
+                self._sim_time = self._tick_later(self._sim_time)
             else:
                 tick_obs, tick_reward, tick_terminated, tick_info = self.env.step(in_force)
+                self._sim_time = float(self.env.data.time)
                 _, record = delays.observe(
-                    tick_obs, float(self.env.data.time), float(tick_reward), bool(tick_terminated), tick_info
+                    tick_obs, self._sim_time, float(tick_reward), bool(tick_terminated), tick_info
                 )
             sent = delays.deliver(tick_reward, tick_terminated, tick_info)
             obs, reward, terminated = sent.obs, sent.reward, sent.terminated
             info = dict(sent.scene_info or {})
             info.update(record.info())
             # The timing keys of real-time mode, exact by construction here.
-            info["sim_time"] = float(self.env.data.time)
+            info["sim_time"] = self._sim_time
             info["ticks_elapsed"] = 1
             info["latency_s"] = None if record.latency_ticks is None else record.latency_ticks * self.env.dt
             info["late"] = record.action_delay_ticks > 0

@@ -11,12 +11,19 @@ Semantics:
 
 - Physics substep ``n`` of an episode (``model.opt.timestep`` simulated
   seconds) runs at the wall-clock deadline ``t0 + n * timestep / factor``,
-  where ``t0`` is the moment the reply to ``reset`` was sent. Deadlines are
-  absolute, so waiting errors never add up to drift; a late process runs the
-  missed substeps back to back to catch up.
-- An action takes effect at the first substep boundary after it reaches the
-  sim and is held until the next one replaces it; after a reset the scene's
+  where ``t0`` is read just before the reply to ``reset`` is sent. Deadlines
+  are absolute, so waiting errors never add up to drift; a late process runs
+  the missed substeps back to back to catch up (up to
+  :data:`~remoteenv.sim.stepping.real_time_pacing.CATCH_UP_LIMIT_S` behind;
+  beyond that the clock slips: the boundary is due when it is processed).
+- An action takes effect at the first substep boundary whose *deadline* is
+  at or after the moment the sim read it (plus the emulated link's delay),
+  and is held until the next one replaces it; after a reset the scene's
   :meth:`~remoteenv.sim.scene.base_env.BaseEnv.default_action` is held.
+  Boundaries processed late (a catch-up) run with the action that had been
+  read by their deadline, never with one read while they were processed, so
+  no action acts at a sim time that preceded its arrival, and no latency
+  is below the time from the observation's reply to the action's arrival.
 - Control ticks are ``frame_skip`` substeps, as in lock-step. The reply to a
   ``step`` is sent at the end of the first tick in which its action was in
   force (the ``"elastic"`` regime, the default); its reward is the sum over all ticks since the previous reply; its
@@ -26,8 +33,8 @@ Semantics:
 - Before the first reset, and while frozen, nothing advances.
 
 Fixed step (``real_time_mode="fixed_step"``, rtgym's regime): an action
-takes effect only at a control-tick boundary, the first one after it
-arrives (never boundary 0), and the reply is sent at that boundary, with the
+takes effect only at a control-tick boundary, the first one whose deadline
+is at or after its arrival (never boundary 0), and the reply is sent at that boundary, with the
 observation of that boundary: an agent that answers within a tick gets one
 tick per step and a latency of exactly one tick; one that overruns gets a
 longer step (``ticks_elapsed > 1``, ``late``). Everything else is as above.
@@ -78,8 +85,9 @@ seconds unless noted):
 ``apply_delay_s``     wall seconds from the request's arrival at its world
                       (once decoded and checked) to the substep where it
                       took effect, the emulated link delay included.
-``link_delay_s``      the emulated link delay drawn for this step's action
-                      (wall seconds; 0.0 without ``link_delay``).
+``link_delay_s``      with ``link_delay`` only: the emulated link delay
+                      drawn for this step's action (wall seconds; 0.0 for
+                      a step answered at once by a frozen world).
 ``pacing_overruns``   running count, for this world since the process
                       started, of substeps that ran more than one substep
                       period (``timestep / factor`` wall seconds) late.

@@ -12,6 +12,15 @@ from typing import Any
 
 from remoteenv.wire.running_stats import RunningStats
 
+#: Wall seconds a world may fall behind its deadlines and still catch up
+#: (run the missed substeps back to back). A boundary processed later than
+#: this *slips* the clock instead: its deadline becomes the moment it is
+#: processed and every later one moves with it, so a sim that cannot keep
+#: pace at all (an impossible ``real_time_factor``, a stall of seconds)
+#: still applies the actions it reads, never at a deadline before their
+#: arrival. The wall time slipped is not simulated.
+CATCH_UP_LIMIT_S = 1.0
+
 
 class PacingFigures:
     """Wall-clock figures of a world whose substeps are ``period`` wall seconds apart.
@@ -33,12 +42,20 @@ class PacingFigures:
         self.substeps = 0
         #: Emulated link delays drawn (wall seconds).
         self.link_delay = link_delay
+        #: Times the clock slipped (see :data:`CATCH_UP_LIMIT_S`), and the wall seconds it dropped.
+        self.slips = 0
+        self.slipped_s = 0.0
 
     def record_lateness(self, lateness: float) -> None:
         """A substep boundary processed ``lateness`` wall seconds after its deadline."""
         self.pacing_error.add(lateness)
         if lateness > self.period:
             self.overruns += 1
+
+    def record_slip(self, seconds: float) -> None:
+        """The clock slipped by ``seconds`` (wall seconds not simulated)."""
+        self.slips += 1
+        self.slipped_s += seconds
 
     def timing(self) -> dict[str, Any]:
         """Pacing figures of this world (wall seconds)."""
@@ -49,6 +66,8 @@ class PacingFigures:
             "substeps": self.substeps,
             "period_s": self.period,
             "link_delay_s": self.link_delay.summary(),
+            "clock_slips": self.slips,
+            "slipped_s": self.slipped_s,
         }
 
     def clear_timing(self) -> None:
@@ -58,6 +77,8 @@ class PacingFigures:
         self.link_delay.clear()
         self.overruns = 0
         self.substeps = 0
+        self.slips = 0
+        self.slipped_s = 0.0
 
 
-__all__ = ["PacingFigures"]
+__all__ = ["CATCH_UP_LIMIT_S", "PacingFigures"]

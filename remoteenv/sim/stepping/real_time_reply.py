@@ -49,9 +49,18 @@ class SinceReply:
         self.ticks += 1
 
     def reply(
-        self, pending: PendingStep, *, terminated: bool, sim_time: float, substep: int, frame_skip: int, overruns: int
+        self,
+        pending: PendingStep,
+        *,
+        terminated: bool,
+        sim_time: float,
+        substep: int,
+        frame_skip: int,
+        overruns: int,
+        link: bool = False,
     ) -> dict[str, Any]:
-        """The reply to ``pending`` at ``sim_time`` (substep ``substep``); starts over afterwards."""
+        """The reply to ``pending`` at ``sim_time`` (substep ``substep``); starts over
+        afterwards. ``link``: the world emulates a link (then ``link_delay_s`` is reported)."""
         applied = pending.applied_sim_time
         info = dict(self.info)
         info.update(
@@ -66,9 +75,10 @@ class SinceReply:
             else (pending.applied_substep - self.obs_substep) / frame_skip,
             late=applied is None or self.ticks > 1,
             apply_delay_s=pending.apply_delay_s,
-            link_delay_s=pending.link_delay,
             pacing_overruns=overruns,
         )
+        if link:
+            info["link_delay_s"] = pending.link_delay
         reply = {
             "seq": pending.seq,
             "ok": True,

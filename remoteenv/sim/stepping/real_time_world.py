@@ -15,15 +15,15 @@ from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.stepping.emulated_link import EmulatedLink
-from remoteenv.sim.stepping.real_time_pacing import PacingFigures
-from remoteenv.sim.stepping.real_time_replay import ReplayCursor
+from remoteenv.sim.stepping.real_time_pacing import CATCH_UP_LIMIT_S, PacingFigures
+from remoteenv.sim.stepping.real_time_replay import ReplayCursor, replay_from_options
 from remoteenv.sim.stepping.real_time_reply import PendingStep, SinceReply
 from remoteenv.sim.transport.channels import Channel, Outgoing
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.wire.messages.handshake import REAL_TIME
 from remoteenv.wire.protocol import error_reply
 from remoteenv.wire.run_options.options import RunOptions
-from remoteenv.wire.run_options.real_time_modes import FIXED_STEP, split_replay
+from remoteenv.wire.run_options.real_time_modes import FIXED_STEP
 from remoteenv.wire.wire_errors import PROTOCOL, SCENE
 
 #: A clock: seconds, monotonic (``time.monotonic`` in a sim process).
@@ -117,12 +117,9 @@ class RealTimeStepper(PacingFigures):
 
         Options carrying a replay schedule put the world into replay for this
         episode (:mod:`remoteenv.sim.stepping.real_time_replay`)."""
-        try:
-            options, schedule = split_replay(options, self.mode)
-        except ValueError as exc:
-            raise RequestError(PROTOCOL, str(exc)) from None
+        options, replay = replay_from_options(options, self.mode, self.env.frame_skip, self.link is not None)
         obs, info = self.env.reset(seed=seed, options=options)
-        self._replay = None if schedule is None else ReplayCursor(schedule, self.env.frame_skip)
+        self._replay = replay
         self._link.reset(seed)
         self.state = _READY
         self._held = self.env.default_action()
@@ -148,15 +145,15 @@ class RealTimeStepper(PacingFigures):
     def resume(self, now: float) -> float:
         """Restart the clock where it stopped; returns the paused wall seconds.
 
-        Every deadline and a waiting request's arrival shift by the pause, so
-        it counts in no timing figure."""
+        Every deadline and a waiting request's arrival (one that came during
+        the pause: its start) shift by the pause, so it counts in no timing figure."""
         if self._paused_at is None:
             return 0.0
-        paused = max(0.0, now - self._paused_at)
-        self._paused_at = None
+        stopped, self._paused_at = self._paused_at, None
+        paused = max(0.0, now - stopped)
         self._t0 += paused
-        if self._pending is not None:
-            self._pending.arrived += paused
+        if self._pending is not None:  # one that came during the pause arrived, on the clock, at its start
+            self._pending.arrived = min(self._pending.arrived, stopped) + paused
         return paused
 
     def submit(self, seq: int, action: Any, channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
@@ -197,10 +194,15 @@ class RealTimeStepper(PacingFigures):
     def advance(self, now: float) -> list[Outgoing]:
         """Process the substep boundary that was due; ``now`` is the clock time it is processed.
 
-        At a tick end the tick is scored (and may end the episode); then a
-        newly arrived action takes effect, and the next substep is computed.
+        At a tick end the tick is scored (and may end the episode); then an
+        action read by the boundary's deadline takes effect, and the next
+        substep is computed. A boundary over ``CATCH_UP_LIMIT_S`` late slips the clock first.
         """
-        self.record_lateness(now - (self._t0 + self._n * self.period))
+        lateness = now - (self._t0 + self._n * self.period)
+        self.record_lateness(lateness)
+        if lateness > CATCH_UP_LIMIT_S:  # too far behind to catch up: this boundary is due now
+            self._t0 += lateness
+            self.record_slip(lateness)
         return self._boundary(now)
 
     def _replay_step(self, pending: PendingStep) -> dict[str, Any]:
@@ -210,6 +212,7 @@ class RealTimeStepper(PacingFigures):
         if self.state != _RUNNING:
             raise RequestError(PROTOCOL, "a replayed step before its reset's reply: reset first")
         pending.apply_at = self._replay.next_substep(self._n)
+        pending.link_delay = self._replay.link_delay
         self._pending = pending
         while True:
             try:
@@ -227,7 +230,10 @@ class RealTimeStepper(PacingFigures):
         out: list[Outgoing] = []
         fs = env.frame_skip
         if self._n and self._n % fs == 0:
-            obs, reward, terminated, info = env.finish_tick(self._held)
+            # Replay renders a tick's cameras only when a reply carries its observation.
+            obs, reward, terminated, info = env.finish_tick(self._held, observe=now is not None)
+            if now is None and (terminated or self._replies_here(self._pending)):
+                obs = env.observe(obs)
             self._since.add_tick(obs, reward, info)
             pending = self._pending
             if pending is not None and (pending.applied_sim_time is not None or terminated):
@@ -238,7 +244,7 @@ class RealTimeStepper(PacingFigures):
                 self.state = _FROZEN
                 return out
         pending = self._pending
-        if pending is not None and pending.applied_sim_time is None and self._arrived(pending, now):
+        if pending is not None and pending.applied_sim_time is None and self._arrived(pending, replay=now is None):
             env.prepare_step(pending.action)
             self._held = pending.action
             pending.applied_sim_time = float(env.data.time)
@@ -256,14 +262,24 @@ class RealTimeStepper(PacingFigures):
         self.substeps += 1
         return out
 
-    def _arrived(self, pending: PendingStep, now: float | None) -> bool:
+    def _replies_here(self, pending: PendingStep | None) -> bool:
+        """Replay, at a tick end: whether ``pending``'s reply goes at this boundary
+        (its action in force; fixed-step: its action takes effect here)."""
+        if pending is None:
+            return False
+        return pending.applied_sim_time is not None or (self.mode == FIXED_STEP and self._arrived(pending, replay=True))
+
+    def _arrived(self, pending: PendingStep, *, replay: bool) -> bool:
         """Whether ``pending``'s action may take effect at boundary ``self._n``
-        (fixed-step: only at a tick boundary after the episode's first tick)."""
+        (fixed-step: only at a tick boundary after the episode's first tick).
+        On the clock the boundary's *deadline* counts, not when it is processed:
+        one processed late whose deadline preceded the action's reading (plus
+        the link's delay) keeps the action in force then (see the module docs)."""
         if self.mode == FIXED_STEP and (self._n == 0 or self._n % self.env.frame_skip):
             return False
-        if now is None:
+        if replay:
             return self._n >= pending.apply_at
-        return now >= pending.arrived + pending.link_delay
+        return self._t0 + self._n * self.period >= pending.arrived + pending.link_delay
 
     def _reply(self, pending: PendingStep, *, terminated: bool) -> dict[str, Any]:
         """The reply to ``pending``: the current observation and what accumulated since the last reply."""
@@ -274,6 +290,7 @@ class RealTimeStepper(PacingFigures):
             substep=self._n,
             frame_skip=self.env.frame_skip,
             overruns=self.overruns,
+            link=self.link is not None,
         )
 
 

@@ -15,10 +15,13 @@ from typing import Any, Protocol
 
 import zmq
 
-from remoteenv.sim.transport.limits import BACKLOG_BYTES, FRAMES_PER_DRAIN, OTHERS_BYTES_PER_PASS
+from remoteenv.sim.transport.limits import BACKLOG_BYTES, FRAMES_PER_DRAIN, MAX_PEERS, OTHERS_BYTES_PER_PASS
 from remoteenv.wire import protocol
 from remoteenv.wire.shared_memory.hot_wait import HotWait
 from remoteenv.wire.wire_errors import PROTOCOL, STATE
+
+#: Routing ids whose connection is noted at most (beyond: drivers' only).
+_MAX_PEERS_NOTED = 4 * MAX_PEERS
 
 
 class Channel(Protocol):
@@ -62,12 +65,26 @@ class ZmqChannel:
     dropped unread and answered with a ``state`` error (see :meth:`drop`).
     :attr:`more` says whether frames were left waiting.
 
+    Peers that leave: each frame's connection (its descriptor in libzmq's
+    I/O thread, ``SRCFD``) is noted by routing id, and a connection the
+    socket monitor reports ended (``disconnected()``, descriptors, from the
+    gate: :class:`~remoteenv.sim.transport.peer_gate.PeerGate`) is passed to
+    ``gone`` with each routing id seen on it, at the start of the next call.
+
     Args:
         sock: the bound ROUTER.
         owners: the routing ids whose frames go first (read on every call).
+        disconnected: the descriptors of connections that ended since the last call.
+        gone: called with the routing id of a peer whose connection ended.
     """
 
-    def __init__(self, sock: zmq.Socket, owners: Callable[[], Collection[bytes]] = frozenset) -> None:
+    def __init__(
+        self,
+        sock: zmq.Socket,
+        owners: Callable[[], Collection[bytes]] = frozenset,
+        disconnected: Callable[[], list[int]] = list,
+        gone: Callable[[bytes], None] = lambda routing_id: None,
+    ) -> None:
         self.socket = sock
         self.closed = False
         #: What to register in a ``zmq.Poller``.
@@ -80,12 +97,23 @@ class ZmqChannel:
         #: Frames dropped unread because the backlog was full.
         self.dropped = 0
         self._owners = owners
+        self._disconnected = disconnected
+        self._gone = gone
+        #: routing id -> the descriptor of the connection its last frame came on.
+        self._fd_of: dict[bytes, int] = {}
         self._backlog: collections.deque[tuple[bytes, Any]] = collections.deque()
         self._backlog_bytes = 0
 
     def receive_nowait(self) -> list[tuple[Any, Any]]:
+        fd_of = self._fd_of
+        for fd in self._disconnected():
+            for routing_id in [r for r, f in fd_of.items() if f == fd]:
+                del fd_of[routing_id]
+                self._gone(routing_id)
         sock = self.socket
         owners = self._owners()
+        if len(fd_of) > _MAX_PEERS_NOTED:  # notices lost under churn: only drivers need one
+            self._fd_of = fd_of = {r: f for r, f in fd_of.items() if r in owners}
         backlog = self._backlog
         out: list[tuple[Any, Any]] = []
         taken = 0
@@ -97,6 +125,7 @@ class ZmqChannel:
                 while sock.getsockopt(zmq.RCVMORE):
                     sock.recv(zmq.NOBLOCK, copy=False)
                 continue
+            fd_of[routing_id] = _source_fd(frame)
             if routing_id in owners:
                 out.append((routing_id, frame))
                 continue
@@ -141,6 +170,15 @@ class ZmqChannel:
 
     def send(self, reply_to: Any, payload: bytes) -> None:
         self.socket.send_multipart([reply_to, payload])
+
+
+def _source_fd(frame: Any) -> int:
+    """The descriptor of the connection ``frame`` came on (-1 where libzmq has
+    none to say, e.g. inproc: such a peer is never reported gone)."""
+    try:
+        return int(frame.get(zmq.SRCFD))
+    except zmq.ZMQError:
+        return -1
 
 
 class LaneWatch(Protocol):

@@ -91,8 +91,8 @@ def require_driver(owner: Any, sender: Any, world: int, instance: int, cmd: str)
         raise RequestError(
             STATE,
             f"'{cmd}' refused: world {world} of sim instance {instance} is driven by another "
-            "connection (the launching agent, or the one that reset it last); only that one may step, "
-            "pause, resume or close it (and, with a launching agent, reset it). Other commands "
+            "connection (the launching agent, or the one that reset it first, until its connection "
+            "ends); only that one may reset, step, pause, resume or close it. Other commands "
             "(handshake, render, timing, attributes) are open to all.",
         )
 

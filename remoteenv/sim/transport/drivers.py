@@ -7,20 +7,22 @@ the reconnect after a timeout, so it stays the same connection).
 
 - Each world has one driver. With a launching pipe, the pipe drives every
   world for good. Without one, nobody drives a world until a connection
-  resets it; a reset (``reset``, ``reset_batch``) then makes the resetting
-  connection its driver.
-- ``step`` and ``step_batch`` on a world, and ``reset``/``reset_batch`` when
-  the pipe drives it, are refused to any other connection with a ``state``
-  error. So are the commands that act on every world (``close``, ``pause``,
-  ``resume``): they need a connection that drives every world somebody
-  drives; the sim's *owner*, who may ``close`` it, is the launching pipe, else
-  the connection that drives its worlds.
+  resets or steps it; that connection then drives it, and a driven world
+  stays its driver's until the driver's connection ends (the ROUTER reports
+  the disconnect, :meth:`Drivers.release`): a reset from any other
+  connection is refused, so a second client cannot take over the world of
+  an agent attached to a ``launch``ed sim.
+- ``step``, ``step_batch``, ``reset`` and ``reset_batch`` on a driven world
+  are refused to any other connection with a ``state`` error. So are the
+  commands that act on every world (``close``, ``pause``, ``resume``): they
+  need a connection that drives every world somebody drives; the sim's
+  *owner*, who may ``close`` it, is the launching pipe, else the connection
+  that drives its worlds.
 - Everything else (``handshake``, ``render``, ``timing``, the attribute
   commands) is open to every connection that reaches the endpoint.
 
-Without a pipe, the driver role is taken by a reset, so this rule keeps a
-second client from stepping, pausing or stopping a sim *someone else
-drives* unless it resets first; it does not tell users apart. Who may
+This rule keeps a second client from stepping, resetting, pausing or
+stopping a sim someone else drives; it does not tell users apart. Who may
 connect at all is the endpoint's business: an ipc socket in a 0700 dir,
 CURVE with the launcher's client key, or (plain tcp on loopback) every
 local user.
@@ -67,16 +69,30 @@ class Drivers:
     # ------------------------------------------------------------ checks
 
     def take(self, worlds: Iterable[int], sender: Sender, cmd: str) -> None:
-        """``sender`` resets ``worlds``: it becomes their driver (refused while the pipe drives them)."""
-        if self._launcher is not None:
-            if sender != self._launcher:
-                for world in worlds:
-                    require_driver(self._launcher, sender, world, self.instance, cmd)
+        """``sender`` resets (or steps) ``worlds``: it becomes the driver of those
+        nobody drives; refused (nothing taken) if another connection drives one."""
+        worlds = list(worlds)
+        if sender == self._sole:
             return
+        by_world = self._by_world
+        for world in worlds:
+            require_driver(by_world[world], sender, world, self.instance, cmd)
         changed = False
         for world in worlds:
-            if self._by_world[world] != sender:
-                self._by_world[world] = sender
+            if by_world[world] is None:
+                by_world[world] = sender
+                changed = True
+        if changed:
+            self._update()
+
+    def release(self, sender: Sender) -> None:
+        """``sender``'s connection ended: the worlds it drove are nobody's (never the pipe's)."""
+        if sender == self._launcher:
+            return
+        changed = False
+        for world, driver in enumerate(self._by_world):
+            if driver == sender:
+                self._by_world[world] = None
                 changed = True
         if changed:
             self._update()
@@ -102,7 +118,7 @@ class Drivers:
     # ------------------------------------------------------------ guards
 
     def guard_reset_batch(self, handler: _Handler) -> _Handler:
-        """``handler`` for ``reset_batch``: its worlds become the sender's (see :meth:`take`)."""
+        """``handler`` for ``reset_batch``: its worlds become the sender's, unless another drives one (:meth:`take`)."""
 
         def guarded(msg: dict[str, Any], channel: Any, reply_to: Any) -> Any:
             if self.pipe is None or channel is not self.pipe:
@@ -113,7 +129,8 @@ class Drivers:
         return guarded
 
     def guard_step_batch(self, handler: _Handler) -> _Handler:
-        """``handler`` for ``step_batch``: refused unless the sender drives every world it names.
+        """``handler`` for ``step_batch``: refused unless the sender drives every world it
+        names or nobody does (it then drives them, :meth:`take`).
 
         Worlds the handler would refuse anyway (ill-formed ``ops``/``worlds``)
         are left to it; every world it can act on is checked here first.
@@ -123,7 +140,7 @@ class Drivers:
             if self.pipe is None or channel is not self.pipe:
                 sender = (channel, reply_to)
                 if sender != self._sole:
-                    self.require(self._named_worlds(msg), sender, "step_batch")
+                    self.take(self._named_worlds(msg), sender, "step_batch")
             return handler(msg, channel, reply_to)
 
         return guarded

@@ -115,6 +115,8 @@ class PeerGate:
         self.max_peers = max_peers
         self.count = PeerCount(handshake_s)
         self.refused = 0
+        #: Descriptors of connections that ended, oldest first (taken by :meth:`take_disconnected`).
+        self._disconnected: collections.deque[int] = collections.deque(maxlen=4 * max_peers + 64)
         self._keys = None if client_keys is None else frozenset(z85.decode(bytes(k).strip()) for k in client_keys)
         self._ctx = ctx
         self._monitor = f"inproc://remoteenv-peer-monitor-{next(_gates)}"
@@ -129,6 +131,13 @@ class PeerGate:
         self._stopper = ctx.socket(zmq.PAIR)
         self._stopper.setsockopt(zmq.LINGER, 0)
         self._stopper.connect(self._stop)
+
+    def take_disconnected(self) -> list[int]:
+        """The descriptors of the connections that ended since the last call (any thread)."""
+        gone = []
+        while self._disconnected:
+            gone.append(self._disconnected.popleft())
+        return gone
 
     def stop(self) -> None:
         """End the thread and the monitor (call before the socket closes)."""
@@ -165,6 +174,8 @@ class PeerGate:
                 while events.poll(0):  # count connections first: the freshest figure
                     event = parse_monitor_message(events.recv_multipart())
                     self.count.event(event["event"], event["value"])
+                    if event["event"] == zmq.EVENT_DISCONNECTED:
+                        self._disconnected.append(int(event["value"]))
                 if zap in ready:
                     zap.send_multipart(self._answer(zap.recv_multipart()))
         finally:

@@ -47,6 +47,22 @@ def write_atomic(path: str | os.PathLike[str], text: str, mode: int = 0o644) -> 
         raise
 
 
+def write_user_file(path: str | os.PathLike[str], text: str, what: str) -> None:
+    """:func:`write_atomic` for a file at a path the user gave (mode 0644): an
+    OSError names that path and ``what`` it was to hold, never the temporary
+    file beside it, and says what to do when its folder does not exist."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(
+            f"cannot save the {what} to {path}: the folder {folder} does not exist; create it first"
+        )
+    try:
+        write_atomic(path, text, 0o644)
+    except OSError as exc:
+        raise type(exc)(f"cannot save the {what} to {path}: {exc.strerror or exc}") from None
+
+
 def _unlink_quietly(path: str | os.PathLike[str]) -> None:
     try:
         os.unlink(path)
@@ -54,4 +70,4 @@ def _unlink_quietly(path: str | os.PathLike[str]) -> None:
         pass
 
 
-__all__ = ["create_new", "write_atomic"]
+__all__ = ["create_new", "write_atomic", "write_user_file"]

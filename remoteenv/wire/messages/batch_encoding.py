@@ -23,11 +23,14 @@ _SCALAR_TYPES: dict[type, tuple[type, str]] = {
 }
 
 
+_INT64_MIN, _INT64_MAX = -(2**63), 2**63 - 1
+
+
 def columnar_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
     """Encode the info maps of ``n`` worlds for the wire.
 
-    If every value is a bool, int or float (numpy scalars included) and each
-    key has one type across the worlds: ``{"columns": {key: [values, mask]}}``
+    If every value is a bool, int (within int64) or float (numpy scalars
+    included) and each key has one type across the worlds: ``{"columns": {key: [values, mask]}}``
     with ``values`` a list of ``n`` (bool, int or float; zero where the world
     lacks the key), or, when the first world's value is a numpy number, an
     array of its dtype (the dtype Gymnasium's own vector envs would give it), and ``mask`` a list of ``n`` bools saying which worlds have
@@ -41,6 +44,8 @@ def columnar_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
     for info in infos:
         for key, value in info.items():
             t = type(value)
+            if t is int and not _INT64_MIN <= value <= _INT64_MAX:
+                return {"maps": infos}  # a column is int64; a map carries any int (extension type 2)
             if t not in _SCALAR_TYPES:
                 if isinstance(value, np.integer):
                     t = int

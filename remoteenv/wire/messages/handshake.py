@@ -46,9 +46,10 @@ LOCK_STEP_COMMANDS = frozenset({"reset_batch", "step_batch"})
 REAL_TIME_COMMANDS = frozenset({"timing"})
 
 
-def handshake_request(version: int = PROTOCOL_VERSION) -> dict[str, Any]:
-    """The arguments of a ``handshake`` request (without ``seq``/``cmd``)."""
-    return {"protocol": version}
+def handshake_request(version: int = PROTOCOL_VERSION, world_cost: bool = False) -> dict[str, Any]:
+    """The arguments of a ``handshake`` request (without ``seq``/``cmd``);
+    ``world_cost``: ask the sim to measure one world's whole tick (``metadata["world_cost_s"]``)."""
+    return {"protocol": version, "world_cost": True} if world_cost else {"protocol": version}
 
 
 @dataclass(frozen=True)
@@ -134,15 +135,31 @@ def _typed(doc: Mapping[str, Any], key: str, types: type | tuple[type, ...], whe
     return value
 
 
+class BatchTooLarge(ProtocolError):
+    """A sim hosts more worlds than one batch reply can carry the observations
+    of; :attr:`worlds_that_fit` says how many would (0: not even one)."""
+
+    def __init__(self, message: str, worlds_that_fit: int) -> None:
+        super().__init__(message)
+        self.worlds_that_fit = worlds_that_fit
+
+
+def worlds_that_fit(observation_space: spaces.Space) -> int:
+    """Most worlds whose observations one batch reply carries (the frame limit)."""
+    return MAX_MESSAGE_BYTES // max(1, value_nbytes(observation_space))
+
+
 def worlds_problem(num_worlds: Any, observation_space: spaces.Space) -> str | None:
     """What is wrong with a handshake's ``num_worlds`` for its observation space, if anything."""
     if not isinstance(num_worlds, int) or isinstance(num_worlds, bool) or not 1 <= num_worlds <= MAX_WORLDS:
         return f"'num_worlds' must be an int in 1..{MAX_WORLDS}, got {short_repr(num_worlds)}"
     batch = num_worlds * value_nbytes(observation_space)
     if batch > MAX_MESSAGE_BYTES:
+        fit = worlds_that_fit(observation_space)
         return (
             f"{num_worlds} worlds' observations take {batch} bytes, above the frame limit of "
-            f"{MAX_MESSAGE_BYTES} bytes: no batch reply could carry them"
+            f"{MAX_MESSAGE_BYTES} bytes: no batch reply could carry them; "
+            + (f"at most {fit} of them fit a reply (envs_per_process={fit})" if fit else "not even one fits a reply")
         )
     return None
 
@@ -181,6 +198,9 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
     num_worlds = 1 if num_worlds is None else num_worlds
     problem = worlds_problem(num_worlds, obs_space)
     if problem is not None:
+        fit = worlds_that_fit(obs_space)
+        if isinstance(num_worlds, int) and 1 <= num_worlds <= MAX_WORLDS and fit < num_worlds:
+            raise BatchTooLarge(f"handshake {problem}", fit)
         raise ProtocolError(f"handshake {problem}")
     render_modes = _need(meta, "render_modes", list, "metadata ")
     if not all(isinstance(m, str) for m in render_modes):
@@ -219,6 +239,7 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
 
 
 __all__ = [
+    "BatchTooLarge",
     "CORE_COMMANDS",
     "LOCK_STEP",
     "LOCK_STEP_COMMANDS",
@@ -228,4 +249,5 @@ __all__ = [
     "handshake_request",
     "parse_handshake",
     "worlds_problem",
+    "worlds_that_fit",
 ]

@@ -1,0 +1,89 @@
+"""How many CPU threads torch keeps in a process whose vector env's sims use its CPUs.
+
+Runs in the agent process (:class:`remoteenv.RemoteVectorEnv`). Torch's
+intra-op pool (OpenMP) has one thread per CPU by default, and after each
+parallel operation its idle threads keep spinning for a while (milliseconds)
+before they sleep. In a training loop every policy inference is followed by
+a vector step, so while the sims step, those spinning threads hold CPUs the
+sims need: with as many sim processes as CPUs the vector step takes about a
+third longer. With ``torch_threads="auto"`` (the default) the vector env
+lowers torch's thread count, once, to the CPUs its local sims leave free
+(at least one), and says so in a :class:`TorchThreadsNotice` warning; it
+never raises the count, and leaves torch alone when the user set
+``OMP_NUM_THREADS`` or asked for ``torch_threads=None``. An int sets that
+many threads (the user's explicit choice, applied without a warning).
+Measured gain: docs/performance.md ("The learner beside the sims").
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import warnings
+
+from remoteenv.wire.shared_memory.hot_wait import usable_cpus
+
+#: ``torch_threads`` values besides an int.
+AUTO = "auto"
+
+
+class TorchThreadsNotice(UserWarning):
+    """remoteenv changed torch's thread count (see :mod:`remoteenv.agent.vector.torch_threads`)."""
+
+
+class _Applied:
+    """Process-wide: whether "auto" lowered torch's threads already (it acts once)."""
+
+    done = False
+
+
+def check_torch_threads(value: object) -> int | str | None:
+    """``value`` if it is a valid ``torch_threads`` (``"auto"``, None or an int >= 1), else a ValueError."""
+    if value is None or value == AUTO:
+        return value
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"torch_threads must be 'auto', None or an int >= 1, got {value!r:.80}")
+    return value
+
+
+class TorchThreads:
+    """The ``torch_threads`` choice of one vector env whose ``local_sims``
+    processes run on this machine; :meth:`apply` acts on it when torch is
+    loaded (at the env's construction and at each ``reset``)."""
+
+    def __init__(self, choice: int | str | None, local_sims: int) -> None:
+        self.choice = check_torch_threads(choice)
+        self.local_sims = local_sims
+        self._pending = choice is not None and not (choice == AUTO and local_sims == 0)
+
+    def apply(self) -> None:
+        """Set torch's threads as chosen, if torch is loaded and it was not done yet."""
+        if not self._pending:
+            return
+        torch = sys.modules.get("torch")
+        if torch is None or not hasattr(torch, "set_num_threads"):
+            return  # not loaded (yet): looked at again at the next reset
+        self._pending = False
+        if isinstance(self.choice, int):
+            torch.set_num_threads(self.choice)
+            return
+        if _Applied.done or os.environ.get("OMP_NUM_THREADS"):
+            return
+        _Applied.done = True
+        cpus = usable_cpus()
+        now = torch.get_num_threads()
+        target = max(1, cpus - self.local_sims)
+        if now <= target:
+            return
+        torch.set_num_threads(target)
+        warnings.warn(
+            f"remoteenv set torch's CPU threads to {target} (was {now}): this vector env's {self.local_sims} "
+            f"sim processes step on this machine's {cpus} CPUs, where torch's idle threads would spin "
+            "(docs/performance.md, 'The learner beside the sims'). To keep torch's setting, pass "
+            "torch_threads=None to the vector env or set OMP_NUM_THREADS.",
+            TorchThreadsNotice,
+            stacklevel=3,
+        )
+
+
+__all__ = ["AUTO", "TorchThreads", "TorchThreadsNotice", "check_torch_threads"]

@@ -1,0 +1,296 @@
+"""``python -m remoteenv bench --train-loop``: the envs inside a PPO-shaped training loop.
+
+Agent side; it starts one training process per contender and N
+(:mod:`remoteenv.benchmarks.train_loop_worker`), each with its learner on the
+same CPUs as its envs, as a user's training script runs: every vector step a
+2x64 tanh MLP infers the actions of all N Reacher worlds; every 128 vector
+steps, 4 epochs of SGD on the batch in 4 minibatches
+(:class:`~remoteenv.benchmarks.harness.ppo_shaped_learner.PPOShapedLearner`); torch's
+settings as the process has them (``--train-env KEY=VALUE`` sets environment
+variables of every training process, e.g. ``OMP_NUM_THREADS=1``, to measure a
+lever). Contenders: remoteenv's default vector env of ``remoteenv/Reacher-v0``,
+EnvPool's ``Reacher-v5`` (skipped with a note when EnvPool is not installed:
+``pip install 'remoteenv[bench]'``), Gymnasium's ``SyncVectorEnv`` and
+``AsyncVectorEnv`` of ``Reacher-v5``. All are built first (one at a time),
+then timed in alternating rounds of whole rollout-and-update iterations, so
+load that comes and goes hits them alike. Each row gives steps per wall
+second (env steps, learning included), CPU microseconds per step of the
+training process and everything it started, context switches per step, and
+where the trainer's wall time went (policy inference, env step, update). It
+measures and prints; it asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from typing import IO, Any
+
+from remoteenv.benchmarks.harness.anchors import CpuHog
+from remoteenv.benchmarks.harness.report import emit, machine_record, progress_log
+from remoteenv.benchmarks.train_loop_worker import CONTENDERS, DEFAULT_CONTENDERS
+
+#: (numerator, denominator, N, target) of the ratios of medians reported.
+TARGETS = [
+    ("remoteenv", "EnvPool", 16, 1.0),
+    ("remoteenv", "EnvPool", 64, 1.0),
+    ("remoteenv", "SyncVectorEnv", 16, 1.5),
+    ("remoteenv", "SyncVectorEnv", 64, None),
+    ("remoteenv", "AsyncVectorEnv", 16, None),
+    ("remoteenv", "AsyncVectorEnv", 64, None),
+]
+#: Longest a contender may take to build and warm up, or to answer a round beyond its length (seconds).
+_PATIENCE_S = 300.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("training-loop benchmark (--train-loop)")
+    g.add_argument("--train-n", default="16,64", help="comma-separated vector sizes N (default 16,64)")
+    g.add_argument("--train-rounds", type=int, default=5, help="alternating rounds; medians are shown (default 5)")
+    g.add_argument(
+        "--train-duration",
+        type=float,
+        default=3.0,
+        help="seconds per contender per round, whole iterations (default 3)",
+    )
+    g.add_argument(
+        "--train-contenders",
+        default=",".join(DEFAULT_CONTENDERS),
+        help=f"comma-separated contenders, of {', '.join(CONTENDERS)} (default {','.join(DEFAULT_CONTENDERS)}); "
+        "remoteenv-torch-kept is remoteenv with torch_threads=None, remoteenv-os-placed with place_sims=None, remoteenv-neither with both; NAME:KEY=VALUE runs one with "
+        "environment variables of its own (e.g. EnvPool:OMP_NUM_THREADS=1 beside EnvPool)",
+    )
+    g.add_argument(
+        "--train-env",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="an environment variable of every training process (repeatable), e.g. OMP_NUM_THREADS=1",
+    )
+
+
+class Trainer:
+    """One contender's training process for one N; ``label`` names it in the
+    table (the contender, and any environment variables of its own)."""
+
+    def __init__(self, contender: str, num_envs: int, env: dict[str, str], label: str | None = None) -> None:
+        self.contender, self.num_envs = label or contender, num_envs
+        read_fd, write_fd = os.pipe()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "remoteenv.benchmarks.train_loop_worker", contender, str(num_envs)]
+            + ["--out-fd", str(write_fd)],
+            stdin=subprocess.PIPE,
+            pass_fds=(write_fd,),
+            env={**os.environ, **env},
+            text=True,
+        )
+        os.close(write_fd)
+        self.replies: IO[str] = os.fdopen(read_fd)
+        self.rounds: list[dict[str, Any]] = []
+        self.ready = self._reply()
+
+    def _reply(self) -> dict[str, Any]:
+        line = self.replies.readline()
+        if not line:
+            raise RuntimeError(f"the {self.contender} training process (N={self.num_envs}) ended without answering")
+        reply: dict[str, Any] = json.loads(line)
+        return reply
+
+    def run_round(self, duration: float) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(f"round {duration}\n")
+        self.proc.stdin.flush()
+        self.rounds.append(self._reply())
+
+    def close(self) -> None:
+        if self.proc.stdin is not None and self.proc.poll() is None:
+            try:
+                self.proc.stdin.write("quit\n")
+                self.proc.stdin.close()
+            except OSError:
+                pass
+        try:
+            self.proc.wait(_PATIENCE_S)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self.replies.close()
+
+
+def _row(t: Trainer) -> dict[str, Any]:
+    rounds = t.rounds
+    steps = sum(r["steps"] for r in rounds)
+
+    def per_step(key: str) -> float:
+        return sum(r[key] for r in rounds) / steps
+
+    wall = sum(r["wall_s"] for r in rounds)
+    return {
+        "name": t.contender,
+        "num_envs": t.num_envs,
+        "median": statistics.median(r["steps_per_s"] for r in rounds),
+        "rates": [r["steps_per_s"] for r in rounds],
+        "cpu_us_per_step": statistics.median(r["cpu_us_per_step"] for r in rounds),
+        "trainer_cpu_us_per_step": per_step("trainer_cpu_s") * 1e6,
+        "voluntary_switches_per_step": per_step("voluntary_switches"),
+        "involuntary_switches_per_step": per_step("involuntary_switches"),
+        "wall_share": {k: sum(r["seconds"][k] for r in rounds) / wall for k in ("act", "env_step", "update")},
+        "build_s": t.ready["build_s"],
+        "torch_threads": t.ready["torch_threads"],
+        "processes": rounds[-1]["processes"] if rounds else None,
+    }
+
+
+def measure(
+    ns: list[int],
+    contenders: list[str],
+    duration: float,
+    rounds: int,
+    hog: int,
+    env: dict[str, str],
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    trainers: list[Trainer] = []
+    loads: list[float] = []
+    skipped: list[str] = []
+    try:
+        for n in ns:
+            for spec in contenders:
+                name, own_env = _contender(spec)
+                log(f"  building {spec}, N={n}")
+                t = Trainer(name, n, {**env, **own_env}, label=spec)
+                if "error" in t.ready:
+                    log(f"  {t.ready['error']}: its rows are skipped")
+                    skipped.append(t.ready["error"])
+                    t.close()
+                    continue
+                trainers.append(t)
+        with CpuHog(hog):
+            for r in range(rounds):
+                # Each round starts one contender later, so none always follows the same one.
+                shift = r % len(trainers)
+                for t in trainers[shift:] + trainers[:shift]:
+                    t.run_round(duration)
+                loads.append(os.getloadavg()[0])
+                log(f"  round {r + 1}/{rounds} done, load average {loads[-1]:.2f}")
+    finally:
+        for t in trainers:
+            t.close()
+    rows = [_row(t) for t in trainers]
+    return {
+        "date": time.strftime("%Y-%m-%d %H:%M %Z"),
+        "machine": machine_record(),
+        "load_avg_per_round": loads,
+        "hogs": hog,
+        "duration_s": duration,
+        "rounds": rounds,
+        "train_env": env,
+        "skipped": skipped,
+        "rows": rows,
+        "ratios": ratios(rows),
+    }
+
+
+def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The ratios of medians of :data:`TARGETS` where both were measured, then
+    their CPU per step inverted (> 1: the numerator is cheaper)."""
+    by = {(r["name"], r["num_envs"]): r for r in rows}
+    out = []
+    for num, den, n, target in TARGETS:
+        a, b = by.get((num, n)), by.get((den, n))
+        if a and b:
+            out.append({"ratio": f"{num} / {den}, N={n}", "value": a["median"] / b["median"], "target": target})
+    for num, den, n, _ in TARGETS:
+        a, b = by.get((num, n)), by.get((den, n))
+        if a and b:
+            out.append(
+                {
+                    "ratio": f"CPU/step: {num} / {den}, N={n}",
+                    "value": b["cpu_us_per_step"] / a["cpu_us_per_step"],
+                    "target": None,
+                }
+            )
+    return out
+
+
+def format_table(result: dict[str, Any]) -> str:
+    lines = [
+        f"{'contender':15s} {'N':>3s} {'steps/s':>8s} {'CPU us/step':>11s} {'trainer':>8s} "
+        f"{'vol/step':>8s} {'invol/step':>10s} {'act':>5s} {'step':>5s} {'update':>6s}   rounds (steps/s)"
+    ]
+    for r in result["rows"]:
+        share = r["wall_share"]
+        rounds = " ".join(f"{x:.0f}" for x in r["rates"])
+        lines.append(
+            f"{r['name']:15s} {r['num_envs']:>3d} {r['median']:>8.0f} {r['cpu_us_per_step']:>11.1f} "
+            f"{r['trainer_cpu_us_per_step']:>8.1f} {r['voluntary_switches_per_step']:>8.3f} "
+            f"{r['involuntary_switches_per_step']:>10.3f} {share['act']:>5.0%} {share['env_step']:>5.0%} "
+            f"{share['update']:>6.0%}   {rounds}"
+        )
+    lines += [
+        "",
+        "trainer: CPU us per step of the training process alone (its sims or workers excluded); "
+        "vol/invol: context switches per step of every thread of the process tree; "
+        "act/step/update: shares of the trainer's wall time",
+        "",
+        f"{'ratio of medians (> 1: numerator better)':44s} {'value':>6s} {'target':>12s}",
+    ]
+    for r in result["ratios"]:
+        target = (
+            "" if r["target"] is None else f">={r['target']:.1f} {'met' if r['value'] >= r['target'] else 'MISSED'}"
+        )
+        lines.append(f"{r['ratio']:44s} {r['value']:6.2f} {target:>12s}")
+    m = result["machine"]
+    loads = ", ".join(f"{x:.2f}" for x in result["load_avg_per_round"])
+    extra = " ".join(f"{k}={v}" for k, v in result["train_env"].items())
+    lines += [
+        "",
+        f"{result['date']}; {m['cpus']} CPUs, {m['platform']}, Python {m['python']}; "
+        f"{result['rounds']} rounds x {result['duration_s']:g} s per contender; CPU hogs: {result['hogs']}; "
+        f"training processes' extra environment: {extra or 'none'}; load average after each round: {loads}",
+    ]
+    lines += [f"skipped: {s}" for s in result["skipped"]]
+    return "\n".join(lines)
+
+
+def _parse_env(pairs: list[str]) -> dict[str, str]:
+    env = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise SystemExit(f"environment variables are given as KEY=VALUE, got {pair[:80]!r}")
+        env[key] = value
+    return env
+
+
+def _contender(spec: str) -> tuple[str, dict[str, str]]:
+    """``NAME[:KEY=VALUE...]``: the contender and the environment variables of its own process."""
+    name, *pairs = spec.split(":")
+    return name, _parse_env(pairs)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        ns = [int(x) for x in args.train_n.split(",") if x.strip()]
+    except ValueError:
+        raise SystemExit(f"--train-n must be comma-separated integers, got {args.train_n[:80]!r}") from None
+    if not ns or min(ns) < 2 or max(ns) > 1024:
+        raise SystemExit(f"--train-n must be integers from 2 to 1024, got {args.train_n[:80]!r}")
+    contenders = [c.strip() for c in args.train_contenders.split(",") if c.strip()]
+    unknown = sorted({_contender(c)[0] for c in contenders} - set(CONTENDERS))
+    if unknown or not contenders:
+        raise SystemExit(
+            f"--train-contenders takes some of {', '.join(CONTENDERS)}; got {args.train_contenders[:80]!r}"
+        )
+    if not 0 < args.train_duration <= 600 or not 1 <= args.train_rounds <= 1000 or not 0 <= args.hog <= 64:
+        raise SystemExit("--train-duration must be in (0, 600] s, --train-rounds in [1, 1000] and --hog in [0, 64]")
+    log = progress_log(args.json)
+    result = measure(ns, contenders, args.train_duration, args.train_rounds, args.hog, _parse_env(args.train_env), log)
+    emit(result, args.json, format_table)
+    return 0

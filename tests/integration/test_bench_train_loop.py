@@ -1,0 +1,49 @@
+"""``bench --train-loop`` runs end to end on a tiny case and writes well-formed
+JSON (its figures are measurements, never asserted); its ratios and its
+contender specs are computed as documented."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from remoteenv.benchmarks.train_loop import _contender, ratios
+
+
+def test_a_tiny_training_loop_benchmark_writes_every_contender_and_the_ratios(tmp_path):
+    out = tmp_path / "train.json"
+    cmd = [sys.executable, "-m", "remoteenv", "bench", "--train-loop", "--train-n", "2"]
+    cmd += ["--train-contenders", "remoteenv,SyncVectorEnv,SyncVectorEnv:OMP_NUM_THREADS=1"]
+    cmd += ["--train-rounds", "2", "--train-duration", "0.05", "--json", str(out)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    result = json.loads(out.read_text())
+    rows = {r["name"]: r for r in result["rows"]}
+    assert set(rows) == {"remoteenv", "SyncVectorEnv", "SyncVectorEnv:OMP_NUM_THREADS=1"}
+    for row in rows.values():
+        assert row["num_envs"] == 2 and len(row["rates"]) == 2 and row["median"] > 0
+        assert row["cpu_us_per_step"] > 0 and set(row["wall_share"]) == {"act", "env_step", "update"}
+    assert rows["SyncVectorEnv:OMP_NUM_THREADS=1"]["torch_threads"] == 1
+    assert rows["remoteenv"]["processes"] >= 2  # the trainer and its sim
+    assert len(result["load_avg_per_round"]) == 2 and result["machine"]["cpus"] >= 1
+
+
+def test_contender_specs_and_ratios():
+    assert _contender("EnvPool") == ("EnvPool", {})
+    assert _contender("remoteenv:OMP_NUM_THREADS=1:X=y") == ("remoteenv", {"OMP_NUM_THREADS": "1", "X": "y"})
+    with pytest.raises(SystemExit, match="KEY=VALUE"):
+        _contender("remoteenv:OMP_NUM_THREADS")
+    rows = [
+        {"name": name, "num_envs": 16, "median": rate, "cpu_us_per_step": cpu}
+        for name, rate, cpu in (("remoteenv", 300.0, 50.0), ("EnvPool", 200.0, 100.0), ("SyncVectorEnv", 100.0, 25.0))
+    ]
+    found = {r["ratio"]: (r["value"], r["target"]) for r in ratios(rows)}
+    assert found == {
+        "remoteenv / EnvPool, N=16": (1.5, 1.0),
+        "remoteenv / SyncVectorEnv, N=16": (3.0, 1.5),
+        "CPU/step: remoteenv / EnvPool, N=16": (2.0, None),
+        "CPU/step: remoteenv / SyncVectorEnv, N=16": (0.5, None),
+    }
