@@ -2,7 +2,10 @@
 
 from remoteenv.integrations.rllib import (
     EnvCreator,
+    float_image_space,
+    is_uint8_image,
     register_envs,
+    scale_images,
 )
 
-__all__ = ["EnvCreator", "register_envs"]
+__all__ = ["EnvCreator", "float_image_space", "is_uint8_image", "register_envs", "scale_images"]

@@ -16,6 +16,7 @@ FACES = {
     "remoteenv.latency_study": "remoteenv.latency.study",
     "remoteenv.rllib": "remoteenv.integrations.rllib",
     "remoteenv.ray": "remoteenv.integrations.ray",
+    "remoteenv.camera_video": "remoteenv.integrations.camera_video",
 }
 #: faces of optional libraries: checked where the library is installed
 OPTIONAL_FACES = {
