@@ -34,7 +34,7 @@ import numpy as np
 
 import remoteenv  # noqa: F401  (registers remoteenv/CartPole-v0)
 from remoteenv.controllers import CARTPOLE_OBS, CartpolePredictor, cartpole_continuous
-from remoteenv.wrappers import ActionHistory
+from remoteenv.latency.action_history import ActionHistory
 
 ENV_ID = "remoteenv/CartPole-v0"
 DEFAULT_DELAYS = (0, 2, 4, 5, 6, 8, 10, 12, 14, 16)

@@ -31,7 +31,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 import remoteenv  # noqa: F401  (registers remoteenv/CartPole-v0)
 from remoteenv import RemoteVectorEnv
-from remoteenv.sb3 import SB3VecEnv
+from remoteenv.integrations.sb3 import SB3VecEnv
 
 
 class PauseDuringUpdates(BaseCallback):

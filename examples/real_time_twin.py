@@ -15,7 +15,7 @@ substep; a step lasts until the end of the first tick the action was in
 force) and ``fixed_step`` (rtgym's: an action takes effect at the next
 control-tick boundary, where the step ends).
 
-``remoteenv.latency_twin.LatencyRecorder`` records, for every step, the
+``remoteenv.latency.twin.LatencyRecorder`` records, for every step, the
 physics substep at which its action took effect; ``save`` writes one episode
 per file. ``make_twin(env_id, path)`` replays a file: the sim applies each
 action at its recorded substep, without a clock, so the twin of a
@@ -43,7 +43,7 @@ import numpy as np
 
 import remoteenv  # noqa: F401  (registers remoteenv/CartPole-v0)
 from remoteenv.controllers import CartpoleHoldPredictor, cartpole_continuous
-from remoteenv.latency_twin import ExactTwin, LatencyRecorder, first_difference, load_recording, make_twin
+from remoteenv.latency.twin import ExactTwin, LatencyRecorder, first_difference, load_recording, make_twin
 
 ENV_ID = "remoteenv/CartPole-v0"
 ENV_KWARGS = {"continuous": True}

@@ -25,7 +25,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 from torch.utils.data import DataLoader
 
-from remoteenv.torch import RemoteIterableDataset, launch_publishers
+from remoteenv.integrations.frame_dataset import RemoteIterableDataset, launch_publishers
 
 
 def main() -> None:

@@ -5,8 +5,8 @@ a plain id (``"remoteenv/CartPole-v0"``) is unknown there. One call in the
 driver registers every remote env id with Ray Tune's env registry, which
 RLlib's runners read::
 
-    import remoteenv.rllib
-    remoteenv.rllib.register_envs()
+    import remoteenv.integrations.rllib
+    remoteenv.integrations.rllib.register_envs()
     config.environment("remoteenv/CartPole-v0")
 
 Each env runner builds its envs with ``gym.make_vec``; with
@@ -56,9 +56,9 @@ def make_config(env_runners: int, envs_per_runner: int, seed: int, env_id: str =
 def register(env_id: str = ENV_ID) -> str:
     """Make ``env_id`` known to RLlib's env runners; returns the plain id to configure.
     ``"module:id"`` imports ``module`` first (an env package of your own)."""
-    import remoteenv.rllib
+    import remoteenv.integrations.rllib
 
-    return remoteenv.rllib.register_envs(env_id)[0]
+    return remoteenv.integrations.rllib.register_envs(env_id)[0]
 
 
 def train(

@@ -1,6 +1,6 @@
 """Train Stable-Baselines3 PPO on a registered remote env (default remoteenv/CartPole-v0), save, load, evaluate.
 
-SB3 does not take Gymnasium vector envs; ``remoteenv.sb3.make_sb3_vec_env``
+SB3 does not take Gymnasium vector envs; ``remoteenv.integrations.sb3.make_sb3_vec_env``
 gives it an SB3 ``VecEnv`` over one RemoteVectorEnv (one request per step for
 all worlds of a sim process). The trained model is saved as SB3's zip, loaded
 back as a fresh model, and evaluated on a single remote env with SB3's
@@ -37,8 +37,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 import remoteenv  # noqa: F401  (registers the shipped scenes' ids)
 from remoteenv.cli.arguments import json_map
+from remoteenv.integrations.sb3 import make_sb3_vec_env
 from remoteenv.registration import find_spec  # "module:id" imports module first, as gym.make does
-from remoteenv.sb3 import make_sb3_vec_env
 
 DEFAULT_ENV = "remoteenv/CartPole-v0"
 

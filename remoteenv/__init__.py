@@ -64,6 +64,9 @@ _SUBMODULES = frozenset(
         "compliance",
         "delays",
         "wrappers",
+        "latency",
+        "integrations",
+        "scene_controllers",
     }
 )
 

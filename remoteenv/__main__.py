@@ -1,4 +1,4 @@
-"""``python -m remoteenv``: see :mod:`remoteenv.cli`."""
+"""``python -m remoteenv``: see :mod:`remoteenv.cli`. Runs in the agent process (the command's own)."""
 
 import sys
 

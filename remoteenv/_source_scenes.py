@@ -5,6 +5,8 @@ as the package ``remoteenv.scenes`` (see ``pyproject.toml``). When Python
 imports remoteenv straight from a checkout instead (``python -m remoteenv``
 run in the repository root puts the checkout first on ``sys.path``), that
 package is not under ``remoteenv/``; this module loads it from ``scenes/``.
+
+Runs in every process that imports ``remoteenv``: the agent's, and a sim's (``remoteenv.sim`` is inside the package).
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@
 Runs in the agent process. A remote env's id is registered with Gymnasium
 (importing its package registers it: ``remoteenv`` for the shipped scenes,
 ``my_arm`` for a package ``new-scene`` wrote) with remoteenv's entry points;
-the adapters for Stable-Baselines3 (:mod:`remoteenv.sb3`), TorchRL
-(:mod:`remoteenv.torchrl`) and RLlib (:mod:`remoteenv.rllib`) find and build
+the adapters for Stable-Baselines3 (:mod:`remoteenv.integrations.sb3`), TorchRL
+(:mod:`remoteenv.integrations.torchrl`) and RLlib (:mod:`remoteenv.integrations.rllib`) find and build
 them through this module.
 
 Autoreset: :class:`~remoteenv.vector_env.RemoteVectorEnv` defaults to

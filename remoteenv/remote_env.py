@@ -5,7 +5,7 @@ the sim (see :mod:`remoteenv.protocol`); spaces and metadata come from the
 sim's handshake, so they are declared once, in the scene. Where the sim runs
 is a :class:`~remoteenv.agent.launch.sim_group.SimGroup` (``launcher=``/``attach=``);
 its lifecycle (start or attach, handshake, restarts, close) is the
-:class:`~remoteenv.agent.session.session.SimSession` this env shares with
+:class:`~remoteenv.agent.session.sim_session.SimSession` this env shares with
 :class:`remoteenv.RemoteVectorEnv`.
 """
 
@@ -23,15 +23,17 @@ from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launch.restart import restarted_info
 from remoteenv.agent.launch.sim_group import SimGroup
 from remoteenv.agent.session.forwarding import SceneAttributes, SceneReach
-from remoteenv.agent.session.latency import LatencyStats
+from remoteenv.agent.session.latency_stats import LatencyStats
 from remoteenv.agent.session.pausing import Pausable, Pauser
 from remoteenv.agent.session.pickling import RebuildOnUnpickle, remember_init_args
-from remoteenv.agent.session.session import choose_group, open_session, scene_label
 from remoteenv.agent.session.session_attributes import SessionAttributes
-from remoteenv.wire.actions import check_action
-from remoteenv.wire.delays.channel_rules import NEWEST, ChannelRules
-from remoteenv.wire.delays.delays import DelaySpec
-from remoteenv.wire.scalar_types import restore_scalars
+from remoteenv.agent.session.sim_session import choose_group, open_session, scene_label
+from remoteenv.wire.codec.scalar_types import restore_scalars
+from remoteenv.wire.delays.channel_rules import NEWEST
+from remoteenv.wire.delays.delay_specs import DelaySpec
+from remoteenv.wire.messages.action_rules import check_action
+from remoteenv.wire.run_options.options import RunOptions
+from remoteenv.wire.run_options.real_time_modes import ELASTIC
 
 __all__ = ["OpenAIRemoteEnv", "check_action"]
 
@@ -48,9 +50,10 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
         render_mode: ``"rgb_array"`` renders offscreen in the sim process.
         real_time: run the sim on a paced wall clock (see docs/real-time.md).
         real_time_factor: simulated seconds per wall-clock second.
-        real_time_mode: with ``real_time``, the regime: ``"elastic"`` (default:
-            an action takes effect at the next physics substep) or
-            ``"fixed_step"`` (rtgym's: at the next control-tick boundary).
+        real_time_mode: with ``real_time``, the regime
+            (:mod:`remoteenv.wire.run_options.real_time_modes`): elastic (the
+            default: an action takes effect at the next physics substep) or
+            fixed step (rtgym's: at the next control-tick boundary).
         action_delay: lock-step; an action takes effect this many ticks later:
             an int, or a :mod:`remoteenv.delays` spec in ticks (e.g.
             ``Uniform(0, 3)``), drawn per step from a stream seeded by
@@ -113,7 +116,11 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
     arguments, with a fresh sim (see :mod:`remoteenv.agent.session.pickling`).
 
     Attributes:
-        latency_stats: :class:`remoteenv.agent.session.latency.LatencyStats` of every step so
+        run_options: the run options the arguments above make
+            (:class:`~remoteenv.wire.run_options.options.RunOptions`: real time, its
+            factor and regime, the delays and their rules), checked once and sent
+            whole to the sims (attached sims run what they were launched with).
+        latency_stats: :class:`remoteenv.agent.session.latency_stats.LatencyStats` of every step so
             far: action latency (mean/p50/p99/max, seconds and ticks), wall
             round trip, late actions, pacing overruns. With ``real_time`` or
             ``action_delay`` each step's info also carries the timing keys
@@ -131,7 +138,7 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
         *,
         real_time: bool = False,
         real_time_factor: float = 1.0,
-        real_time_mode: str = "elastic",
+        real_time_mode: str = ELASTIC,
         action_delay: int | DelaySpec = 0,
         obs_delay: int | DelaySpec = 0,
         link_delay: float | DelaySpec | None = None,
@@ -157,6 +164,18 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
         self.latency_stats = LatencyStats()
         self._last_obs: Any = None
         self.scene = os.fspath(scene)
+        #: How the sim's world runs, as the arguments above ask (made and checked once, here).
+        self.run_options = RunOptions(
+            real_time=real_time,
+            real_time_factor=real_time_factor,
+            real_time_mode=real_time_mode,
+            action_delay=action_delay,
+            obs_delay=obs_delay,
+            link_delay=link_delay,
+            action_delivery=action_delivery,
+            obs_delivery=obs_delivery,
+            delayed_rewards=delayed_rewards,
+        )
         group = choose_group(
             launcher, attach, attach_instances=[0], transport=transport, bind_host=bind_host, curve=curve
         )
@@ -180,13 +199,7 @@ class OpenAIRemoteEnv(SessionAttributes, SceneAttributes, Pausable, RebuildOnUnp
             seed=seed,
             env_kwargs=scene_kwargs,
             render_mode=render_mode,
-            real_time=real_time,
-            real_time_factor=real_time_factor,
-            real_time_mode=real_time_mode,
-            action_delay=action_delay,
-            obs_delay=obs_delay,
-            link_delay=link_delay,
-            channel=ChannelRules(action_delivery, obs_delivery, delayed_rewards),
+            run=self.run_options,
         )
         hs = self._session.handshake
         self.observation_space = hs.observation_space

@@ -10,7 +10,7 @@ one world and is driven with plain ``step``/``reset`` requests, so every world
 keeps its own paced clock.
 
 The class keeps Gymnasium's vector semantics; the jobs under it live in
-:mod:`remoteenv.agent`: the sims' lifecycle (:mod:`~remoteenv.agent.session.session`),
+:mod:`remoteenv.agent`: the sims' lifecycle (:mod:`~remoteenv.agent.session.sim_session`),
 the requests of a call and their gathering (:mod:`~remoteenv.agent.vector.vector_episodes`,
 :mod:`~remoteenv.agent.vector.vector_requests`,
 :mod:`~remoteenv.agent.connection.fan_in`), autoreset planning
@@ -31,12 +31,12 @@ from gymnasium.vector.utils import batch_space
 
 from remoteenv.agent.launch.sim_group import SimGroup
 from remoteenv.agent.session.forwarding import SceneReach, VectorAttributes
-from remoteenv.agent.session.latency import LatencyStats
+from remoteenv.agent.session.latency_stats import LatencyStats
 from remoteenv.agent.session.pausing import Pausable, Pauser
 from remoteenv.agent.session.pickling import RebuildOnUnpickle, remember_init_args
 from remoteenv.agent.session.reset_args import is_int_seed
-from remoteenv.agent.session.session import choose_group, scene_label
 from remoteenv.agent.session.session_attributes import SessionAttributes
+from remoteenv.agent.session.sim_session import choose_group, scene_label
 from remoteenv.agent.vector.pool_api import PoolAPI
 from remoteenv.agent.vector.sim_placement import SimPlacement, check_place_sims
 from remoteenv.agent.vector.torch_threads import AUTO, TorchThreads, check_torch_threads
@@ -49,9 +49,11 @@ from remoteenv.agent.vector.vector_layout import (
     world_slices,
 )
 from remoteenv.agent.vector.vector_results import hold_big_ints, hold_nones
-from remoteenv.wire.delays.channel_rules import NEWEST, ChannelRules
-from remoteenv.wire.delays.delays import DelaySpec
-from remoteenv.wire.handshake import Handshake
+from remoteenv.wire.delays.channel_rules import NEWEST
+from remoteenv.wire.delays.delay_specs import DelaySpec
+from remoteenv.wire.messages.handshake import Handshake
+from remoteenv.wire.run_options.options import RunOptions
+from remoteenv.wire.run_options.real_time_modes import ELASTIC
 
 __all__ = ["RemoteVectorEnv", "default_envs_per_process"]
 
@@ -133,9 +135,13 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
     constructor arguments, with fresh sims.
 
     Attributes:
+        run_options: the run options the arguments above make
+            (:class:`~remoteenv.wire.run_options.options.RunOptions`: real time, its
+            factor and regime, the delays and their rules), checked once and sent
+            whole to the sims (attached sims run what they were launched with).
         world_cost_s: what one world's whole control tick costs its sim on one
             thread (seconds), where the default layout measured it; else None.
-        latency_stats: :class:`remoteenv.agent.session.latency.LatencyStats` of every
+        latency_stats: :class:`remoteenv.agent.session.latency_stats.LatencyStats` of every
             vector step so far: one wall round trip per call, and with
             ``real_time`` or ``action_delay`` each world's action latency.
     """
@@ -152,7 +158,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         render_mode: str | None = None,
         real_time: bool = False,
         real_time_factor: float = 1.0,
-        real_time_mode: str = "elastic",
+        real_time_mode: str = ELASTIC,
         action_delay: int | DelaySpec = 0,
         obs_delay: int | DelaySpec = 0,
         link_delay: float | DelaySpec | None = None,
@@ -178,6 +184,18 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         self.startup_timeout = startup_timeout
         check_torch_threads(torch_threads)
         check_place_sims(place_sims)
+        #: How the sims' worlds run, as the arguments ask (made and checked once, here).
+        self.run_options = RunOptions(
+            real_time=real_time,
+            real_time_factor=real_time_factor,
+            real_time_mode=real_time_mode,
+            action_delay=action_delay,
+            obs_delay=obs_delay,
+            link_delay=link_delay,
+            action_delivery=action_delivery,
+            obs_delivery=obs_delivery,
+            delayed_rewards=delayed_rewards,
+        )
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         group = choose_group(launcher, attach, transport=transport, bind_host=bind_host, curve=curve)
@@ -205,13 +223,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
             "seed": seed,
             "env_kwargs": scene_kwargs,
             "render_mode": render_mode,
-            "real_time": real_time,
-            "real_time_factor": real_time_factor,
-            "real_time_mode": real_time_mode,
-            "action_delay": action_delay,
-            "obs_delay": obs_delay,
-            "link_delay": link_delay,
-            "channel": ChannelRules(action_delivery, obs_delivery, delayed_rewards),
+            "run": self.run_options,
         }
         default_layout = asked is None and launcher is None and attach is None and not self.real_time
         self._session, self.envs_per_process, self.world_cost_s = open_worlds(

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import Any, ClassVar, cast
 
-from remoteenv.wire import errors as wire_errors
+from remoteenv.wire import wire_errors
 
 
 class RemoteEnvError(RuntimeError):

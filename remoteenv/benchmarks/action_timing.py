@@ -41,12 +41,13 @@ from typing import Any
 
 import gymnasium as gym
 
+from remoteenv.benchmarks.harness.report import emit, machine_record, progress_log
 from remoteenv.benchmarks.pacing import start_hogs, stop_hogs
-from remoteenv.benchmarks.report import emit, machine_record, progress_log
-from remoteenv.controllers import cartpole_continuous
+from remoteenv.scene_controllers.cartpole import cartpole_continuous
+from remoteenv.wire.run_options.real_time_modes import REAL_TIME_MODES
 
 ENV_ID = "remoteenv/CartPole-v0"
-MODES = ("elastic", "fixed_step")
+MODES = REAL_TIME_MODES
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

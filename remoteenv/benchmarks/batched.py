@@ -3,7 +3,7 @@
 Agent side; it launches sims. Reacher at N = 16 and 64 (``--batched-n``), and
 the hexapod (the heavy, contact-rich scene) next to its own physics limit:
 the physics limit (raw ``mj_step``, one thread per CPU,
-:class:`~remoteenv.benchmarks.anchors.PhysicsLimit`; and on one thread), EnvPool's
+:class:`~remoteenv.benchmarks.harness.anchors.PhysicsLimit`; and on one thread), EnvPool's
 ``Reacher-v5`` (skipped with a note when EnvPool is not installed),
 remoteenv's batched ``RemoteVectorEnv`` (default K) stepped with ``step``
 and with ``send``/``recv`` (``batch_size`` = N / 2), Gymnasium's
@@ -28,8 +28,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from remoteenv.benchmarks.anchors import CpuHog, PhysicsLimit, cpu_seconds, make_envpool
-from remoteenv.benchmarks.report import emit, machine_record, progress_log
+from remoteenv.benchmarks.harness.anchors import CpuHog, PhysicsLimit, cpu_seconds, make_envpool
+from remoteenv.benchmarks.harness.report import emit, machine_record, progress_log
 
 REMOTE_ID = "remoteenv/Reacher-v0"
 GYM_ID = "Reacher-v5"
@@ -265,8 +265,8 @@ def format_table(result: dict[str, Any]) -> str:
 
 
 def format_profile(ns: list[int]) -> str:
-    """The stage profile (:func:`remoteenv.benchmarks.step_profile.profile`) of each N, as a table."""
-    from remoteenv.benchmarks.step_profile import STAGES, profile
+    """The stage profile (:func:`remoteenv.benchmarks.harness.step_profile.profile`) of each N, as a table."""
+    from remoteenv.benchmarks.harness.step_profile import STAGES, profile
 
     by_n = {n: profile(n) for n in ns}
     head = "".join(f"{f'N={n} wall':>12s}{f'N={n} CPU':>12s}" for n in ns)

@@ -38,10 +38,10 @@ from typing import Any
 
 import numpy as np
 
-from remoteenv import controllers
-from remoteenv.agent.connection.connection import Connection
+from remoteenv.agent.connection.connect import Connection
 from remoteenv.agent.launch.launcher import Launcher
-from remoteenv.agent.session.latency import LatencyStats
+from remoteenv.agent.session.latency_stats import LatencyStats
+from remoteenv.scene_controllers.cartpole import cartpole_continuous
 from remoteenv.wire import protocol
 
 
@@ -187,7 +187,7 @@ def measure(args: argparse.Namespace, sim_args: list[str], verbose: bool) -> dic
         while time.monotonic() - start < duration:
             time.sleep(rng.uniform(0.0, max_think))
             sent = time.perf_counter()
-            reply = conn.request("step", action=controllers.cartpole_continuous(obs))
+            reply = conn.request("step", action=cartpole_continuous(obs))
             stats.record(reply["info"], time.perf_counter() - sent)
             obs = reply["obs"]
             if reply["terminated"]:

@@ -5,7 +5,7 @@ uint8 images rendered by MuJoCo's offscreen renderer, without MSAA and
 shadows) stepped as ``RemoteVectorEnv`` (its default layout, and the splits
 given with ``--pixels-k``) next to Gymnasium's ``AsyncVectorEnv`` and
 ``SyncVectorEnv`` of the same task written as an in-process env
-(:mod:`remoteenv.benchmarks.in_process`: the same MJCF, hooks and renderer
+(:mod:`remoteenv.benchmarks.harness.in_process`: the same MJCF, hooks and renderer
 settings), at each ``--pixels-cases`` (image side x worlds; default 64x8,
 84x8, 64x16). Per case the contenders are built, then timed in
 ``--pixels-rounds`` alternating rounds of ``--pixels-duration`` s, so load
@@ -30,18 +30,18 @@ import gymnasium as gym
 import numpy as np
 
 from remoteenv import RemoteVectorEnv
-from remoteenv.benchmarks.anchors import CpuHog
 from remoteenv.benchmarks.batched import Contender
-from remoteenv.benchmarks.in_process import make_in_process
+from remoteenv.benchmarks.harness.anchors import CpuHog
+from remoteenv.benchmarks.harness.in_process import make_in_process
+from remoteenv.benchmarks.harness.report import emit, machine_record, progress_log
 from remoteenv.benchmarks.render_cost import format_cost, render_cost
-from remoteenv.benchmarks.report import emit, machine_record, progress_log
 from remoteenv.sim.scene.cameras import MAX_SIDE
-from remoteenv.wire.frame_limits import MAX_MESSAGE_BYTES
+from remoteenv.wire.codec.frame_limits import MAX_MESSAGE_BYTES
 from remoteenv.wire.memory import format_bytes, resident_bytes, worlds_problem
 
 REMOTE_ID = "remoteenv/CartPole-v0"
 #: The scene script of ``--pixels-render-in-hook``.
-HOOK_RENDER_SCENE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "hook_render_scene.py")
+HOOK_RENDER_SCENE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "harness", "hook_render_scene.py")
 #: (image side, worlds) measured by default; the first is the one with targets.
 DEFAULT_CASES = "64x8,84x8,64x16"
 #: (ratio, numerator, denominator, target at the first case)
@@ -106,7 +106,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--pixels-render-in-hook",
         action="store_true",
         help="every contender's scene renders its image in its own hook, no camera declared "
-        "(remoteenv.benchmarks.hook_render_scene): the layout must see the cost by measuring a whole step",
+        "(remoteenv.benchmarks.harness.hook_render_scene): the layout must see the cost by measuring a whole step",
     )
     g.add_argument(
         "--pixels-k",
@@ -204,7 +204,7 @@ def _contender(name: str, env: Any) -> Contender:
 
 def contenders(side: int, n: int, ks: list[int], in_hook: bool = False) -> list[Contender]:
     """The contenders of one case (built; the caller closes them). ``in_hook``:
-    the scene renders its image in its own hook (:mod:`remoteenv.benchmarks.hook_render_scene`)."""
+    the scene renders its image in its own hook (:mod:`remoteenv.benchmarks.harness.hook_render_scene`)."""
     import remoteenv  # noqa: F401  (registers the ids)
 
     limit = gym.spec(REMOTE_ID).max_episode_steps

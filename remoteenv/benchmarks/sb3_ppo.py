@@ -7,7 +7,7 @@ each contender in turn, round-robin, for ``--sb3-rounds`` rounds of
 ``--sb3-steps`` timesteps:
 
 - ``SubprocVecEnv``: SB3's worker processes, 8 x ``gymnasium.make("CartPole-v1")``;
-- ``remoteenv``: :func:`remoteenv.sb3.make_sb3_vec_env` of ``remoteenv/CartPole-v0``
+- ``remoteenv``: :func:`remoteenv.integrations.sb3.make_sb3_vec_env` of ``remoteenv/CartPole-v0``
   (the discrete scene with CartPole-v1's constants and 500-step limit);
 - ``DummyVecEnv``: 8 in-process CartPole-v1, a reference row.
 
@@ -32,8 +32,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from remoteenv.benchmarks.anchors import cpu_seconds
-from remoteenv.benchmarks.report import emit, machine_record, progress_log
+from remoteenv.benchmarks.harness.anchors import cpu_seconds
+from remoteenv.benchmarks.harness.report import emit, machine_record, progress_log
 
 GYM_ID = "CartPole-v1"
 REMOTE_ID = "remoteenv/CartPole-v0"
@@ -94,7 +94,7 @@ def make_venv(name: str) -> Any:
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor
 
     if name == "remoteenv":
-        from remoteenv.sb3 import make_sb3_vec_env
+        from remoteenv.integrations.sb3 import make_sb3_vec_env
 
         venv: Any = make_sb3_vec_env(REMOTE_ID, NUM_ENVS)
         if not (isinstance(venv.action_space, Discrete) and venv.action_space.n == 2):

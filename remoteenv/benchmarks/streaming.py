@@ -24,7 +24,7 @@ import statistics
 import time
 from typing import Any
 
-from remoteenv.benchmarks.report import machine_record
+from remoteenv.benchmarks.harness.report import machine_record
 
 #: name -> launch_publishers(quality=...)
 SETTINGS = {"cheap": False, "quality": True}
@@ -34,7 +34,7 @@ def frames_per_second(size: int, publishers: int, workers: int, frames: int, bat
     """Frames per second read through a DataLoader from fresh publishers, after one warm-up batch."""
     from torch.utils.data import DataLoader
 
-    from remoteenv.torch import RemoteIterableDataset, launch_publishers
+    from remoteenv.integrations.frame_dataset import RemoteIterableDataset, launch_publishers
 
     per_publisher = -(-frames // publishers)
     with launch_publishers(

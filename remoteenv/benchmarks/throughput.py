@@ -19,9 +19,9 @@ from typing import Any
 import gymnasium as gym
 
 from remoteenv import SHIPPED_SCENES
-from remoteenv.benchmarks.report import emit, machine_record, progress_log
-from remoteenv.benchmarks.timing import timed as _timed
-from remoteenv.benchmarks.transport_floor import pipe_floor, zmq_floor
+from remoteenv.benchmarks.harness.report import emit, machine_record, progress_log
+from remoteenv.benchmarks.harness.timing import timed as _timed
+from remoteenv.benchmarks.harness.transport_floor import pipe_floor, zmq_floor
 
 #: remoteenv scene -> (remoteenv id, Gymnasium id to compare with)
 SCENES = {

@@ -5,7 +5,7 @@ Agent side; it starts one training process per contender and N
 same CPUs as its envs, as a user's training script runs: every vector step a
 2x64 tanh MLP infers the actions of all N Reacher worlds; every 128 vector
 steps, 4 epochs of SGD on the batch in 4 minibatches
-(:class:`~remoteenv.benchmarks.ppo_shaped_learner.PPOShapedLearner`); torch's
+(:class:`~remoteenv.benchmarks.harness.ppo_shaped_learner.PPOShapedLearner`); torch's
 settings as the process has them (``--train-env KEY=VALUE`` sets environment
 variables of every training process, e.g. ``OMP_NUM_THREADS=1``, to measure a
 lever). Contenders: remoteenv's default vector env of ``remoteenv/Reacher-v0``,
@@ -32,8 +32,8 @@ import time
 from collections.abc import Callable
 from typing import IO, Any
 
-from remoteenv.benchmarks.anchors import CpuHog
-from remoteenv.benchmarks.report import emit, machine_record, progress_log
+from remoteenv.benchmarks.harness.anchors import CpuHog
+from remoteenv.benchmarks.harness.report import emit, machine_record, progress_log
 from remoteenv.benchmarks.train_loop_worker import CONTENDERS, DEFAULT_CONTENDERS
 
 #: (numerator, denominator, N, target) of the ratios of medians reported.

@@ -2,7 +2,7 @@
 
 Agent side (benchmarks only). ``python -m remoteenv.benchmarks.train_loop_worker
 CONTENDER N`` builds the contender's vector env of N Reacher worlds and a
-:class:`~remoteenv.benchmarks.ppo_shaped_learner.PPOShapedLearner` beside it,
+:class:`~remoteenv.benchmarks.harness.ppo_shaped_learner.PPOShapedLearner` beside it,
 as a user's training script would (torch's settings as the process has them),
 runs one warm-up rollout and update, then serves rounds: each line
 ``round SECONDS`` on stdin runs whole rollout-and-update iterations until
@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from remoteenv.benchmarks.anchors import context_switches, cpu_seconds, make_envpool, process_tree
-from remoteenv.benchmarks.ppo_shaped_learner import PPOShapedLearner
+from remoteenv.benchmarks.harness.anchors import context_switches, cpu_seconds, make_envpool, process_tree
+from remoteenv.benchmarks.harness.ppo_shaped_learner import PPOShapedLearner
 
 REMOTE_ID = "remoteenv/Reacher-v0"
 GYM_ID = "Reacher-v5"

@@ -1,5 +1,8 @@
 """``python -m remoteenv <command>``: one module per command, each with
-``add_parser(subparsers)`` and ``run(args) -> int``."""
+``add_parser(subparsers)`` and ``run(args) -> int``.
+
+Runs in the agent process (the command's own).
+"""
 
 from __future__ import annotations
 

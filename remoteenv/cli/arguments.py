@@ -3,6 +3,8 @@ before a command starts any work, and refused with a message naming the rule.
 
 Each is an ``argparse`` ``type=``: it raises ``argparse.ArgumentTypeError``,
 which argparse reports as ``argument --name: <message>`` (exit status 2).
+
+Runs in the agent process (the command's own).
 """
 
 from __future__ import annotations

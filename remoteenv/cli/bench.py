@@ -12,14 +12,15 @@ import argparse
 import importlib
 from typing import Any
 
-#: Benchmark modules in remoteenv.benchmarks; the default one first.
+#: Benchmark modules in remoteenv.benchmarks (its entry points; their parts are in
+#: remoteenv.benchmarks.harness) and the flag that picks each; the default one first.
 BENCHMARKS = {
     "throughput": None,
     "batched": "--batched",
     "pacing": "--real-time",
     "soak": "--soak",
     "sb3_ppo": "--sb3",
-    "startup": "--startup",
+    "startup_time": "--startup",
     "pixels": "--pixels",
     "action_timing": "--action-timing",
     "train_loop": "--train-loop",

@@ -4,6 +4,8 @@ Runs every check of :mod:`remoteenv.compliance` on the servers a launch-info
 file names and prints one line per check and a summary per server. Exit
 status: 0 when every server is compliant (no check failed), 1 when one is
 not, 2 when the launch-info file cannot be used.
+
+Runs in the agent process (the command's own).
 """
 
 from __future__ import annotations

@@ -6,6 +6,8 @@ remoteenv serves (``module:id`` imports the module first) or the path of a
 scene script. Other scenes run random actions, unless their scene script
 defines ``demo_policy(obs, t) -> action`` (``t``: simulated seconds since the
 reset), which the demo then loads and uses.
+
+Runs in the agent process (the command's own).
 """
 
 from __future__ import annotations
@@ -153,7 +155,9 @@ def script_policy(path: str | None) -> Policy | None:
 
 def make_policy(scene: str, env: gym.Env, random: bool) -> Policy:
     """The demo's controller for ``scene`` (or random actions)."""
-    from remoteenv import controllers
+    from remoteenv.scene_controllers.cartpole import cartpole_continuous, cartpole_discrete
+    from remoteenv.scene_controllers.hexapod import hexapod_tripod
+    from remoteenv.scene_controllers.reacher import reacher_reach
 
     if random:
         return lambda obs, t: env.action_space.sample()
@@ -161,12 +165,12 @@ def make_policy(scene: str, env: gym.Env, random: bool) -> Policy:
         own = script_policy(scene_script(scene))
         return own if own is not None else (lambda obs, t: env.action_space.sample())
     if scene == "hexapod":
-        return controllers.hexapod_tripod
+        return hexapod_tripod
     if scene == "reacher":
-        return lambda obs, t: controllers.reacher_reach(obs)
+        return lambda obs, t: reacher_reach(obs)
     if isinstance(env.action_space, gym.spaces.Discrete):
-        return lambda obs, t: controllers.cartpole_discrete(obs)
-    return lambda obs, t: controllers.cartpole_continuous(obs)
+        return lambda obs, t: cartpole_discrete(obs)
+    return lambda obs, t: cartpole_continuous(obs)
 
 
 def on_state(policy: Policy, env: gym.Env) -> Policy:

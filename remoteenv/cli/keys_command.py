@@ -1,4 +1,4 @@
-"""``python -m remoteenv keys DIR``: generate CURVE key pairs for remote binding."""
+"""``python -m remoteenv keys DIR``: generate CURVE key pairs for remote binding. Runs in the agent process (the command's own)."""
 
 from __future__ import annotations
 

@@ -22,6 +22,8 @@ each finished run; ``--resume`` continues an interrupted study),
 table) and ``rt_replay.json``. The defaults are the study of docs/latency.md::
 
     python -m remoteenv latency-study --out docs/latency
+
+Runs in the agent process (the command's own).
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ DEFAULT_RANDOM = "4:8,6:10,8:16,0:16"
 
 def random_models(text: str) -> list[str]:
     """``"6:10,0:16"`` -> ``["U(6,10)", "U(0,16)"]`` (the study's model names)."""
-    from remoteenv.latency_study.design import random_model, random_name
+    from remoteenv.latency.study.design import random_model, random_name
 
     names = []
     for part in text.split(","):
@@ -90,7 +92,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--ppo",
         default="{}",
-        help="JSON map of PPO settings to override (see remoteenv.latency_study.design.PPO_SETTINGS), e.g. '{\"gamma\": 0.98}'",
+        help="JSON map of PPO settings to override (see remoteenv.latency.study.design.PPO_SETTINGS), e.g. '{\"gamma\": 0.98}'",
     )
     p.add_argument("--out", default="latency-study", help="output directory (default ./latency-study)")
     p.add_argument("--resume", action="store_true", help="keep the finished runs of an interrupted study in --out")
@@ -109,7 +111,7 @@ def add_parser(sub: Any) -> None:
 
 
 def _config(args: argparse.Namespace) -> Any:
-    from remoteenv.latency_study.design import StudyConfig
+    from remoteenv.latency.study.design import StudyConfig
 
     if args.env_kwargs is None:
         kwargs: dict[str, Any] = {"continuous": True} if args.env == DEFAULT_ENV else {}
@@ -137,7 +139,7 @@ def _config(args: argparse.Namespace) -> Any:
 def _check_spaces(config: Any) -> None:
     """Refuse spaces the study cannot train on, before it starts its sims (reading
     the spaces makes one env, whose sim is closed at once)."""
-    from remoteenv.latency_study.spaces import check_spaces, probe_spaces
+    from remoteenv.latency.study.trainable_spaces import check_spaces, probe_spaces
 
     observation_space, action_space = probe_spaces(config.env_id, config.env_kwargs)
     try:
@@ -158,8 +160,8 @@ def _check_writable(folder: str) -> None:
 
 def _check_resumable(json_path: str, config: Any) -> None:
     """Refuse (one line, naming the file) a ``--resume`` file that is not an
-    earlier run of this study (see :func:`remoteenv.latency_study.results.load_records`)."""
-    from remoteenv.latency_study.results import load_records
+    earlier run of this study (see :func:`remoteenv.latency.study.results.load_records`)."""
+    from remoteenv.latency.study.results import load_records
 
     try:
         load_records(json_path, config)
@@ -194,10 +196,10 @@ def _terminated(signum: int, frame: Any) -> None:
 
 def _study(args: argparse.Namespace, config: Any, json_path: str) -> int:
     from remoteenv.agent.launch.dir_reaper import forget_dir, watch_dir
-    from remoteenv.latency_study.references import reference_returns
-    from remoteenv.latency_study.results import markdown_table, plot, write_json
-    from remoteenv.latency_study.runner import run_study
-    from remoteenv.latency_study.twin_check import run_twin_check
+    from remoteenv.latency.study.references import reference_returns
+    from remoteenv.latency.study.results import markdown_table, plot, write_json
+    from remoteenv.latency.study.runner import run_study
+    from remoteenv.latency.study.twin_check import run_twin_check
     from remoteenv.wire.files.owned_dirs import remove_dir
 
     scratch = tempfile.mkdtemp(prefix="remoteenv-study-policies-")

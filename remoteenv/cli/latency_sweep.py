@@ -28,48 +28,29 @@ action in force (``info["action_delay_ticks"]`` per tick) and how many of
 the episode's actions never took effect (overtaken, or still on their way
 when it ended); the printed table gives both per delay (mean age per tick,
 fraction of the actions sent).
+
+Runs in the agent process (the command's own).
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
-import importlib
-import importlib.util
-import io
-import json
 import os
-import time
-from collections.abc import Callable
 from typing import Any
-
-import numpy as np
 
 from remoteenv.cli.arguments import MAX_SEED, json_map, non_negative_int, positive_int
 from remoteenv.cli.optional import require
-from remoteenv.wire.files.file_reads import read_bytes
-
-#: Builtin controllers (functions of remoteenv.controllers) and the scene each suits.
-BUILTIN_POLICIES = {
-    "cartpole_continuous": "CartPole with continuous=True",
-    "cartpole_discrete": "CartPole (Discrete(2))",
-    "reacher_reach": "Reacher",
-}
-MODES = ("action_delay", "obs_delay", "real_time")
-#: Largest TorchScript --policy file read.
-MAX_POLICY_BYTES = 1 << 30
-CSV_FIELDS = (
-    "delay",
-    "seed",
-    "episode",
-    "return",
-    "length",
-    "latency_ticks",
-    "action_age_ticks",
-    "actions_never_acted",
+from remoteenv.latency.sweep import (
+    BUILTIN_POLICIES,
+    MODES,
+    SweepEnv,
+    SweepFiles,
+    load_controller,
+    load_policy,
+    plot,
+    run_sweep,
+    summarize,
 )
-
-Policy = Callable[[np.ndarray], Any]
 
 
 def add_parser(sub: Any) -> None:
@@ -120,226 +101,16 @@ def int_list(text: str, what: str, maximum: int | None = None) -> list[int]:
     return values
 
 
-def load_policy(name: str) -> Policy:
-    """A builtin controller by name, or a TorchScript module from a file (run on CPU, no grad)."""
-    if name in BUILTIN_POLICIES:
-        from remoteenv import controllers
-
-        fn: Policy = getattr(controllers, name)
-        return fn
-    if not os.path.isfile(name):
-        raise SystemExit(f"--policy {name[:200]!r} is neither a builtin ({', '.join(BUILTIN_POLICIES)}) nor a file")
-    torch = require("torch", "a TorchScript --policy")
-    try:
-        data = read_bytes(name, MAX_POLICY_BYTES, what="--policy")
-        module = torch.jit.load(io.BytesIO(data), map_location="cpu")
-    except (OSError, ValueError, RuntimeError) as exc:  # UnreadableFile is a ValueError; torch says RuntimeError
-        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]
-        raise SystemExit(f"--policy {name[:200]!r} is not a TorchScript file (torch.jit.save): {first}") from None
-    module.eval()
-
-    def policy(obs: np.ndarray) -> Any:
-        with torch.no_grad():
-            out = module(torch.as_tensor(np.asarray(obs, dtype=np.float32)).unsqueeze(0))
-        return out.squeeze(0).numpy()
-
-    return policy
-
-
-def load_controller(spec: str) -> Policy:
-    """A plain Python controller: ``module:function`` or ``file.py[:function]``
-    (see the module docs); a one-line SystemExit naming ``spec`` if it cannot be had."""
-    where, _, name = spec.rpartition(":") if ":" in spec else (spec, "", "")
-    if where.endswith(".py") or spec.endswith(".py"):
-        path = where if where.endswith(".py") else spec
-        name = (name if where.endswith(".py") else "") or "policy"
-        if not os.path.isfile(path):
-            raise SystemExit(f"--controller: {path[:200]!r} is not a file")
-        module_spec = importlib.util.spec_from_file_location(f"remoteenv_controller_{abs(hash(path))}", path)
-        if module_spec is None or module_spec.loader is None:
-            raise SystemExit(f"--controller: cannot load {path[:200]!r} as Python")
-        module = importlib.util.module_from_spec(module_spec)
-        try:
-            module_spec.loader.exec_module(module)
-        except Exception as exc:  # the user's file raised while loading
-            raise SystemExit(f"--controller: {path[:200]!r} raised {type(exc).__name__}: {str(exc)[:200]}") from None
-        where = path
-    else:
-        if not where or not name:
-            raise SystemExit(f"--controller must be module:function or a .py file, got {spec[:200]!r}")
-        try:
-            module = importlib.import_module(where)
-        except ImportError as exc:
-            raise SystemExit(f"--controller: cannot import {where[:200]!r}: {str(exc)[:200]}") from None
-    target = getattr(module, name, None)
-    if target is None:
-        raise SystemExit(f"--controller: {where[:200]!r} has no {name[:100]!r}")
-    if isinstance(target, type):
-        try:
-            target = target()
-        except Exception as exc:
-            raise SystemExit(f"--controller: {name[:100]}() raised {type(exc).__name__}: {str(exc)[:200]}") from None
-    if not callable(target):
-        raise SystemExit(f"--controller: {where[:200]}:{name[:100]} is not callable (observation -> action)")
-    fn: Policy = target
-    return fn
+def sweep_env(args: argparse.Namespace) -> SweepEnv:
+    """How the sweep makes each point's env, from the command line."""
+    return SweepEnv(
+        args.env, args.mode, args.random, json_map(args.env_kwargs, "--env-kwargs"), args.max_steps, args.action_history
+    )
 
 
 def make_env(args: argparse.Namespace, delay: int) -> Any:
     """The env of one point of the sweep."""
-    import gymnasium as gym
-
-    import remoteenv
-    from remoteenv.delays import Uniform
-    from remoteenv.wrappers import ActionHistory
-
-    kwargs = json_map(args.env_kwargs, "--env-kwargs")
-    spec: Any = Uniform(0, delay) if args.random else delay
-    if args.mode == "action_delay":
-        kwargs["action_delay"] = spec
-    elif args.mode == "obs_delay":
-        kwargs["obs_delay"] = spec
-    else:
-        kwargs["real_time"] = True
-    if args.max_steps is not None:
-        kwargs["max_episode_steps"] = args.max_steps
-    target = args.env
-    if target in remoteenv.SHIPPED_SCENES:
-        target = remoteenv.SHIPPED_SCENES[target]
-    if os.path.isfile(target):
-        env: Any = remoteenv.OpenAIRemoteEnv(target, **{k: v for k, v in kwargs.items() if k != "max_episode_steps"})
-        if args.max_steps is not None:
-            env = gym.wrappers.TimeLimit(env, args.max_steps)
-    else:
-        env = gym.make(target, **kwargs)
-    if args.action_history:
-        env = ActionHistory(env, args.action_history)
-    return env
-
-
-def run_point(env: Any, policy: Policy, seed: int, episodes: int, think_s: float) -> list[dict[str, Any]]:
-    """``episodes`` episodes from ``reset(seed=seed)``; one row per episode."""
-    rows = []
-    reset = getattr(policy, "reset", None)
-    for episode in range(episodes):
-        obs, _ = env.reset(seed=seed if episode == 0 else None)
-        if callable(reset):
-            reset()
-        total, length, latencies, ages, acted = 0.0, 0, [], [], 0
-        done = False
-        while not done:
-            if think_s:
-                time.sleep(think_s)
-            obs, reward, terminated, truncated, info = env.step(policy(obs))
-            total += float(reward)
-            length += 1
-            if info.get("latency_ticks") is not None:
-                latencies.append(float(info["latency_ticks"]))
-            if info.get("action_delay_ticks") is not None:  # delayed lock-step: the action in force
-                ages.append(float(info["action_delay_ticks"]))
-                acted += info.get("action_took_effect") is True
-            done = terminated or truncated
-        rows.append(
-            {
-                "seed": seed,
-                "episode": episode,
-                "return": total,
-                "length": length,
-                "latency_ticks": float(np.mean(latencies)) if latencies else 0.0,
-                # the mean age of the action in force, and the actions that never took effect
-                # (overtaken, or still on their way at the end); empty without a lock-step delay
-                "action_age_ticks": float(np.mean(ages)) if ages else None,
-                "actions_never_acted": len(ages) - acted if ages else None,
-            }
-        )
-    return rows
-
-
-def summarize(rows: list[dict[str, Any]], delays: list[int], seeds: list[int]) -> list[dict[str, Any]]:
-    """Per delay: each seed's mean return, their mean, std, min and max, and the mean latency."""
-    out = []
-    for d in delays:
-        per_seed = [float(np.mean([r["return"] for r in rows if r["delay"] == d and r["seed"] == s])) for s in seeds]
-        lat = [r["latency_ticks"] for r in rows if r["delay"] == d]
-        measured = [r for r in rows if r["delay"] == d and r.get("action_age_ticks") is not None]
-        steps = sum(r["length"] for r in measured)
-        out.append(
-            {
-                "delay": d,
-                "mean_return": float(np.mean(per_seed)),
-                "std_over_seeds": float(np.std(per_seed)),
-                "min_over_seeds": float(np.min(per_seed)),
-                "max_over_seeds": float(np.max(per_seed)),
-                "seed_means": per_seed,
-                "mean_latency_ticks": float(np.mean(lat)),
-                # per tick over every episode of the point (None without a lock-step delay)
-                "mean_action_age_ticks": (
-                    sum(r["action_age_ticks"] * r["length"] for r in measured) / steps if steps else None
-                ),
-                "never_acted_fraction": sum(r["actions_never_acted"] for r in measured) / steps if steps else None,
-            }
-        )
-    return out
-
-
-def plot(summary: list[dict[str, Any]], path: str, title: str, xlabel: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    x = [s["delay"] for s in summary]
-    fig, ax = plt.subplots(figsize=(5.5, 3.6))
-    ax.plot(x, [s["mean_return"] for s in summary], marker="o", label="mean over seeds")
-    ax.fill_between(
-        x,
-        [s["min_over_seeds"] for s in summary],
-        [s["max_over_seeds"] for s in summary],
-        alpha=0.25,
-        label="spread of the seeds' means",
-    )
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("episode return")
-    ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-class SweepFiles:
-    """The sweep's result files in ``out``: ``sweep.csv`` is created (and its
-    header written) before the sweep starts, so an unwritable ``out`` fails at
-    once, and takes each episode's row as soon as it ends; ``sweep.json`` is
-    rewritten after every delay point. A sweep cut short keeps what it ran."""
-
-    def __init__(self, out: str) -> None:
-        self.out = out
-        self.csv_path = os.path.join(out, "sweep.csv")
-        self.json_path = os.path.join(out, "sweep.json")
-        try:
-            os.makedirs(out, exist_ok=True)
-            fd = os.open(self.csv_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NOFOLLOW", 0), 0o644)
-        except OSError as exc:
-            raise SystemExit(f"cannot write the results into --out {out!r}: {exc.strerror or exc}") from None
-        self._csv = os.fdopen(fd, "w", newline="")
-        self._writer = csv.DictWriter(self._csv, fieldnames=CSV_FIELDS)
-        self._writer.writeheader()
-        self._csv.flush()
-
-    def add(self, row: dict[str, Any]) -> None:
-        """Append one episode's row to ``sweep.csv`` (flushed at once)."""
-        self._writer.writerow(row)
-        self._csv.flush()
-
-    def write_json(self, doc: dict[str, Any]) -> None:
-        """Replace ``sweep.json`` with ``doc`` (atomically)."""
-        from remoteenv.wire.files.files import write_atomic
-
-        write_atomic(self.json_path, json.dumps(doc, indent=1))
-
-    def close(self) -> None:
-        self._csv.close()
+    return sweep_env(args).make(delay)
 
 
 def checked_env(args: argparse.Namespace, delay: int) -> Any:
@@ -377,31 +148,14 @@ def run(args: argparse.Namespace) -> int:
     json_map(args.env_kwargs, "--env-kwargs")
     if not args.no_plot:
         require("matplotlib", "latency-sweep's plot (or pass --no-plot)")
+    if args.policy is not None and args.policy not in BUILTIN_POLICIES and os.path.isfile(args.policy):
+        require("torch", "a TorchScript --policy")
     policy = load_policy(args.policy) if args.policy is not None else load_controller(args.controller)
     files = SweepFiles(args.out)  # before the first sim starts
-    first_env = checked_env(args, delays[0])  # a bad id or keyword fails here, in one line
     config = {k: v for k, v in vars(args).items() if k != "run"}
-    rows: list[dict[str, Any]] = []
-    started = time.perf_counter()
-    try:
-        with progress(len(delays) * len(seeds) * args.episodes) as bar:
-            for i, d in enumerate(delays):
-                env = first_env if i == 0 else checked_env(args, d)
-                try:
-                    think = d * float(env.unwrapped.dt) if args.mode == "real_time" else 0.0
-                    for s in seeds:
-                        for row in run_point(env, policy, s, args.episodes, think):
-                            rows.append({"delay": d, **row})
-                            files.add(rows[-1])
-                            bar.update(1)
-                finally:
-                    env.close()
-                done = delays[: i + 1]
-                doc = {"config": config, "wall_s": time.perf_counter() - started, "complete": done == delays}
-                files.write_json({**doc, "summary": summarize(rows, done, seeds), "rows": rows})
-    finally:
-        files.close()
-    wall = time.perf_counter() - started
+    rows, wall = run_sweep(
+        lambda d: checked_env(args, d), policy, delays, seeds, args.episodes, args.mode, files, config
+    )
     summary = summarize(rows, delays, seeds)
     kind = f"Uniform(0, d) {args.mode}" if args.random else args.mode
     xlabel = "think time d (ticks)" if args.mode == "real_time" else f"{kind} d (ticks)"
@@ -425,31 +179,3 @@ def run(args: argparse.Namespace) -> int:
         )
     print(f"wrote {files.csv_path}, sweep.json{'' if args.no_plot else ', sweep.png'} in {wall:.1f} s")
     return 0
-
-
-class _Lines:
-    """A stand-in for tqdm's bar when tqdm is not installed: one line per tenth."""
-
-    def __init__(self, total: int) -> None:
-        self.total, self.done = total, 0
-
-    def __enter__(self) -> _Lines:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        pass
-
-    def update(self, n: int) -> None:
-        step = max(1, self.total // 10)
-        before, self.done = self.done, self.done + n
-        if before // step != self.done // step or self.done == self.total:
-            print(f"latency sweep: {self.done}/{self.total} episodes", flush=True)
-
-
-def progress(total: int) -> Any:
-    """A progress bar over ``total`` episodes: tqdm's if installed (it is optional), else plain lines."""
-    try:
-        from tqdm import tqdm
-    except ModuleNotFoundError:
-        return _Lines(total)
-    return tqdm(total=total, unit="episode", desc="latency sweep")

@@ -25,7 +25,7 @@ from remoteenv.cli.arguments import (
     positive_factor,
     positive_int,
 )
-from remoteenv.wire.real_time_modes import ELASTIC, REAL_TIME_MODES
+from remoteenv.wire.run_options.real_time_modes import ELASTIC, REAL_TIME_MODES
 
 _WATCH_S = 0.2
 
@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     from remoteenv.agent.launch.attach import AttachedSim, LaunchInfo, write_launch_info
     from remoteenv.agent.launch.launcher import Launcher
     from remoteenv.wire.files.keys import write_secret_key
-    from remoteenv.wire.handshake import handshake_request, parse_handshake
+    from remoteenv.wire.messages.handshake import handshake_request, parse_handshake
 
     env_kwargs = json_map(args.env_kwargs, "--env-kwargs")
     out = os.path.abspath(args.out)

@@ -3,6 +3,8 @@
 A command imports an optional package through :func:`require` before it
 starts any work; :func:`remoteenv.cli.main` turns a missing optional package
 found later (deep in a benchmark, say) into the same message.
+
+Runs in the agent process (the command's own).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Protocol compliance suite: checks any server speaking the remoteenv wire must pass.
 
 The protocol is written down first (:mod:`remoteenv.wire.protocol`, with
-:mod:`remoteenv.wire.spaces` and :mod:`remoteenv.wire.batch`); these checks
+:mod:`remoteenv.wire.codec.spaces` and :mod:`remoteenv.wire.messages.batch_encoding`); these checks
 hold a server to it, whatever it runs on: the reference MuJoCo sim, a bridge
 to a real robot, another language. Three ways to run them:
 
@@ -19,9 +19,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from remoteenv.compliance.check_results import FAIL, PASS, SKIP, Check, Result
 from remoteenv.compliance.failures import CheckFailed, CheckSkipped
 from remoteenv.compliance.probe import Probe, Target, targets_from_launch_info
-from remoteenv.compliance.results import FAIL, PASS, SKIP, Check, Result
 from remoteenv.compliance.suite import CHECKS, compliant, format_report, run_check, run_suite
 
 if TYPE_CHECKING:

@@ -5,14 +5,16 @@ be asked for its scene's attribute names, so the checks probe the refusals
 the spec requires of any scene: private names, names no scene has, and the
 methods that drive the world, each an ``attribute`` error after which the
 server keeps serving.
+
+Runs in the checking process, an agent of the server under test (it speaks the wire itself: no sim code, no env classes).
 """
 
 from __future__ import annotations
 
+from remoteenv.compliance.check_results import Check
 from remoteenv.compliance.failures import CheckSkipped
 from remoteenv.compliance.probe import Probe
-from remoteenv.compliance.results import Check
-from remoteenv.wire.errors import ATTRIBUTE, PROTOCOL
+from remoteenv.wire.wire_errors import ATTRIBUTE, PROTOCOL
 
 #: The commands these checks need.
 ATTRIBUTE_COMMANDS = ("get_attr", "set_attr", "call")

@@ -1,19 +1,21 @@
 """Checks of ``reset_batch`` and ``step_batch``, for servers that offer them.
 
 A server offers them when its handshake says so (see
-:meth:`~remoteenv.compliance.handshake.Handshake.offered`); the others skip
+:meth:`~remoteenv.compliance.handshake_check.Handshake.offered`); the others skip
 these checks. Every check resets the worlds it uses first.
+
+Runs in the checking process, an agent of the server under test (it speaks the wire itself: no sim code, no env classes).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from remoteenv.compliance.actions import invalid_actions, neutral_action, stacked_actions
+from remoteenv.compliance.check_results import Check
 from remoteenv.compliance.failures import CheckSkipped, fail_unless
-from remoteenv.compliance.handshake import BATCH_COMMANDS, Handshake
+from remoteenv.compliance.handshake_check import BATCH_COMMANDS, Handshake
 from remoteenv.compliance.probe import Probe
-from remoteenv.compliance.results import Check
+from remoteenv.compliance.probe_actions import invalid_actions, neutral_action, stacked_actions
 from remoteenv.compliance.values import (
     batch_obs_problem,
     infos_problem,
@@ -22,8 +24,8 @@ from remoteenv.compliance.values import (
     type_name,
     value_problem,
 )
-from remoteenv.wire.errors import INVALID_ACTION, PROTOCOL, short_repr
 from remoteenv.wire.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET
+from remoteenv.wire.wire_errors import INVALID_ACTION, PROTOCOL, short_repr
 
 
 def _batch(p: Probe) -> Handshake:

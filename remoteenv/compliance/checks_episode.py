@@ -2,6 +2,8 @@
 
 Values are judged against the spaces the handshake advertised. Worlds are
 addressed one by one (the first :data:`MAX_WORLDS` of them).
+
+Runs in the checking process, an agent of the server under test (it speaks the wire itself: no sim code, no env classes).
 """
 
 from __future__ import annotations
@@ -9,11 +11,11 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from remoteenv.compliance.actions import invalid_actions, neutral_action
+from remoteenv.compliance.check_results import Check
 from remoteenv.compliance.failures import CheckFailed, CheckSkipped, fail_unless
-from remoteenv.compliance.handshake import Handshake
+from remoteenv.compliance.handshake_check import Handshake
 from remoteenv.compliance.probe import Probe
-from remoteenv.compliance.results import Check
+from remoteenv.compliance.probe_actions import invalid_actions, neutral_action
 from remoteenv.compliance.values import (
     frame_problem,
     is_int,
@@ -22,7 +24,7 @@ from remoteenv.compliance.values import (
     step_reply_problem,
     type_name,
 )
-from remoteenv.wire.errors import INVALID_ACTION, PROTOCOL, STATE, short_repr
+from remoteenv.wire.wire_errors import INVALID_ACTION, PROTOCOL, STATE, short_repr
 
 #: Worlds each check addresses at most (a server may host many).
 MAX_WORLDS = 8

@@ -2,6 +2,8 @@
 
 None of them changes a world's state except :func:`stale_replies` (which
 resets and steps world 0).
+
+Runs in the checking process, an agent of the server under test (it speaks the wire itself: no sim code, no env classes).
 """
 
 from __future__ import annotations
@@ -11,13 +13,13 @@ import struct
 
 import msgpack
 
-from remoteenv.compliance.actions import neutral_action
+from remoteenv.compliance.check_results import Check
 from remoteenv.compliance.failures import CheckFailed, fail_unless
 from remoteenv.compliance.probe import Probe
-from remoteenv.compliance.results import Check
+from remoteenv.compliance.probe_actions import neutral_action
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import PROTOCOL
-from remoteenv.wire.errors import short_repr as _short
+from remoteenv.wire.wire_errors import PROTOCOL
+from remoteenv.wire.wire_errors import short_repr as _short
 
 #: A protocol version no server speaks.
 ALIEN_VERSION = 999

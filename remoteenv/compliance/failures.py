@@ -1,4 +1,4 @@
-"""How a check says that a server broke the spec, or that the check does not apply."""
+"""How a check says that a server broke the spec, or that the check does not apply. Runs in the checking process, an agent of the server under test (it speaks the wire itself: no sim code, no env classes)."""
 
 from __future__ import annotations
 

@@ -5,6 +5,8 @@ launch-info file gives keys) rather than through the agent's connection
 classes: it must send malformed frames, choose its own ``seq`` values and see
 every reply, stale or not. Each check gets a fresh :class:`Probe`, so no
 reply of one check can reach another.
+
+Runs in the checking process, an agent of the server under test (it speaks the wire itself: no sim code, no env classes).
 """
 
 from __future__ import annotations
@@ -18,11 +20,11 @@ from typing import Any
 import zmq
 
 from remoteenv.compliance.failures import CheckFailed
-from remoteenv.compliance.handshake import Handshake, parse_handshake
+from remoteenv.compliance.handshake_check import Handshake, parse_handshake
 from remoteenv.compliance.values import envelope_problem
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import short_repr
 from remoteenv.wire.files.keys import KeyPair
+from remoteenv.wire.wire_errors import short_repr
 
 #: Frames from the server a probe's socket queues (libzmq stops reading beyond).
 PROBE_RCVHWM = 4

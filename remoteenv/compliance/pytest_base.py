@@ -20,6 +20,8 @@ or, to start the server for the class, overrides the
 
 Each check is a test named ``test_protocol[<check name>]``; a failing check
 fails with its reason, a check that does not apply is skipped with why.
+
+Runs in the checking process, an agent of the server under test (it speaks the wire itself: no sim code, no env classes).
 """
 
 from __future__ import annotations
@@ -29,8 +31,8 @@ from typing import ClassVar
 
 import pytest
 
+from remoteenv.compliance.check_results import FAIL, SKIP, Check
 from remoteenv.compliance.probe import targets_from_launch_info
-from remoteenv.compliance.results import FAIL, SKIP, Check
 from remoteenv.compliance.suite import CHECKS, run_check
 
 

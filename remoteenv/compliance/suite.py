@@ -4,6 +4,8 @@ Order matters only for two checks: ``step_before_reset`` runs before any
 check resets a world (it needs a fresh one), and ``close`` runs last (it
 stops the server). Every check opens its own connection and resets the
 worlds it uses, so any subset runs on its own.
+
+Runs in the checking process, an agent of the server under test (it speaks the wire itself: no sim code, no env classes).
 """
 
 from __future__ import annotations
@@ -12,11 +14,11 @@ import time
 from collections.abc import Iterable, Sequence
 
 from remoteenv.compliance import checks_attributes, checks_batch, checks_episode, checks_wire
+from remoteenv.compliance.check_results import FAIL, PASS, SKIP, Check, Result
 from remoteenv.compliance.failures import CheckFailed, CheckSkipped
 from remoteenv.compliance.probe import Probe, Target
-from remoteenv.compliance.results import FAIL, PASS, SKIP, Check, Result
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import short_repr
+from remoteenv.wire.wire_errors import short_repr
 
 #: Every check, in the order they run.
 CHECKS: tuple[Check, ...] = (

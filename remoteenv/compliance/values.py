@@ -2,8 +2,10 @@
 
 Each function returns a description of the first problem found, or None.
 They judge against the spec (:mod:`remoteenv.wire.protocol`,
-:mod:`remoteenv.wire.batch`), not against what the reference server happens
+:mod:`remoteenv.wire.messages.batch_encoding`), not against what the reference server happens
 to send, and never echo more than a bounded repr of what they were given.
+
+Runs in the checking process, an agent of the server under test (it speaks the wire itself: no sim code, no env classes).
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from remoteenv.wire.errors import ERROR_KINDS, short_repr
+from remoteenv.wire.wire_errors import ERROR_KINDS, short_repr
 
 #: Spaces whose values are numpy arrays of the space's shape and dtype.
 ARRAY_SPACES = (spaces.Box, spaces.MultiDiscrete, spaces.MultiBinary)

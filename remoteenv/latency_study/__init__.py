@@ -1,13 +1,10 @@
-"""The delay-effect study (agent side): PPO trained with and without the
-actions in flight, across constant and random action delays.
+"""Kept for old imports: the delay-effect study's names (and its submodules, each under its old name too) live in :mod:`remoteenv.latency.study` (runs in the agent process)."""
 
-``python -m remoteenv latency-study`` runs it (see :mod:`remoteenv.cli.latency_study`
-and docs/latency.md). :mod:`~remoteenv.latency_study.design` holds the grid
-and the learner's settings, :mod:`~remoteenv.latency_study.training` one run,
-:mod:`~remoteenv.latency_study.runner` the parallel runs,
-:mod:`~remoteenv.latency_study.results` the JSON, table and figure.
-"""
+from remoteenv.latency.study import (
+    PPO_SETTINGS,
+    Cell,
+    StudyConfig,
+    cells,
+)
 
-from remoteenv.latency_study.design import PPO_SETTINGS, Cell, StudyConfig, cells
-
-__all__ = ["PPO_SETTINGS", "Cell", "StudyConfig", "cells"]
+__all__ = ["Cell", "PPO_SETTINGS", "StudyConfig", "cells"]

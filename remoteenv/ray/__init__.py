@@ -1,11 +1,8 @@
-"""Sims on a Ray cluster: ``RayLauncher`` places an env's sim processes on the
-cluster's nodes (``pip install "remoteenv[ray]"``; see docs/cluster.md).
+"""Kept for old imports: Ray placement's names live in :mod:`remoteenv.integrations.ray` (runs in the agent process)."""
 
-Agent side: imports :mod:`remoteenv.agent` and :mod:`remoteenv.wire`, never
-:mod:`remoteenv.sim` (the sims run as separate processes on the nodes).
-"""
+from remoteenv.integrations.ray import (
+    STRATEGIES,
+    RayLauncher,
+)
 
-from remoteenv.ray.launcher import RayLauncher
-from remoteenv.ray.placement import STRATEGIES
-
-__all__ = ["STRATEGIES", "RayLauncher"]
+__all__ = ["RayLauncher", "STRATEGIES"]

@@ -22,7 +22,7 @@ from remoteenv.sim.scene.batch_result import BatchResult
 from remoteenv.sim.scene.camera_rig import CameraSetupError
 from remoteenv.sim.scene.cameras import Camera, CameraObservation, camera_observation
 from remoteenv.sim.scene_main import run_scene
-from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.serving.sim_server import RemoteControlledAgent
 from remoteenv.sim.stepping.batch_worlds import stacked
 
 __all__ = [

@@ -1,7 +1,7 @@
 """Frame publisher: a sim process that streams rendered frames and labels.
 
 Runs in the sim process; the agent-side reader is
-:class:`remoteenv.torch.RemoteIterableDataset`. This is blendtorch's other
+:class:`remoteenv.integrations.frame_dataset.RemoteIterableDataset`. This is blendtorch's other
 half: instead of answering step requests, the sim drives its own world with
 random actions and sends what it renders, as its reader asks for it.
 
@@ -14,7 +14,7 @@ Wire
 ----
 The publisher binds one ZeroMQ ROUTER socket (loopback or ipc only); its
 reader connects a DEALER. Frames are rendered on demand: the reader grants
-*credit* with ``{"credit": n}`` (:mod:`remoteenv.wire.stream`: msgpack,
+*credit* with ``{"credit": n}`` (:mod:`remoteenv.wire.messages.stream_credit`: msgpack,
 ``1 <= n <= WINDOW``), and the publisher renders and sends one item per
 credit, never more than ``WINDOW`` ahead. Each item is one msgpack map, encoded with
 :mod:`remoteenv.protocol` (numpy arrays as extension type 1; never pickle)::
@@ -68,7 +68,7 @@ from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.scene_main import scene_argument_parser
 from remoteenv.wire import protocol
 from remoteenv.wire.addresses import is_loopback
-from remoteenv.wire.stream import MAX_CREDIT_BYTES, WINDOW, parse_credit, superseded_message
+from remoteenv.wire.messages.stream_credit import MAX_CREDIT_BYTES, WINDOW, parse_credit, superseded_message
 
 _POLL_MS = round(CHECK_INTERVAL_S * 1000)
 

@@ -1,4 +1,4 @@
-"""The command line every scene script shares: ``python <scene script> --address ...``."""
+"""The command line every scene script shares: ``python <scene script> --address ...``. Runs in the sim process."""
 
 from __future__ import annotations
 
@@ -13,11 +13,14 @@ from remoteenv.sim.process.log import log_to_stderr
 from remoteenv.sim.process.pacing_levers import GC_MODES, apply_levers
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.scene.world_builds import WorldsDoNotFit, build_worlds
-from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.serving.sim_server import RemoteControlledAgent
 from remoteenv.wire.delays.channel_rules import DELIVERY_RULES, NEWEST, ChannelRules
 from remoteenv.wire.delays.delay_file import read_delay_file
-from remoteenv.wire.delays.delays import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
-from remoteenv.wire.errors import (
+from remoteenv.wire.delays.delay_specs import SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
+from remoteenv.wire.files.keys import read_key, read_keys
+from remoteenv.wire.run_options.options import RunOptions
+from remoteenv.wire.run_options.real_time_modes import ELASTIC, REAL_TIME_MODES
+from remoteenv.wire.wire_errors import (
     EXIT_RESOURCES,
     EXIT_SCENE_ARGS,
     RESOURCES_MARKER,
@@ -25,8 +28,6 @@ from remoteenv.wire.errors import (
     ProtocolError,
     short_repr,
 )
-from remoteenv.wire.files.keys import read_key, read_keys
-from remoteenv.wire.real_time_modes import ELASTIC, REAL_TIME_MODES
 
 
 def _delay_argument(text: str, unit: str) -> DelaySpec:
@@ -79,6 +80,27 @@ def apply_delay_file(parser: argparse.ArgumentParser, args: argparse.Namespace) 
             )
             parser.error(f"{flag} is given twice: as a flag and in --delay-file")
         setattr(args, key, spec)
+
+
+def run_options_from_arguments(parser: argparse.ArgumentParser, args: argparse.Namespace) -> RunOptions:
+    """The run options of a parsed scene command line: the real-time flags, the
+    delay flags or ``--delay-file`` (exits through ``parser.error`` if the file
+    is bad or repeats a delay flag) and the channel rules' flags. A ValueError
+    (as :class:`~remoteenv.wire.run_options.options.RunOptions` raises it) for
+    options that contradict each other."""
+    apply_channel_flags(args)
+    if args.delay_file is not None:
+        apply_delay_file(parser, args)
+    channel = args.channel.to_wire() if args.channel is not None else {}
+    return RunOptions(
+        real_time=args.real_time,
+        real_time_factor=args.real_time_factor,
+        real_time_mode=args.real_time_mode,
+        action_delay=args.action_delay,
+        obs_delay=args.obs_delay,
+        link_delay=args.link_delay,
+        **channel,
+    )
 
 
 def scene_argument_parser(description: str | None = None) -> argparse.ArgumentParser:
@@ -183,9 +205,7 @@ def run_scene(
     parser = scene_argument_parser(description)
     args = parser.parse_args(argv)
     log_to_stderr(args.instance)
-    apply_channel_flags(args)
-    if args.delay_file is not None:
-        apply_delay_file(parser, args)
+    run = run_options_from_arguments(parser, args)
     env_kwargs: dict[str, Any] = json.loads(args.env_kwargs)
     if not isinstance(env_kwargs, dict):
         sys.exit(f"--env-kwargs must be a JSON map, got {args.env_kwargs!r}")
@@ -218,13 +238,7 @@ def run_scene(
         instance=args.instance,
         parent_pid=args.parent_pid,
         ready_file=args.ready_file,
-        real_time=args.real_time,
-        real_time_factor=args.real_time_factor,
-        real_time_mode=args.real_time_mode,
-        action_delay=args.action_delay,
-        obs_delay=args.obs_delay,
-        link_delay=args.link_delay,
-        channel=args.channel,
+        run=run,
         seed=args.seed,
         allow_remote=args.allow_remote,
         curve_secret_key=secret,

@@ -1,4 +1,4 @@
-"""ZeroMQ endpoints: which are private to this machine, and fresh ones for new sims."""
+"""ZeroMQ endpoints: which are private to this machine, and fresh ones for new sims. Both processes use it."""
 
 from __future__ import annotations
 

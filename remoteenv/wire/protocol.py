@@ -40,7 +40,7 @@ waiting, answering it with a ``state`` error whose ``seq`` is read from the
 frame's first bytes (-1 if it is not there: :func:`peek_seq`).
 Integers are within msgpack's range ``[-2**63, 2**64)``. Error messages echo
 at most a bounded repr of the request's content
-(:data:`remoteenv.wire.errors.MAX_ECHO_CHARS` characters per value) and are
+(:data:`remoteenv.wire.wire_errors.MAX_ECHO_CHARS` characters per value) and are
 at most :data:`MAX_ERROR_CHARS` characters long.
 
 A reply holds at most :data:`MAX_REPLY_VALUES` msgpack values (every map,
@@ -118,11 +118,11 @@ time) and may answer without it (then the client keeps its layout); ``stepping``
 ``action_delay`` (ticks; the largest of a random model) and, with delays
 beyond a constant action delay, ``obs_delay`` (the largest, ticks),
 ``action_delay_spec`` and ``obs_delay_spec`` (the models' wire forms, see
-:mod:`remoteenv.wire.delays.delays`) and, with a delay and delivery rules or
+:mod:`remoteenv.wire.delays.delay_specs`) and, with a delay and delivery rules or
 delayed rewards other than the default, ``channel`` (see
 :mod:`remoteenv.wire.delays.channel_rules`); in real time ``real_time_factor`` and, with an
 emulated link, ``link_delay_spec``, and ``real_time_mode`` (``"elastic"``
-or ``"fixed_step"``, see :mod:`remoteenv.wire.real_time_modes`; a server
+or ``"fixed_step"``, see :mod:`remoteenv.wire.run_options.real_time_modes`; a server
 that does not say runs ``"elastic"``).
 
 ``reset`` ``{"world": int, "seed": int | nil, "options": map | nil}`` ->
@@ -132,7 +132,7 @@ that does not say runs ``"elastic"``).
 recorded episode without its clock: the key is removed before the scene
 sees the options, and each ``step`` of the episode is answered at once, its
 action taking effect at the next listed substep (counted from the reset),
-as it would have on the clock (:mod:`remoteenv.wire.real_time_modes`,
+as it would have on the clock (:mod:`remoteenv.wire.run_options.real_time_modes`,
 :mod:`remoteenv.sim.stepping.real_time_replay`). A schedule of another
 regime, a malformed one, or a step beyond it is a ``protocol`` error.
 
@@ -298,17 +298,17 @@ memory with nothing. numpy scalars are sent as plain ints, floats and
 bools; a ``reset`` or ``step`` reply whose reward or info values were numpy
 scalars says which in an optional ``"types"`` map, ``{"reward": dtype,
 "info": {key: dtype}}`` (dtype strings from :data:`ARRAY_DTYPES`), so a
-client can give them back their type (see :mod:`remoteenv.wire.scalar_types`;
+client can give them back their type (see :mod:`remoteenv.wire.codec.scalar_types`;
 a client may ignore it).
 
 An integer outside msgpack's range ``[-2**63, 2**64)`` travels in a reply
 (never in a request) as msgpack extension type 2: its two's-complement
-big-endian bytes, 1 to :data:`~remoteenv.wire.arrays.MAX_BIG_INT_BYTES` of them
+big-endian bytes, 1 to :data:`~remoteenv.wire.codec.arrays.MAX_BIG_INT_BYTES` of them
 (Gymnasium's ``np_random_seed`` is a 128-bit integer). Requests keep the
 range: a client refuses to send a larger integer and a sim refuses type 2.
 
 Spaces (Box, Discrete, MultiDiscrete, MultiBinary, Dict, Tuple) travel as maps,
-see :mod:`remoteenv.wire.spaces`.
+see :mod:`remoteenv.wire.codec.spaces`.
 """
 
 from __future__ import annotations
@@ -319,9 +319,8 @@ from typing import Any
 
 import msgpack
 
-from remoteenv.wire.arrays import ARRAY_DTYPES, _default, _default_big, _ext_hook, _ext_hook_big, wire_dtype
-from remoteenv.wire.errors import ProtocolError, short_repr
-from remoteenv.wire.frame_limits import (
+from remoteenv.wire.codec.arrays import ARRAY_DTYPES, _default, _default_big, _ext_hook, _ext_hook_big, wire_dtype
+from remoteenv.wire.codec.frame_limits import (
     MAX_ERROR_CHARS,
     MAX_MESSAGE_BYTES,
     MAX_REPLY_VALUES,
@@ -331,7 +330,8 @@ from remoteenv.wire.frame_limits import (
     MAX_WORLDS,
     FrameTooLarge,
 )
-from remoteenv.wire.value_count import values_within
+from remoteenv.wire.codec.value_count import values_within
+from remoteenv.wire.wire_errors import ProtocolError, short_repr
 
 PROTOCOL_VERSION = 1
 
@@ -514,7 +514,7 @@ def _capped(text: str) -> str:
 def error_reply(seq: int, kind: str, message: str, traceback: str = "") -> dict[str, Any]:
     """An error reply; ``message`` and ``traceback`` are capped at :data:`MAX_ERROR_CHARS`
     (messages built from request content must bound each echoed value themselves,
-    with :func:`~remoteenv.wire.errors.short_repr`)."""
+    with :func:`~remoteenv.wire.wire_errors.short_repr`)."""
     return {
         "seq": seq,
         "ok": False,

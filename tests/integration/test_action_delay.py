@@ -117,7 +117,8 @@ def test_reset_refills_the_queue_with_the_default_action():
 
 
 def test_negative_delay_is_refused():
-    from remoteenv.sim.stepping.stepping import LockStepper
+    from remoteenv.sim.stepping.lock_step import LockStepper
+    from remoteenv.wire.run_options.options import RunOptions
 
     with pytest.raises(ValueError, match="action_delay"):
-        LockStepper(ReacherEnv(), action_delay=-1)
+        LockStepper(ReacherEnv(), RunOptions(action_delay=-1))

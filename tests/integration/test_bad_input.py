@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from remoteenv import Launcher, OpenAIRemoteEnv, RemoteEnvError, scene_path
-from remoteenv.agent.connection.connection import Connection
+from remoteenv.agent.connection.connect import Connection
 from remoteenv.protocol import PROTOCOL_VERSION
 
 

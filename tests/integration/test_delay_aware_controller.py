@@ -64,8 +64,8 @@ def test_the_expected_state_predictor_holds_under_jitter_where_the_plain_lqr_fal
     sees), the expected in-force actions are enough to balance; the LQR is not."""
     from remoteenv.controllers import CartpoleExpectedPredictor
     from remoteenv.delays import Uniform
-    from remoteenv.latency_study.training import evaluate
-    from remoteenv.wrappers import ActionHistory
+    from remoteenv.latency.action_history import ActionHistory
+    from remoteenv.latency.study.training import evaluate
 
     spec = Uniform(8, 16)
     env = gym.make("remoteenv/CartPole-v0", continuous=True, action_delay=spec, max_episode_steps=300)

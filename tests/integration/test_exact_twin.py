@@ -17,7 +17,7 @@ import pytest
 
 import remoteenv  # noqa: F401
 from remoteenv.controllers import CartpoleHoldPredictor, cartpole_continuous
-from remoteenv.latency_twin import (
+from remoteenv.latency.twin import (
     LatencyRecorder,
     LatencyRecorderVector,
     compare_real_time_and_replay,
@@ -25,7 +25,7 @@ from remoteenv.latency_twin import (
     load_recording,
     make_twin,
 )
-from remoteenv.latency_twin.compare import replay_episode
+from remoteenv.latency.twin.compare import replay_episode
 
 ENV_ID = "remoteenv/CartPole-v0"
 KWARGS = {"continuous": True}

@@ -67,7 +67,7 @@ def test_crash_during_step_names_instance_code_and_stderr(make_env):
 
 def test_the_dead_instance_is_named_among_several():
     from remoteenv import Launcher, protocol
-    from remoteenv.agent.connection.connection import Connection
+    from remoteenv.agent.connection.connect import Connection
 
     with Launcher(FAULTY, 3, startup_timeout=120.0) as launcher:
         conns = [Connection(s.endpoint, instance=s.instance, timeout=30.0, death_check=s.death) for s in launcher.sims]

@@ -13,7 +13,7 @@ import pytest
 import zmq
 
 from remoteenv import Launcher, protocol, scene_path
-from remoteenv.agent.connection.connection import Connection
+from remoteenv.agent.connection.connect import Connection
 from remoteenv.wire import protocol as wire_protocol
 
 N_FRAMES = 12_000

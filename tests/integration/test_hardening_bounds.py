@@ -20,7 +20,7 @@ import pytest
 
 import remoteenv  # noqa: F401  (registers the ids)
 from remoteenv import LimitError
-from remoteenv.wire.frame_limits import MAX_MESSAGE_BYTES
+from remoteenv.wire.codec.frame_limits import MAX_MESSAGE_BYTES
 from remoteenv.wire.memory import available_bytes
 
 

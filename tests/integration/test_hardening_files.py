@@ -12,7 +12,7 @@ import time
 import pytest
 
 from remoteenv.agent.launch.attach import LaunchInfo, read_launch_info, write_launch_info
-from remoteenv.wire.files import files, keys
+from remoteenv.wire.files import keys, safe_writes
 
 
 def test_a_planted_symlink_at_the_launch_info_path_is_replaced_not_followed(tmp_path):
@@ -34,7 +34,7 @@ def test_files_are_created_exclusively_without_following_symlinks(tmp_path):
     link = tmp_path / "link"
     link.symlink_to(victim)
     with pytest.raises(FileExistsError):
-        files.create_new(link, "y")
+        safe_writes.create_new(link, "y")
     with pytest.raises(FileExistsError):
         keys.write_secret_key(link, keys.generate_keypair().secret)
     assert victim.read_text() == "x"
@@ -45,7 +45,7 @@ def test_files_are_created_exclusively_without_following_symlinks(tmp_path):
     finally:
         os.umask(old)
     assert (secret.stat().st_mode & 0o777) == 0o600
-    files.write_atomic(tmp_path / "plain.json", "{}", 0o644)
+    safe_writes.write_atomic(tmp_path / "plain.json", "{}", 0o644)
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
 
 

@@ -33,7 +33,7 @@ import pytest
 
 from remoteenv import OpenAIRemoteEnv, RemoteVectorEnv
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout, RemoteProtocolError, SceneError
-from remoteenv.wire.frame_limits import MAX_ERROR_CHARS
+from remoteenv.wire.codec.frame_limits import MAX_ERROR_CHARS
 
 SERVER = Path(__file__).parent / "servers" / "hostile_server.py"
 #: Address space an agent child may take: a fixed agent needs well under 1.5 GB

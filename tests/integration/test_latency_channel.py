@@ -9,9 +9,9 @@ import pytest
 import remoteenv
 from remoteenv import RemoteVectorEnv
 from remoteenv.delays import Uniform
+from remoteenv.latency.action_history import ActionHistory
 from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delay_line import LockStepDelays
-from remoteenv.wrappers import ActionHistory
 
 #: Every key a delayed lock-step step adds to the scene's info (docs/delays.md's table).
 DELAY_KEYS = {

@@ -15,7 +15,7 @@ import time
 import numpy as np
 import pytest
 
-from remoteenv.latency_study.design import cells
+from remoteenv.latency.study.design import cells
 
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("matplotlib")
@@ -126,7 +126,7 @@ def test_the_trained_policy_normalises_observations_as_vec_normalize_did(tmp_pat
     import gymnasium as gym
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    from remoteenv.latency_study.training import TrainedPolicy
+    from remoteenv.latency.study.training import TrainedPolicy
 
     venv = VecNormalize(DummyVecEnv([lambda: gym.make("Pendulum-v1")]), norm_reward=False)
     venv.reset()

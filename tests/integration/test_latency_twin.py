@@ -17,7 +17,7 @@ import numpy as np
 import remoteenv  # noqa: F401
 from remoteenv.controllers import cartpole_continuous
 from remoteenv.delays import Trace
-from remoteenv.latency_twin import LatencyRecorder, LatencyRecorderVector, decision_ticks, load_recording, make_twin
+from remoteenv.latency.twin import LatencyRecorder, LatencyRecorderVector, decision_ticks, load_recording, make_twin
 
 ENV_ID = "remoteenv/CartPole-v0"
 EXAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "examples", "real_time_twin.py")

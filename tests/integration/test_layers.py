@@ -13,8 +13,8 @@ AGENT_SIDE = (
     "remoteenv.agent",
     "remoteenv.remote_env",
     "remoteenv.vector_env",
-    "remoteenv.sb3",
-    "remoteenv.torch",
+    "remoteenv.integrations.sb3",
+    "remoteenv.integrations.frame_dataset",
     "remoteenv.cli",
     "remoteenv.benchmarks",
 )
@@ -37,7 +37,7 @@ def _loaded_after(statement: str) -> list[str]:
         "from remoteenv.sim import BaseEnv, RemoteControlledAgent, run_scene",
         "import remoteenv.scenes.cartpole.cartpole_scene",
         "import remoteenv.scenes.reacher.reacher_scene",
-        "import remoteenv.sim.process.zygote.server",
+        "import remoteenv.sim.process.zygote.fork_server",
     ],
 )
 def test_sim_side_loads_no_agent_module(statement: str) -> None:

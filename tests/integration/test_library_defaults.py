@@ -30,7 +30,7 @@ def test_gymnasium_vector_wrappers_take_the_default_vector_env():
 
 def test_sb3_on_the_default_and_through_its_adapter(tmp_path):
     sb3 = pytest.importorskip("stable_baselines3")
-    from remoteenv.sb3 import SB3VecEnv, make_sb3_vec_env
+    from remoteenv.integrations.sb3 import SB3VecEnv, make_sb3_vec_env
 
     default = SB3VecEnv(gym.make_vec(ID, num_envs=2, vectorization_mode="vector_entry_point", max_episode_steps=5))
     adapted = make_sb3_vec_env(ID, num_envs=2, max_episode_steps=5)
@@ -54,7 +54,7 @@ def test_torchrl_through_its_adapter():
     pytest.importorskip("torchrl")
     from torchrl.envs.utils import check_env_specs
 
-    from remoteenv.torchrl import make_torchrl_env
+    from remoteenv.integrations.torchrl import make_torchrl_env
 
     env = make_torchrl_env(ID, num_envs=2, max_episode_steps=5, seed=0)
     try:

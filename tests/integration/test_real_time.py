@@ -19,7 +19,7 @@ import pytest
 
 import remoteenv
 from remoteenv import RemoteEnvError, controllers, protocol
-from remoteenv.agent.connection.connection import Connection
+from remoteenv.agent.connection.connect import Connection
 from remoteenv.agent.launch.launcher import Launcher
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
 from remoteenv.scenes.reacher.reacher_scene import ReacherEnv

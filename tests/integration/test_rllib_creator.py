@@ -1,4 +1,4 @@
-"""RLlib's env creators (remoteenv.rllib.EnvCreator) build envs in processes
+"""RLlib's env creators (remoteenv.integrations.rllib.EnvCreator) build envs in processes
 that never imported remoteenv or the env's package; Ray itself is not needed
 here (tests/ray trains with them)."""
 
@@ -10,8 +10,8 @@ import subprocess
 import sys
 
 from remoteenv.cli.new_scene import write_package
+from remoteenv.integrations.rllib import EnvCreator
 from remoteenv.registration import find_spec, remote_env_ids
-from remoteenv.rllib import EnvCreator
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -71,7 +71,7 @@ def test_an_env_package_the_worker_cannot_even_import(tmp_path, monkeypatch):
 
 def test_importing_the_adapter_does_not_import_ray():
     out = subprocess.run(
-        [sys.executable, "-c", "import sys, remoteenv.rllib; print('ray' in sys.modules)"],
+        [sys.executable, "-c", "import sys, remoteenv.integrations.rllib; print('ray' in sys.modules)"],
         env=dict(os.environ, PYTHONPATH=ROOT),
         capture_output=True,
         text=True,

@@ -74,7 +74,7 @@ def _check_sb3_done_semantics(venv, max_episode_steps):
 def test_adapter_done_semantics_over_sync_vector_env(mode):
     from gymnasium.vector import AutoresetMode
 
-    from remoteenv.sb3 import SB3VecEnv
+    from remoteenv.integrations.sb3 import SB3VecEnv
 
     venv = SB3VecEnv(_sync_venv(2, AutoresetMode(mode), max_episode_steps=30))
     try:
@@ -86,7 +86,7 @@ def test_adapter_done_semantics_over_sync_vector_env(mode):
 
 @pytest.mark.parametrize("mode", ["NextStep", "SameStep"])
 def test_adapter_done_semantics_over_remote_vector_env(mode):
-    from remoteenv.sb3 import make_sb3_vec_env
+    from remoteenv.integrations.sb3 import make_sb3_vec_env
 
     venv = make_sb3_vec_env("remoteenv/CartPole-v0", num_envs=3, autoreset_mode=mode, max_episode_steps=30, seed=0)
     try:
@@ -100,7 +100,7 @@ def test_sb3_ppo_learns_on_the_remote_vector_env():
     from stable_baselines3 import PPO
 
     import remoteenv
-    from remoteenv.sb3 import SB3VecEnv
+    from remoteenv.integrations.sb3 import SB3VecEnv
     from remoteenv.vector_env import RemoteVectorEnv
 
     venv = SB3VecEnv(RemoteVectorEnv(remoteenv.scene_path("cartpole"), 4, max_episode_steps=500, seed=0))
@@ -151,7 +151,7 @@ def _assert_same_trajectories(a, b):
 def test_adapter_gives_sb3_the_same_steps_for_same_step_and_next_step(vectorization):
     from gymnasium.vector import AutoresetMode
 
-    from remoteenv.sb3 import SB3VecEnv, make_sb3_vec_env
+    from remoteenv.integrations.sb3 import SB3VecEnv, make_sb3_vec_env
 
     rng = np.random.default_rng(3)
     actions = [rng.integers(0, 2, size=3) for _ in range(120)]
@@ -170,7 +170,7 @@ def test_adapter_gives_sb3_the_same_steps_for_same_step_and_next_step(vectorizat
 def test_make_sb3_vec_env_builds_a_same_step_vector_env_unless_told_otherwise(env_id):
     from gymnasium.vector import AutoresetMode
 
-    from remoteenv.sb3 import make_sb3_vec_env
+    from remoteenv.integrations.sb3 import make_sb3_vec_env
 
     venv = make_sb3_vec_env(env_id, num_envs=2)
     try:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import remoteenv
-from remoteenv.sb3 import SB3VecEnv
+from remoteenv.integrations.sb3 import SB3VecEnv
 
 ID = "remoteenv/CartPole-v0"
 

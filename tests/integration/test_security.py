@@ -18,7 +18,7 @@ import zmq
 
 from remoteenv import Launcher, OpenAIRemoteEnv, protocol, scene_path
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
-from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.serving.sim_server import RemoteControlledAgent
 from remoteenv.wire.files import keys
 
 # How long a rejected client waits for an answer that must never come.

@@ -11,8 +11,8 @@ from equality import assert_same
 
 import remoteenv  # noqa: F401  (registers the ids)
 from remoteenv import scene_path
-from remoteenv.agent.connection import shared_lane
-from remoteenv.agent.connection.connection import Connection
+from remoteenv.agent.connection import shared_lane_client as shared_lane
+from remoteenv.agent.connection.connect import Connection
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launch.launcher import Launcher
 from remoteenv.wire.shared_memory import doorbell

@@ -20,7 +20,7 @@ def test_by_default_records_go_to_stderr_with_the_instance() -> None:
         "import logging\n"
         "from remoteenv.sim.process.log import log_to_stderr\n"
         "log_to_stderr(3)\n"
-        "logging.getLogger('remoteenv.sim.serving.server').info('hello')\n"
+        "logging.getLogger('remoteenv.sim.serving.sim_server').info('hello')\n"
     )
     assert out.stderr == "remoteenv sim 3: INFO hello\n"
 
@@ -31,6 +31,6 @@ def test_a_scene_that_configured_logging_keeps_its_own() -> None:
         "logging.basicConfig(stream=sys.stdout, level=logging.INFO, format='mine %(name)s %(message)s')\n"
         "from remoteenv.sim.process.log import log_to_stderr\n"
         "log_to_stderr(0)\n"
-        "logging.getLogger('remoteenv.sim.serving.server').info('routed')\n"
+        "logging.getLogger('remoteenv.sim.serving.sim_server').info('routed')\n"
     )
-    assert "mine remoteenv.sim.serving.server routed" in out.stdout.splitlines() and out.stderr == ""
+    assert "mine remoteenv.sim.serving.sim_server routed" in out.stdout.splitlines() and out.stderr == ""

@@ -12,7 +12,7 @@ torch = pytest.importorskip("torch")
 from torch.utils.data import DataLoader  # noqa: E402
 
 from remoteenv import RemoteEnvError  # noqa: E402
-from remoteenv.torch import RemoteIterableDataset, launch_publishers  # noqa: E402
+from remoteenv.integrations.frame_dataset import RemoteIterableDataset, launch_publishers  # noqa: E402
 
 W, H = 48, 32
 
@@ -116,7 +116,7 @@ def test_every_epoch_reads_the_next_items_of_each_publisher(workers):
 
 
 def test_a_pass_left_early_drops_at_most_the_window():
-    from remoteenv.wire.stream import WINDOW
+    from remoteenv.wire.messages.stream_credit import WINDOW
 
     with launch_publishers("cartpole", num_instances=1, seed=0, width=W, height=H) as pubs:
         dataset = RemoteIterableDataset(pubs.endpoints, items_per_publisher=4, pids=pubs.pids, timeout=10.0)

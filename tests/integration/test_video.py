@@ -79,7 +79,7 @@ def test_record_video_of_the_agents_camera(tmp_path):
     """RenderObservation: render() is the observation's image (the newest frame of
     a stack, scaled up), so RecordVideo records what the agent saw, not the scene's
     600x400 side view."""
-    from remoteenv.camera_video import RenderObservation
+    from remoteenv.integrations.camera_video import RenderObservation
 
     env = gym.make("remoteenv/CartPole-v0", obs_mode="pixels", image_size=32, frame_stack=2)
     assert env.unwrapped.render_mode is None  # the scene renders nothing itself
@@ -100,7 +100,7 @@ def test_record_video_of_the_agents_camera(tmp_path):
 
 
 def test_render_observation_shows_depth_and_segmentation_of_a_dict():
-    from remoteenv.camera_video import RenderObservation
+    from remoteenv.integrations.camera_video import RenderObservation
 
     kwargs = {"obs_mode": "state_pixels", "image_size": 24, "camera_kind": ["rgb", "depth", "segmentation"]}
     for key, check in (

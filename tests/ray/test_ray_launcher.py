@@ -15,7 +15,7 @@ import remoteenv
 from remoteenv import OpenAIRemoteEnv, RemoteVectorEnv, SimDiedError
 from remoteenv.agent.errors import LaunchError
 from remoteenv.delays import Trace
-from remoteenv.ray import RayLauncher
+from remoteenv.integrations.ray import RayLauncher
 from remoteenv.wire.delays.delay_line import LockStepDelays
 
 REACHER = "remoteenv/Reacher-v0"
@@ -233,7 +233,7 @@ def test_losing_a_node_mid_run(cluster, assert_nothing_left) -> None:
 _DRIVER = """
 import json, sys, time
 import gymnasium as gym, ray, remoteenv
-from remoteenv.ray import RayLauncher
+from remoteenv.integrations.ray import RayLauncher
 ray.init(address=sys.argv[1])
 launcher = RayLauncher(strategy="SPREAD", num_cpus_per_process=0.5)
 envs = gym.make_vec("remoteenv/CartPole-v0", num_envs=2, vectorization_mode="vector_entry_point",

@@ -1,5 +1,5 @@
 """RLlib PPO (new API stack) trains on a plain remoteenv id: two iterations of the
-example, and one of each vectorize mode after remoteenv.rllib.register_envs()."""
+example, and one of each vectorize mode after remoteenv.integrations.rllib.register_envs()."""
 
 from __future__ import annotations
 
@@ -59,9 +59,9 @@ def test_ppo_trains_two_iterations_on_remote_cartpole(cluster) -> None:
 def test_the_plain_id_trains_after_one_call_in_the_driver(cluster, vectorize) -> None:
     from ray.rllib.algorithms.ppo import PPOConfig
 
-    import remoteenv.rllib
+    import remoteenv.integrations.rllib
 
-    assert "remoteenv/CartPole-v0" in remoteenv.rllib.register_envs()
+    assert "remoteenv/CartPole-v0" in remoteenv.integrations.rllib.register_envs()
     config = (
         PPOConfig()
         .environment("remoteenv/CartPole-v0", env_config={"seed": 0, "continuous": True})

@@ -12,7 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
-from remoteenv.wrappers import ActionHistory, ActionHistoryVector
+from remoteenv.latency.action_history import ActionHistory, ActionHistoryVector
 
 
 class LatencyInfo(gym.Wrapper):
@@ -334,8 +334,8 @@ def test_the_buffer_holds_the_action_in_force_at_the_largest_delays():
     """k = K_a + K_o + 1: at the largest alpha and omega the in-force action of the
     returned tick is the oldest entry, k - 1 - omega - alpha = 0; with k one shorter it is gone."""
     from remoteenv.delays import Uniform
+    from remoteenv.latency.action_history import required_history
     from remoteenv.wire.delays.delay_line import LockStepDelays
-    from remoteenv.wrappers import required_history
 
     assert required_history(Uniform(0, 8)) == 9 and required_history(3, Uniform(1, 2)) == 6
     K_a, K_o = 4, 2

@@ -10,7 +10,7 @@ from remoteenv.agent.launch.attach import AttachedSim, AttachedSims, LaunchInfo
 from remoteenv.agent.launch.launcher import Launcher
 from remoteenv.agent.launch.processes import pid_alive
 from remoteenv.agent.launch.sim_group import LaunchSpec, SimLayout
-from remoteenv.agent.session.session import choose_group
+from remoteenv.agent.session.sim_session import choose_group
 
 
 def test_launch_spec_checks_its_fields():

@@ -8,10 +8,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from remoteenv.wire.errors import ProtocolError
-from remoteenv.wire.handshake import LOCK_STEP, Handshake, handshake_request, parse_handshake
+from remoteenv.wire.codec.spaces import space_to_wire
+from remoteenv.wire.messages.handshake import LOCK_STEP, Handshake, handshake_request, parse_handshake
 from remoteenv.wire.protocol import PROTOCOL_VERSION
-from remoteenv.wire.spaces import space_to_wire
+from remoteenv.wire.wire_errors import ProtocolError
 
 OBS = gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
 ACT = gym.spaces.Discrete(2)

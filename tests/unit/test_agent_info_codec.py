@@ -10,7 +10,7 @@ import pytest
 from gymnasium.vector import VectorEnv
 
 from remoteenv.wire import protocol
-from remoteenv.wire.batch import columnar_infos, merge_infos, stack
+from remoteenv.wire.messages.batch_encoding import columnar_infos, merge_infos, stack
 
 
 class _Merger(VectorEnv):

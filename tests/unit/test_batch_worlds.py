@@ -9,7 +9,7 @@ import pytest
 from unit.test_batched_scenes import K, _requests, _scene_class
 
 from remoteenv.sim.stepping import batch_worlds
-from remoteenv.sim.stepping.batch import BatchCommands
+from remoteenv.sim.stepping.batch_commands import BatchCommands
 from remoteenv.sim.stepping.batch_worlds import BatchedWorlds, StackedWorlds, batch_state, stacked
 from remoteenv.sim.stepping.lock_step import LockStepping
 from remoteenv.wire import protocol

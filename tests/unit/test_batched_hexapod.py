@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from unit.test_batched_scenes import K, _requests, _scene_class
 
-from remoteenv.sim.stepping.batch import BatchCommands
+from remoteenv.sim.stepping.batch_commands import BatchCommands
 from remoteenv.sim.stepping.lock_step import LockStepping
 from remoteenv.wire import protocol
 

@@ -11,10 +11,11 @@ import pytest
 
 import remoteenv
 from remoteenv.sim.scene.base_env import BaseEnv
-from remoteenv.sim.stepping.batch import BatchCommands
+from remoteenv.sim.stepping.batch_commands import BatchCommands
 from remoteenv.sim.stepping.lock_step import LockStepping
 from remoteenv.wire import protocol
 from remoteenv.wire.protocol import OP_RESET, OP_STEP, OP_STEP_AUTORESET, OP_STEP_RESET
+from remoteenv.wire.run_options.options import RunOptions
 
 
 def _scene_class(name: str, cls: str) -> type[BaseEnv]:
@@ -130,7 +131,7 @@ def test_step_batch_refuses_repeated_worlds() -> None:
 def test_worlds_with_delays_step_one_by_one(delays) -> None:
     """Delays live in each world's LockStepper: such worlds never take the batched path."""
     envs = [Reacher() for _ in range(2)]
-    lock = LockStepping(envs, **delays)
+    lock = LockStepping(envs, RunOptions(**delays))
     commands = BatchCommands(lock.worlds, envs[0].action_space, 0)
     try:
         assert commands.stepper is None

@@ -7,8 +7,8 @@ import pytest
 from gymnasium import spaces
 
 from remoteenv.compliance import CHECKS, FAIL, PASS, SKIP, CheckFailed, Result, Target, compliant, format_report
-from remoteenv.compliance.actions import invalid_actions, neutral_action, stacked_actions
-from remoteenv.compliance.handshake import handshake_problems, parse_handshake
+from remoteenv.compliance.handshake_check import handshake_problems, parse_handshake
+from remoteenv.compliance.probe_actions import invalid_actions, neutral_action, stacked_actions
 from remoteenv.compliance.values import (
     batch_obs_problem,
     envelope_problem,
@@ -17,8 +17,8 @@ from remoteenv.compliance.values import (
     step_reply_problem,
     value_problem,
 )
-from remoteenv.wire.batch import columnar_infos
-from remoteenv.wire.spaces import space_to_wire
+from remoteenv.wire.codec.spaces import space_to_wire
+from remoteenv.wire.messages.batch_encoding import columnar_infos
 
 SPACES = [
     spaces.Box(-1.0, 1.0, (2,), dtype=np.float32),

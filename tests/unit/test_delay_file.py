@@ -15,8 +15,8 @@ from remoteenv.delays import MAX_DELAY_TICKS, Categorical, Constant, Trace, Unif
 from remoteenv.sim.scene_main import apply_channel_flags, apply_delay_file, scene_argument_parser
 from remoteenv.wire.delays import delay_file
 from remoteenv.wire.delays.delay_file import delay_file_text, read_delay_file, write_delay_file
-from remoteenv.wire.delays.delays import MAX_VALUES
-from remoteenv.wire.errors import ProtocolError
+from remoteenv.wire.delays.delay_specs import MAX_VALUES
+from remoteenv.wire.wire_errors import ProtocolError
 
 
 def long_trace() -> Trace:

@@ -35,6 +35,7 @@ import pytest
 from remoteenv.delays import Uniform
 from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delay_line import OBS_STREAM, LockStepDelays, delay_rng
+from remoteenv.wire.run_options.options import RunOptions
 
 K = 8
 STEPS = 100_000
@@ -231,8 +232,14 @@ def make_stepper(combo: tuple[bool, str, str], world: ToyWorld) -> Any:
     from remoteenv.sim.stepping.lock_step import LockStepper
 
     delayed, obs, rule = combo
-    rules = ChannelRules(action_delivery=rule, obs_delivery=rule, delayed_rewards=delayed)
-    return LockStepper(world, action_delay=Uniform(0, K), obs_delay=OBS_DELAYS[obs], rules=rules)  # type: ignore[arg-type]
+    run = RunOptions(
+        action_delay=Uniform(0, K),
+        obs_delay=OBS_DELAYS[obs],
+        action_delivery=rule,
+        obs_delivery=rule,
+        delayed_rewards=delayed,
+    )
+    return LockStepper(world, run)  # type: ignore[arg-type]
 
 
 def reply_values(reply: dict[str, Any]) -> dict[str, float]:

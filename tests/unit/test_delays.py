@@ -27,8 +27,8 @@ from remoteenv.delays import (
 )
 from remoteenv.wire import protocol
 from remoteenv.wire.delays.delay_line import ACTION_STREAM, OBS_STREAM, DelayStream
-from remoteenv.wire.delays.delays import MAX_VALUES
-from remoteenv.wire.errors import ProtocolError
+from remoteenv.wire.delays.delay_specs import MAX_VALUES
+from remoteenv.wire.wire_errors import ProtocolError
 
 SPECS = [
     Constant(0),

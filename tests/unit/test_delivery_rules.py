@@ -13,7 +13,7 @@ import pytest
 from remoteenv.delays import Trace, Uniform
 from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.delay_line import DelayLine, LockStepDelays
-from remoteenv.wire.errors import ProtocolError
+from remoteenv.wire.wire_errors import ProtocolError
 
 TICKS = 3000
 

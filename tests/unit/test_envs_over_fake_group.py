@@ -24,8 +24,8 @@ from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout, SimDiedErro
 from remoteenv.agent.launch.restart import INFO_RESTARTED, INFO_RESTARTS
 from remoteenv.agent.launch.sim_group import LaunchSpec, SimGroup, SimHandle, SimLayout
 from remoteenv.wire import protocol
-from remoteenv.wire.batch import columnar_infos, stack
-from remoteenv.wire.spaces import space_to_wire
+from remoteenv.wire.codec.spaces import space_to_wire
+from remoteenv.wire.messages.batch_encoding import columnar_infos, stack
 
 SCENE = "/nonexistent/walker_scene.py"  # the fake group never runs it
 OBS_SPACE = gym.spaces.Box(-10.0, 10.0, (2,), np.float32)
@@ -214,12 +214,13 @@ class FakeGroup:
     def layout(self) -> SimLayout | None:
         if self._fixed is not None or self.spec is None:
             return self._fixed
-        return SimLayout(self.spec.num_instances, self.spec.worlds_per_instance, self.spec.real_time, "fake")
+        return SimLayout(self.spec.num_instances, self.spec.worlds_per_instance, self.spec.run.real_time, "fake")
 
     def start(self, spec: LaunchSpec) -> None:
         self.spec = spec
         self.sims = [
-            FakeSim(i, spec.worlds_per_instance, spec.real_time, spec.action_delay) for i in range(spec.num_instances)
+            FakeSim(i, spec.worlds_per_instance, spec.run.real_time, spec.run.action_delay)
+            for i in range(spec.num_instances)
         ]
 
     def connect(self, index: int, timeout: float | None) -> SimConnection:

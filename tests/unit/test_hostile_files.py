@@ -14,7 +14,7 @@ import pytest
 
 from remoteenv.agent.errors import LaunchError
 from remoteenv.agent.launch.attach import LaunchInfo, read_launch_info
-from remoteenv.wire.delays.delays import Trace
+from remoteenv.wire.delays.delay_specs import Trace
 from remoteenv.wire.files.keys import load_keypair
 
 

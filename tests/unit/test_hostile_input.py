@@ -19,12 +19,12 @@ from remoteenv.agent.connection.zmq_connection import ZmqConnection
 from remoteenv.agent.errors import LaunchError, RemoteEnvError, RemoteProtocolError
 from remoteenv.agent.vector.vector_layout import check_sims
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import ProtocolError
+from remoteenv.wire.codec.scalar_types import restore_scalars
+from remoteenv.wire.codec.spaces import space_from_wire, space_to_wire
+from remoteenv.wire.codec.value_count import values_within
 from remoteenv.wire.files.file_reads import UnreadableFile, parse_json, read_bytes
-from remoteenv.wire.handshake import parse_handshake
-from remoteenv.wire.scalar_types import restore_scalars
-from remoteenv.wire.spaces import space_from_wire, space_to_wire
-from remoteenv.wire.value_count import values_within
+from remoteenv.wire.messages.handshake import parse_handshake
+from remoteenv.wire.wire_errors import ProtocolError
 
 OBS = spaces.Box(-1.0, 1.0, (3,), np.float32)
 

@@ -9,7 +9,7 @@ import pytest
 
 from remoteenv.controllers import CARTPOLE_GAINS, CartpoleExpectedPredictor, CartpolePredictor
 from remoteenv.delays import Categorical, Trace, Uniform
-from remoteenv.latency_study.markov_check import MODELS, TOLERANCE, calibration, in_force_steps
+from remoteenv.latency.study.markov_check import MODELS, TOLERANCE, calibration, in_force_steps
 from remoteenv.wire.delays.channel_rules import ChannelRules
 from remoteenv.wire.delays.in_force import delay_pmf, in_force_posterior, mean_age
 from remoteenv.wrappers import ActionHistory

@@ -14,26 +14,30 @@ from remoteenv.agent.launch.sim_group import LaunchSpec
 from remoteenv.delays import Categorical, Constant, Trace, Uniform
 from remoteenv.sim.scene_main import seconds_delay_argument, tick_delay_argument
 from remoteenv.sim.stepping.lock_step import LockStepper
+from remoteenv.wire.codec.spaces import space_to_wire
 from remoteenv.wire.delays.delay_file import delays_from_map, read_delay_file
-from remoteenv.wire.handshake import parse_handshake
-from remoteenv.wire.spaces import space_to_wire
+from remoteenv.wire.messages.handshake import parse_handshake
+from remoteenv.wire.run_options.options import RunOptions
 from tests.unit.test_sim_lock_step import DT, RecordingWorld
 
 
 def test_delay_specs_round_trip_through_the_delay_file(tmp_path):
-    spec = LaunchSpec("x.py", action_delay=Uniform(0, 3), obs_delay=2)
-    text = spec.delay_file_text()
+    spec = LaunchSpec("x.py", run=RunOptions(action_delay=Uniform(0, 3), obs_delay=2))
+    text = spec.run.delay_file_text()
     assert text is not None
     path = write_sim_delay_file(str(tmp_path), 4, text)
     assert path == str(tmp_path / "sim-4.delays.json")
     assert read_delay_file(path) == {"action_delay": Uniform(0, 3), "obs_delay": Constant(2)}
-    rt = LaunchSpec("x.py", real_time=True, link_delay=Uniform(0.0, 0.01, unit="s"))
-    assert delays_from_map(json.loads(rt.delay_file_text() or "")) == {"link_delay": Uniform(0.0, 0.01, unit="s")}
-    assert json.loads(LaunchSpec("x.py", real_time=True, link_delay=0.02).delay_file_text() or "") == {
-        "link_delay": Constant(0.02, unit="s").to_wire()
-    }
-    assert LaunchSpec("x.py").delay_file_text() is None
-    assert LaunchSpec("x.py", action_delay=Constant(0), obs_delay=Trace([0, 0])).delay_file_text() is None
+    rt = LaunchSpec("x.py", run=RunOptions(real_time=True, link_delay=Uniform(0.0, 0.01, unit="s")))
+    assert delays_from_map(json.loads(rt.run.delay_file_text() or "")) == {"link_delay": Uniform(0.0, 0.01, unit="s")}
+    assert json.loads(
+        LaunchSpec("x.py", run=RunOptions(real_time=True, link_delay=0.02)).run.delay_file_text() or ""
+    ) == {"link_delay": Constant(0.02, unit="s").to_wire()}
+    assert LaunchSpec("x.py").run.delay_file_text() is None
+    assert (
+        LaunchSpec("x.py", run=RunOptions(action_delay=Constant(0), obs_delay=Trace([0, 0]))).run.delay_file_text()
+        is None
+    )
     assert write_sim_delay_file(str(tmp_path), 5, None) is None and not (tmp_path / "sim-5.delays.json").exists()
 
 
@@ -54,21 +58,21 @@ def test_bad_tick_delays_are_refused_on_the_command_line(text):
 
 def test_a_launch_refuses_delays_of_the_other_mode_before_starting_anything():
     with pytest.raises(ValueError, match="action_delay"):
-        LaunchSpec("x.py", real_time=True, action_delay=Uniform(0, 2))
+        LaunchSpec("x.py", run=RunOptions(real_time=True, action_delay=Uniform(0, 2)))
     with pytest.raises(ValueError, match="link_delay"):
-        LaunchSpec("x.py", link_delay=0.01)
+        LaunchSpec("x.py", run=RunOptions(link_delay=0.01))
     with pytest.raises(ValueError, match="ticks"):
-        LaunchSpec("x.py", action_delay=Constant(0.5, unit="s"))
-    LaunchSpec("x.py", real_time=True, action_delay=Constant(0))  # zero delays are no delay
+        LaunchSpec("x.py", run=RunOptions(action_delay=Constant(0.5, unit="s")))
+    LaunchSpec("x.py", run=RunOptions(real_time=True, action_delay=Constant(0)))  # zero delays are no delay
 
 
 def test_the_handshake_describes_random_models_and_makes_steps_timed():
-    stepper = LockStepper(RecordingWorld(), action_delay=Categorical([0, 4]), obs_delay=Uniform(0, 2))  # type: ignore[arg-type]
+    stepper = LockStepper(RecordingWorld(), RunOptions(action_delay=Categorical([0, 4]), obs_delay=Uniform(0, 2)))  # type: ignore[arg-type]
     stepping = stepper.describe()
     assert stepping["action_delay"] == 4 and stepping["obs_delay"] == 2
     assert stepping["obs_delay_spec"] == Uniform(0, 2).to_wire()
     assert json.loads(json.dumps(stepping)) == stepping  # plain data
-    obs_only = LockStepper(RecordingWorld(), obs_delay=1).describe()  # type: ignore[arg-type]
+    obs_only = LockStepper(RecordingWorld(), RunOptions(obs_delay=1)).describe()  # type: ignore[arg-type]
     discrete = space_to_wire(spaces.Discrete(2))
     reply = {
         "protocol": 1,
@@ -83,7 +87,7 @@ def test_the_handshake_describes_random_models_and_makes_steps_timed():
 
 def test_an_observation_delay_returns_older_observations_with_their_sim_time():
     world = RecordingWorld()
-    stepper = LockStepper(world, obs_delay=2)  # type: ignore[arg-type]
+    stepper = LockStepper(world, RunOptions(obs_delay=2))  # type: ignore[arg-type]
     stepper.reset(seed=0, options=None)
     replies = [stepper.step(f"a{t}") for t in range(1, 6)]
     assert world.actions == ["a1", "a2", "a3", "a4", "a5"]  # actions undelayed
@@ -99,7 +103,7 @@ def test_an_observation_delay_returns_older_observations_with_their_sim_time():
 
 def test_the_launch_seed_seeds_delays_until_a_reset_brings_one():
     def latencies(seed_at_launch, reset_seed):
-        stepper = LockStepper(RecordingWorld(), action_delay=Uniform(0, 9), seed=seed_at_launch)  # type: ignore[arg-type]
+        stepper = LockStepper(RecordingWorld(), RunOptions(action_delay=Uniform(0, 9)), seed=seed_at_launch)  # type: ignore[arg-type]
         stepper.reset(seed=reset_seed, options=None)
         return [stepper.step(t)["info"]["latency_ticks"] for t in range(12)]
 

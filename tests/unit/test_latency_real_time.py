@@ -13,13 +13,14 @@ import pytest
 from remoteenv.delays import Constant, Uniform
 from remoteenv.sim.stepping.real_time import RealTimeStepper, RealTimeStepping
 from remoteenv.wire.delays.delay_line import LINK_STREAM, delay_rng
+from remoteenv.wire.run_options.options import RunOptions
 from tests.unit.test_real_time_stepper import T0, TIMESTEP, FakeClock, TickWorld, run_until, start
 
 
 def make_linked(link: Any, seed: int | None = None) -> tuple[RealTimeStepper, TickWorld, FakeClock]:
     clock = FakeClock(T0 - 1.0)
     world = TickWorld()
-    stepper = RealTimeStepper(world, clock=clock, link_delay=link, seed=seed)  # type: ignore[arg-type]
+    stepper = RealTimeStepper(world, RunOptions(real_time=True, link_delay=link), clock=clock, seed=seed)  # type: ignore[arg-type]
     return stepper, world, clock
 
 
@@ -144,4 +145,4 @@ def test_the_pause_and_resume_commands_cover_every_world():
 
 def test_link_delay_specs_must_be_in_seconds():
     with pytest.raises(ValueError, match="seconds|s"):
-        RealTimeStepper(TickWorld(), link_delay=Constant(2))  # type: ignore[arg-type]
+        RealTimeStepper(TickWorld(), RunOptions(real_time=True, link_delay=Constant(2)))  # type: ignore[arg-type]

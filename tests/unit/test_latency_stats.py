@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from remoteenv.agent.session.latency import LatencyStats
+from remoteenv.agent.session.latency_stats import LatencyStats
 from remoteenv.delays import Uniform
 from remoteenv.wire.delays.delay_line import LockStepDelays
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from remoteenv.delays import Uniform
-from remoteenv.latency_study.design import PPO_SETTINGS, Cell, StudyConfig, cells, random_model
-from remoteenv.latency_study.results import load_records, markdown_table, summarize, write_json
+from remoteenv.latency.study.design import PPO_SETTINGS, Cell, StudyConfig, cells, random_model
+from remoteenv.latency.study.results import load_records, markdown_table, summarize, write_json
 
 
 def test_cells_cover_every_variant_delay_and_seed_once_in_a_fixed_order():
@@ -131,7 +131,7 @@ def test_the_study_files_are_written_whole_and_readable_as_any_file_the_user_mak
     import os
     import stat
 
-    from remoteenv.latency_study.results import write_json
+    from remoteenv.latency.study.results import write_json
 
     path = tmp_path / "delay_effect.json"
     old = os.umask(0o022)
@@ -147,7 +147,7 @@ def test_the_study_files_are_written_whole_and_readable_as_any_file_the_user_mak
 def test_the_study_picks_the_policy_from_the_space_and_refuses_what_it_cannot_train():
     from gymnasium import spaces
 
-    from remoteenv.latency_study.spaces import policy_for, space_problem
+    from remoteenv.latency.study.trainable_spaces import policy_for, space_problem
 
     image = spaces.Box(0, 255, (64, 64, 3), dtype=np.uint8)
     state = spaces.Box(-1, 1, (4,), dtype=np.float32)
@@ -164,7 +164,7 @@ def test_the_study_picks_the_policy_from_the_space_and_refuses_what_it_cannot_tr
 
 
 def test_a_resumed_study_adds_its_wall_time_to_the_finished_segments_before_it(tmp_path):
-    from remoteenv.latency_study.runner import _earlier_segments
+    from remoteenv.latency.study.runner import _earlier_segments
 
     path = str(tmp_path / "delay_effect.json")
     assert _earlier_segments(path) == []

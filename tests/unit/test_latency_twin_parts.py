@@ -14,7 +14,7 @@ import pytest
 from gymnasium import spaces
 
 from remoteenv.delays import Trace
-from remoteenv.latency_twin import (
+from remoteenv.latency.twin import (
     LatencyRecorder,
     LockStepTwin,
     compare_returns,
@@ -24,8 +24,8 @@ from remoteenv.latency_twin import (
     twin_latency,
     twin_values,
 )
-from remoteenv.latency_twin.compare import ks_distance
-from remoteenv.latency_twin.trace import write_trace_file
+from remoteenv.latency.twin.compare import ks_distance
+from remoteenv.latency.twin.trace import write_trace_file
 
 
 def test_a_latency_becomes_whole_ticks_by_the_documented_rounding():

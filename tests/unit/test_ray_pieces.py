@@ -1,4 +1,4 @@
-"""The parts of remoteenv.ray that need neither Ray nor a process: placement
+"""The parts of remoteenv.integrations.ray that need neither Ray nor a process: placement
 options, which scene the nodes are asked for, the scene command line."""
 
 from __future__ import annotations
@@ -11,11 +11,12 @@ import pytest
 import remoteenv
 from remoteenv.agent.launch.sim_command import scene_command
 from remoteenv.agent.launch.sim_group import SimGroup, SimHandle
-from remoteenv.ray import RayLauncher
-from remoteenv.ray.launcher import scene_on_nodes
-from remoteenv.ray.placement import STRATEGIES, Placement
-from remoteenv.ray.sim_actor import resolve_scene
-from remoteenv.ray.sim_handle import RaySim
+from remoteenv.integrations.ray import RayLauncher
+from remoteenv.integrations.ray.placement import STRATEGIES, Placement
+from remoteenv.integrations.ray.ray_launcher import scene_on_nodes
+from remoteenv.integrations.ray.ray_sim import RaySim
+from remoteenv.integrations.ray.sim_actor import resolve_scene
+from remoteenv.wire.run_options.options import RunOptions
 
 
 @pytest.mark.parametrize("strategy", STRATEGIES)
@@ -79,8 +80,7 @@ def test_the_scene_command_line_carries_every_launch_option() -> None:
         private_dir="/d",
         seed=24,
         render_mode="rgb_array",
-        real_time=True,
-        real_time_factor=2.0,
+        run=RunOptions(real_time=True, real_time_factor=2.0),
         delay_file="/d/sim-3.delays.json",
         curve_files=("/d/s", "/d/c"),
         allow_remote=True,

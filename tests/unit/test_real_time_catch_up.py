@@ -17,13 +17,15 @@ import pytest
 
 from remoteenv.sim.stepping.real_time import RealTimeStepper
 from remoteenv.sim.stepping.real_time_pacing import CATCH_UP_LIMIT_S
+from remoteenv.wire.run_options.options import RunOptions
 from tests.unit.test_real_time_stepper import DT, FRAME_SKIP, T0, TIMESTEP, FakeClock, TickWorld, run_until
 
 
 def make(mode: str, world: Any = None, link_delay: float | None = None) -> tuple[RealTimeStepper, Any, FakeClock]:
     clock = FakeClock(T0 - 1.0)
     world = world or TickWorld()
-    stepper = RealTimeStepper(world, clock=clock, mode=mode, link_delay=link_delay, seed=0)
+    run = RunOptions(real_time=True, real_time_mode=mode, link_delay=link_delay)
+    stepper = RealTimeStepper(world, run, clock=clock, seed=0)
     stepper.reset(seed=None, options=None)
     clock.t = T0
     stepper.start(T0)

@@ -14,14 +14,20 @@ import pytest
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
 from remoteenv.sim.stepping.real_time import RealTimeStepper
 from remoteenv.sim.transport.checks import RequestError
-from remoteenv.wire.real_time_modes import MAX_REPLAY_STEP_TICKS, REPLAY_OPTION, replay_options, split_replay
+from remoteenv.wire.run_options.options import RunOptions
+from remoteenv.wire.run_options.real_time_modes import (
+    MAX_REPLAY_STEP_TICKS,
+    REPLAY_OPTION,
+    replay_options,
+    split_replay,
+)
 from tests.unit.test_real_time_stepper import FRAME_SKIP, T0, FakeClock, TickWorld, run_until
 
 
 def make(mode: str, world: Any = None) -> tuple[RealTimeStepper, Any, FakeClock]:
     clock = FakeClock(T0 - 1.0)
     world = world or TickWorld()
-    return RealTimeStepper(world, clock=clock, mode=mode), world, clock
+    return RealTimeStepper(world, RunOptions(real_time=True, real_time_mode=mode), clock=clock), world, clock
 
 
 def begin(stepper: RealTimeStepper, clock: FakeClock, options: dict[str, Any] | None = None, seed: Any = None) -> None:

@@ -17,6 +17,7 @@ import pytest
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
 from remoteenv.sim.stepping.real_time import RealTimeStepper, RealTimeStepping
 from remoteenv.sim.transport.checks import RequestError
+from remoteenv.wire.run_options.options import RunOptions
 
 TIMESTEP = 0.01  # simulated seconds per substep
 FRAME_SKIP = 4  # substeps per control tick
@@ -90,7 +91,7 @@ class TickWorld:
 def make(world: TickWorld | None = None, factor: float = 1.0) -> tuple[RealTimeStepper, TickWorld, FakeClock]:
     clock = FakeClock(T0 - 1.0)
     world = world or TickWorld()
-    stepper = RealTimeStepper(world, real_time_factor=factor, clock=clock)  # type: ignore[arg-type]
+    stepper = RealTimeStepper(world, RunOptions(real_time=True, real_time_factor=factor), clock=clock)  # type: ignore[arg-type]
     return stepper, world, clock
 
 
@@ -249,7 +250,7 @@ def test_substeps_more_than_one_period_late_are_counted_as_overruns():
 @pytest.mark.parametrize("factor", [0.0, -1.0, float("nan"), float("inf")])
 def test_impossible_factors_are_refused(factor):
     with pytest.raises(ValueError, match="real_time_factor"):
-        RealTimeStepper(TickWorld(), real_time_factor=factor)  # type: ignore[arg-type]
+        RealTimeStepper(TickWorld(), RunOptions(real_time=True, real_time_factor=factor))  # type: ignore[arg-type]
 
 
 # ---------------------------------------------------------------- several worlds

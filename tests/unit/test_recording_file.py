@@ -11,7 +11,7 @@ import pytest
 from gymnasium import spaces
 
 from remoteenv.delays import Uniform
-from remoteenv.latency_twin import (
+from remoteenv.latency.twin import (
     LatencyRecorder,
     RecordedEpisode,
     first_difference,
@@ -19,9 +19,9 @@ from remoteenv.latency_twin import (
     make_twin,
     save_recording,
 )
-from remoteenv.latency_twin.digest import obs_digest
-from remoteenv.latency_twin.recording_file import episode_from_document, recording_document
-from remoteenv.latency_twin.replay import exact_twin_kwargs
+from remoteenv.latency.twin.digest import obs_digest
+from remoteenv.latency.twin.recording_file import episode_from_document, recording_document
+from remoteenv.latency.twin.replay import exact_twin_kwargs
 
 
 def episode() -> RecordedEpisode:

@@ -11,8 +11,8 @@ import threading
 
 import pytest
 
-from remoteenv.latency_study.design import StudyConfig, cells
-from remoteenv.latency_study.results import load_records, write_json
+from remoteenv.latency.study.design import StudyConfig, cells
+from remoteenv.latency.study.results import load_records, write_json
 
 CONFIG = StudyConfig(delays=(0, 2), random_delays=("U(1,4)",), seeds=(0, 1), steps=64, eval_episodes=2)
 
@@ -175,7 +175,7 @@ def test_a_records_value_that_is_not_a_list_is_refused(tmp_path):
 def test_a_saved_policy_is_read_through_the_bounded_reader(tmp_path):
     """A FIFO where a policy should be (``--policies`` is the user's) is refused, not waited on."""
     pytest.importorskip("stable_baselines3")
-    from remoteenv.latency_study.training import TrainedPolicy
+    from remoteenv.latency.study.training import TrainedPolicy
 
     os.mkfifo(tmp_path / "plain-constant-0-seed0.zip")
     with pytest.raises(ValueError, match="not a regular file"):

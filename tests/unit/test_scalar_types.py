@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from remoteenv.wire import protocol
-from remoteenv.wire.scalar_types import describe_scalars, restore_scalars
+from remoteenv.wire.codec.scalar_types import describe_scalars, restore_scalars
 
 
 def test_types_round_trip_through_the_codec() -> None:

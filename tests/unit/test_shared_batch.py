@@ -12,9 +12,9 @@ from gymnasium import spaces
 
 from remoteenv.sim.scene.batch_result import BatchResult
 from remoteenv.sim.transport.checks import RequestError
-from remoteenv.sim.transport.shared_lane import SharedLane, layout_for
-from remoteenv.wire.errors import ProtocolError
+from remoteenv.sim.transport.shared_lane_server import SharedLane, layout_for
 from remoteenv.wire.shared_memory.shared_batch import MAX_SHARED_BYTES, SharedLayout, create_region, map_region
+from remoteenv.wire.wire_errors import ProtocolError
 
 BOX_ACT = spaces.Box(-1, 1, (2,), np.float32)
 BOX_OBS = spaces.Box(-np.inf, np.inf, (10,), np.float64)
@@ -115,7 +115,7 @@ class FakePipe:
 
 @linux_only
 def test_the_sims_end_serves_the_pipe_only(monkeypatch):
-    from remoteenv.sim.transport import shared_lane
+    from remoteenv.sim.transport import shared_lane_server as shared_lane
 
     monkeypatch.setattr(shared_lane, "PipeChannel", FakePipe)
     lane = SharedLane(BOX_ACT, BOX_OBS, 4)

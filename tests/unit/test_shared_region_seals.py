@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from remoteenv.agent.connection import shared_lane
+from remoteenv.agent.connection import shared_lane_client as shared_lane
 from remoteenv.wire.shared_memory.shared_batch import SharedLayout, create_region
 
 OBS = spaces.Box(-1.0, 1.0, (3,), np.float32)

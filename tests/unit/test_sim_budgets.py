@@ -19,7 +19,7 @@ import pytest
 import zmq
 
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
-from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.serving.sim_server import RemoteControlledAgent
 from remoteenv.sim.transport import channels, limits
 from remoteenv.sim.transport.channels import ZmqChannel
 from remoteenv.wire import protocol

@@ -14,10 +14,11 @@ import numpy as np
 import pytest
 
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
-from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.serving.sim_server import RemoteControlledAgent
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import MAX_ECHO_CHARS
-from remoteenv.wire.spaces import space_from_wire
+from remoteenv.wire.codec.spaces import space_from_wire
+from remoteenv.wire.run_options.options import RunOptions
+from remoteenv.wire.wire_errors import MAX_ECHO_CHARS
 
 MakeServer = Callable[..., RemoteControlledAgent]
 
@@ -61,7 +62,7 @@ def error_of(reply: dict[str, Any] | None, seq: int = 11) -> dict[str, Any]:
 def server(request, make_server) -> RemoteControlledAgent:
     """A two-world continuous CartPole server in either stepping mode (real time on a fake clock)."""
     if request.param == "real_time":
-        return make_server(2, env_kwargs={"continuous": True}, real_time=True, clock=FakeClock())
+        return make_server(2, env_kwargs={"continuous": True}, run=RunOptions(real_time=True), clock=FakeClock())
     return make_server(2, env_kwargs={"continuous": True})
 
 
@@ -100,7 +101,10 @@ def test_a_world_out_of_range_is_a_protocol_error(server, cmd, world):
 
 
 def test_step_before_reset_is_a_state_error_naming_world_and_instance(make_server):
-    for server in (make_server(2, instance=3), make_server(2, instance=3, real_time=True, clock=FakeClock())):
+    for server in (
+        make_server(2, instance=3),
+        make_server(2, instance=3, run=RunOptions(real_time=True), clock=FakeClock()),
+    ):
         assert ask(server, "reset", world=0, seed=0)["ok"]
         err = error_of(ask(server, "step", world=1, action=0))
         assert err["kind"] == "state" and "world 1" in err["message"] and "instance 3" in err["message"]
@@ -209,7 +213,7 @@ def test_a_lock_step_step_is_answered_at_once(make_server):
 
 def test_a_real_time_step_is_answered_by_its_world_when_its_tick_ends(make_server):
     clock = FakeClock()
-    server = make_server(env_kwargs={"continuous": True}, real_time=True, clock=clock)
+    server = make_server(env_kwargs={"continuous": True}, run=RunOptions(real_time=True), clock=clock)
     stepping = server.stepping
     assert ask(server, "reset", seed=0)["ok"]
     assert stepping.clock_waiting  # the loop starts the clock once the reply is sent
@@ -230,7 +234,7 @@ def test_a_real_time_step_is_answered_by_its_world_when_its_tick_ends(make_serve
 
 def test_real_time_and_action_delay_are_exclusive(make_server):
     with pytest.raises(ValueError, match="action_delay"):
-        make_server(real_time=True, action_delay=2)
+        make_server(run=RunOptions(real_time=True, action_delay=2))
 
 
 # ---------------------------------------------------------------- batches

@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
-from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.serving.sim_server import RemoteControlledAgent
 from remoteenv.sim.transport.drivers import Drivers
+from remoteenv.wire.run_options.options import RunOptions
 
 
 class FakeClock:
@@ -32,7 +33,9 @@ def make(tmp_path) -> Iterator[Any]:
         agent_end = sim_end = None
         if pipe:
             agent_end, sim_end = socket.socketpair()
-        kwargs: dict[str, Any] = {"real_time": True, "clock": FakeClock()} if mode == "real_time" else {}
+        kwargs: dict[str, Any] = (
+            {"run": RunOptions(real_time=True), "clock": FakeClock()} if mode == "real_time" else {}
+        )
         server = RemoteControlledAgent(
             [CartPoleEnv() for _ in range(worlds)],
             f"ipc://{tmp_path}/sim-{len(made)}.sock",

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from remoteenv.sim.stepping.lock_step import LockStepper, LockStepping
+from remoteenv.wire.run_options.options import RunOptions
 
 DT = 0.02
 
@@ -38,7 +39,7 @@ class RecordingWorld:
 
 def make(delay: int) -> tuple[LockStepper, RecordingWorld]:
     world = RecordingWorld()
-    return LockStepper(world, action_delay=delay), world  # type: ignore[arg-type]
+    return LockStepper(world, RunOptions(action_delay=delay)), world  # type: ignore[arg-type]
 
 
 def test_without_delay_each_action_is_applied_in_its_own_tick_and_info_is_the_scenes():
@@ -84,11 +85,11 @@ def test_a_reset_refills_the_delay_queue_with_the_default():
 
 def test_negative_delay_is_refused():
     with pytest.raises(ValueError, match="action_delay"):
-        LockStepper(RecordingWorld(), action_delay=-1)  # type: ignore[arg-type]
+        LockStepper(RecordingWorld(), RunOptions(action_delay=-1))  # type: ignore[arg-type]
 
 
 def test_lock_stepping_has_no_clock_and_one_stepper_per_world():
-    stepping = LockStepping([RecordingWorld(), RecordingWorld()], action_delay=1)  # type: ignore[list-item]
+    stepping = LockStepping([RecordingWorld(), RecordingWorld()], RunOptions(action_delay=1))  # type: ignore[list-item]
     assert stepping.next_deadline() is None and not stepping.clock_waiting
     assert list(stepping.run_due(0.0)) == []
     assert [w.action_delay for w in stepping.worlds] == [1, 1]

@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
-from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.serving.sim_server import RemoteControlledAgent
 from remoteenv.wire import protocol
 
 # A loop that misses its stop condition would wait forever: fail instead.

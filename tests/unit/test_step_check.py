@@ -12,7 +12,7 @@ import remoteenv
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.scene.batch_result import BatchResult
 from remoteenv.sim.scene.step_check import StepResultError, check_batch, unpack_step
-from remoteenv.sim.stepping.batch import BatchCommands
+from remoteenv.sim.stepping.batch_commands import BatchCommands
 from remoteenv.sim.stepping.lock_step import LockStepping
 from remoteenv.sim.stepping.real_time import RealTimeStepping
 

@@ -7,7 +7,7 @@ import msgpack
 import pytest
 
 from remoteenv.wire import protocol
-from remoteenv.wire.arrays import MAX_BIG_INT_BYTES
+from remoteenv.wire.codec.arrays import MAX_BIG_INT_BYTES
 
 
 @pytest.mark.parametrize("value", [2**64, 2**127 + 12345, -(2**63) - 1, -(2**200), 2**511 - 1, -(2**511)])
@@ -41,7 +41,7 @@ def test_an_integer_too_long_is_refused_both_ways():
 
 def test_a_batch_with_an_integer_beyond_int64_in_its_infos_goes_as_maps():
     # Issue 35, item 6: a column is int64; before, 2**70 raised OverflowError in the sim's encoding.
-    from remoteenv.wire.batch import columnar_infos
+    from remoteenv.wire.messages.batch_encoding import columnar_infos
 
     assert "columns" in columnar_infos([{"a": 2**63 - 1}, {"a": -(2**63)}])
     for big in (2**63, -(2**63) - 1, 2**70, 2**510):

@@ -12,7 +12,7 @@ from remoteenv.agent.connection.sim_connection import SimConnection
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.sim.transport.checks import RequestError, protocol_version, require_driver, seed_value, world_index
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import MAX_ECHO_CHARS, short_repr
+from remoteenv.wire.wire_errors import MAX_ECHO_CHARS, short_repr
 
 LIMIT = protocol.MAX_MESSAGE_BYTES
 

@@ -5,7 +5,13 @@ from __future__ import annotations
 import msgpack
 import pytest
 
-from remoteenv.wire.stream import WINDOW, credit_message, is_superseded, parse_credit, superseded_message
+from remoteenv.wire.messages.stream_credit import (
+    WINDOW,
+    credit_message,
+    is_superseded,
+    parse_credit,
+    superseded_message,
+)
 
 
 def test_a_reader_grants_what_a_publisher_takes() -> None:

@@ -10,9 +10,9 @@ from typing import Any
 from remoteenv.agent.vector import vector_layout
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
 from remoteenv.sim.scene.world_cost import measured_cost, step_cost, world_cost
-from remoteenv.sim.serving.server import RemoteControlledAgent
+from remoteenv.sim.serving.sim_server import RemoteControlledAgent
 from remoteenv.wire import protocol
-from remoteenv.wire.handshake import handshake_request, parse_handshake
+from remoteenv.wire.messages.handshake import handshake_request, parse_handshake
 
 HOOK_S = 0.004
 

@@ -15,10 +15,9 @@ from remoteenv.agent.launch.sim_process import kill_group
 from remoteenv.agent.launch.zygote import registry
 from remoteenv.agent.launch.zygote.forked import LOST_STATUS, ForkedProcess
 from remoteenv.agent.launch.zygote.process import pidfd_pid
+from remoteenv.sim.process.zygote.fork_server import ZygoteServer, script_path, thread_count
 from remoteenv.sim.process.zygote.preload import installed, preload, scene_imports, shadowing
-from remoteenv.sim.process.zygote.server import ZygoteServer, script_path, thread_count
-from remoteenv.wire.errors import ProtocolError
-from remoteenv.wire.zygote_channel import (
+from remoteenv.wire.messages.zygote_channel import (
     MAX_CONTROL_BYTES,
     ForkRequest,
     channel_pair,
@@ -26,6 +25,7 @@ from remoteenv.wire.zygote_channel import (
     receive_message,
     send_message,
 )
+from remoteenv.wire.wire_errors import ProtocolError
 
 
 def _open(fd: int) -> bool:
@@ -187,7 +187,7 @@ def test_a_relative_script_is_found_from_the_sims_working_dir_not_the_zygotes(tm
 
 def test_a_fork_that_fails_is_refused_and_the_descriptors_closed(pair, tmp_path, monkeypatch):
     server = _server(pair[0])
-    monkeypatch.setattr("remoteenv.sim.process.zygote.server.thread_count", lambda: 1)
+    monkeypatch.setattr("remoteenv.sim.process.zygote.fork_server.thread_count", lambda: 1)
 
     def no_fork() -> int:
         raise BlockingIOError(11, "Resource temporarily unavailable")

@@ -17,10 +17,10 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 from remoteenv.cli.latency_study import random_models
-from remoteenv.latency_study.design import Cell, StudyConfig
-from remoteenv.latency_study.results import write_json
-from remoteenv.latency_study.runner import host_facts
-from remoteenv.latency_study.training import run_cell
+from remoteenv.latency.study.design import Cell, StudyConfig
+from remoteenv.latency.study.results import write_json
+from remoteenv.latency.study.runner import host_facts
+from remoteenv.latency.study.training import run_cell
 
 
 def main() -> None:

@@ -1,1 +1,1 @@
-"""Connections to a sim: the pipe, ZeroMQ, reply checks and the shared region."""
+"""Connections to a sim: the pipe, ZeroMQ, reply checks and the shared region. Runs in the agent process."""

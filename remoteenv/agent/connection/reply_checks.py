@@ -21,7 +21,7 @@ A reply in a shared region (the fast lane) holds numbers of the dtypes and
 shapes its layout fixed: the region's when it was mapped, the info columns'
 when the sim announced them (:meth:`ReplyChecks.info_layout`); each such
 reply is taken only for the request it names and the layout it was written
-in (:mod:`remoteenv.agent.connection.shared_lane`).
+in (:mod:`remoteenv.agent.connection.shared_lane_client`).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import numpy as np
 from gymnasium import spaces
 
 from remoteenv.agent.errors import RemoteProtocolError
-from remoteenv.wire.errors import short_repr
+from remoteenv.wire.wire_errors import short_repr
 
 #: Spaces whose values are numpy arrays of the space's dtype and shape.
 _ARRAY_SPACES = (spaces.Box, spaces.MultiDiscrete, spaces.MultiBinary)

@@ -15,7 +15,7 @@ Whatever the peer sends, a wait ends by its deadline: the deadline is checked
 after every frame received, so stale or foreign frames arriving without end
 cannot extend it, and :meth:`SimConnection.try_receive` reads at most
 :data:`DRAIN_FRAMES` frames per call. Frames are decoded one at a time with
-at most :data:`~remoteenv.wire.frame_limits.MAX_REPLY_VALUES` values (counted
+at most :data:`~remoteenv.wire.codec.frame_limits.MAX_REPLY_VALUES` values (counted
 before any is built), and the text of an error reply is capped where it is
 received.
 """
@@ -29,7 +29,7 @@ from typing import Any
 
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import ERROR_KINDS, short_repr
+from remoteenv.wire.wire_errors import ERROR_KINDS, short_repr
 
 #: How often (seconds) a waiting call checks that the sim process still lives.
 LIVENESS_CHECK_S = 0.1

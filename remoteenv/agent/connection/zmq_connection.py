@@ -28,8 +28,8 @@ from zmq.utils.monitor import recv_monitor_message
 from remoteenv.agent.connection.sim_connection import LIVENESS_CHECK_S, SimConnection
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import short_repr
 from remoteenv.wire.files.keys import check_key
+from remoteenv.wire.wire_errors import short_repr
 
 #: Frames from the sim the socket queues before libzmq stops reading it (a
 #: vector env has one request in flight per sim, ``send()``/``recv()`` a few).

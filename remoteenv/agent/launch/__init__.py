@@ -1,1 +1,1 @@
-"""Starting, attaching to and restarting sims."""
+"""Starting, attaching to and restarting sims. Runs in the agent process."""

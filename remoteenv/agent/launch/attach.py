@@ -33,7 +33,7 @@ The file is read as any file a user names (:mod:`remoteenv.wire.files.file_reads
 never blocking, a regular file of at most :data:`MAX_LAUNCH_INFO_BYTES`, JSON
 nested at most 32 deep), and its content is checked before anything is
 connected: at most :data:`MAX_INSTANCES` instances of at most
-:data:`~remoteenv.wire.frame_limits.MAX_WORLDS` worlds, ``tcp://`` or
+:data:`~remoteenv.wire.codec.frame_limits.MAX_WORLDS` worlds, ``tcp://`` or
 ``ipc://`` endpoints, well-formed CURVE keys. Anything off is a
 :class:`~remoteenv.agent.errors.LaunchError` naming the file and the field.
 """
@@ -52,11 +52,11 @@ from remoteenv.agent.connection.zmq_connection import ZmqConnection
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launch.processes import pid_alive
 from remoteenv.agent.launch.sim_group import LaunchSpec, SimLayout
-from remoteenv.wire.errors import short_repr
+from remoteenv.wire.codec.frame_limits import MAX_WORLDS
 from remoteenv.wire.files.file_reads import read_json
-from remoteenv.wire.files.files import write_atomic
 from remoteenv.wire.files.keys import KeyPair, check_key, load_keypair
-from remoteenv.wire.frame_limits import MAX_WORLDS
+from remoteenv.wire.files.safe_writes import write_atomic
+from remoteenv.wire.wire_errors import short_repr
 
 FORMAT = "remoteenv-launch/1"
 #: Largest launch-info file read (bytes).
@@ -166,7 +166,7 @@ class LaunchInfo:
 def write_launch_info(path: str | os.PathLike[str], info: LaunchInfo) -> None:
     """Write ``info`` to ``path`` atomically (readers never see half a file),
     never through a symlink planted there or at a temporary name
-    (:func:`remoteenv.wire.files.files.write_atomic`)."""
+    (:func:`remoteenv.wire.files.safe_writes.write_atomic`)."""
     path = os.fspath(path)
     write_atomic(path, json.dumps(info.to_json(), indent=2) + "\n", 0o644)
     info.path = path

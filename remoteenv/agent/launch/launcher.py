@@ -22,7 +22,7 @@ import weakref
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from remoteenv.agent.connection.connection import SimConnection, connect_sim
+from remoteenv.agent.connection.connect import SimConnection, connect_sim
 from remoteenv.agent.launch.dir_reaper import watch_dir
 from remoteenv.agent.launch.processes import pid_alive
 from remoteenv.agent.launch.sim_command import wait_ready
@@ -31,6 +31,8 @@ from remoteenv.agent.launch.sim_process import LaunchState, SimProcess, kill_gro
 from remoteenv.agent.launch.sim_spawn import sim_address, spawn_sim
 from remoteenv.wire.addresses import is_loopback, zmq_transport
 from remoteenv.wire.files.keys import KeyPair, generate_keypair
+from remoteenv.wire.run_options.options import RunOptions
+from remoteenv.wire.run_options.real_time_modes import ELASTIC
 
 #: The launch arguments of :class:`Launcher` and their defaults (a Launcher
 #: made without a scene must leave them alone: :meth:`Launcher.start` gets them).
@@ -43,7 +45,7 @@ _LAUNCH_DEFAULTS: dict[str, Any] = {
     "startup_timeout": 60.0,
     "real_time": False,
     "real_time_factor": 1.0,
-    "real_time_mode": "elastic",
+    "real_time_mode": ELASTIC,
     "action_delay": 0,
 }
 
@@ -60,8 +62,11 @@ class Launcher:
     Args:
         scene: path of the scene script; None to start later with :meth:`start`.
         num_instances, seed, worlds_per_instance, env_kwargs, render_mode,
-        startup_timeout, real_time, real_time_factor, real_time_mode, action_delay: the launch
-            (see :class:`~remoteenv.agent.launch.sim_group.LaunchSpec`); only with ``scene``.
+        startup_timeout: the launch (see :class:`~remoteenv.agent.launch.sim_group.LaunchSpec`);
+            only with ``scene``.
+        real_time, real_time_factor, real_time_mode, action_delay: its run
+            options (see :class:`~remoteenv.wire.run_options.options.RunOptions`,
+            made here once); only with ``scene``.
         transport: ``"ipc"`` (default): each sim binds an ipc endpoint in the
             private dir; ``"tcp"``: 127.0.0.1 with an OS-assigned port;
             ``"pipe"``: ipc, and each sim also gets one end of a Unix socketpair
@@ -99,7 +104,7 @@ class Launcher:
         startup_timeout: float = 60.0,
         real_time: bool = False,
         real_time_factor: float = 1.0,
-        real_time_mode: str = "elastic",
+        real_time_mode: str = ELASTIC,
         action_delay: int = 0,
         extra_args: Sequence[str] = (),
         bind_host: str | None = None,
@@ -127,10 +132,12 @@ class Launcher:
                 seed=seed,
                 env_kwargs=env_kwargs or {},
                 render_mode=render_mode,
-                real_time=real_time,
-                real_time_factor=real_time_factor,
-                real_time_mode=real_time_mode,
-                action_delay=action_delay,
+                run=RunOptions(
+                    real_time=real_time,
+                    real_time_factor=real_time_factor,
+                    real_time_mode=real_time_mode,
+                    action_delay=action_delay,
+                ),
                 startup_timeout=startup_timeout,
             )
             if not os.path.isfile(spec.scene):

@@ -3,7 +3,7 @@ how many relaunches an env may spend, which instances a failure costs, how a
 gather goes on around relaunches, and what the agent is told.
 
 Runs in the agent process; used by the single and the vector env (through
-:class:`remoteenv.agent.session.session.SimSession`, which relaunches).
+:class:`remoteenv.agent.session.sim_session.SimSession`, which relaunches).
 """
 
 from __future__ import annotations

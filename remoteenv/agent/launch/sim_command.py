@@ -2,11 +2,13 @@
 
 Runs wherever sims are started for an agent: in the agent process (the local
 :class:`remoteenv.Launcher`) or in a Ray actor on a cluster node
-(:mod:`remoteenv.ray`). Both build the same command line here, so a sim
+(:mod:`remoteenv.integrations.ray`). Both build the same command line here, so a sim
 started either way gets the same arguments (see
 :func:`remoteenv.sim.scene_main.scene_argument_parser` for their meaning).
-Delay specs are not arguments: the launcher writes them to a delay file in
-its private dir (:mod:`remoteenv.wire.delays.delay_file`) and passes its path.
+The run options travel whole (:class:`~remoteenv.wire.run_options.options.RunOptions`):
+the real-time ones as flags; the delay specs are not arguments: the launcher
+writes them to a delay file in its private dir
+(:mod:`remoteenv.wire.delays.delay_file`) and passes its path.
 """
 
 from __future__ import annotations
@@ -20,8 +22,9 @@ from typing import Any, Protocol
 
 from remoteenv.agent.errors import LimitError, RemoteEnvError, SceneArgumentError
 from remoteenv.wire.delays.delay_file import write_delay_file
-from remoteenv.wire.errors import RESOURCES_MARKER, SCENE_ARGS_MARKER
 from remoteenv.wire.files.file_reads import UnreadableFile, read_json
+from remoteenv.wire.run_options.options import RunOptions
+from remoteenv.wire.wire_errors import RESOURCES_MARKER, SCENE_ARGS_MARKER
 
 #: Largest ready file read (a sim writes its endpoint and pid: well under 1 KiB).
 READY_FILE_LIMIT = 64 << 10
@@ -39,9 +42,7 @@ def scene_command(
     private_dir: str,
     seed: int | None = None,
     render_mode: str | None = None,
-    real_time: bool = False,
-    real_time_factor: float = 1.0,
-    real_time_mode: str = "elastic",
+    run: RunOptions = RunOptions(),
     delay_file: str | None = None,
     curve_files: tuple[str, str] | None = None,
     allow_remote: bool = False,
@@ -52,8 +53,10 @@ def scene_command(
 
     ``curve_files`` is ``(server secret key file, allowed client keys file)``
     to turn CURVE on; ``allow_remote`` permits an address beyond loopback
-    (which needs CURVE). ``delay_file`` is the path of the sim's delay file
-    (see :func:`write_sim_delay_file`), None without delays. ``python`` is the
+    (which needs CURVE). ``run``: the sim's run options, as flags
+    (:meth:`~remoteenv.wire.run_options.options.RunOptions.scene_arguments`)
+    and, for their delays, the delay file at ``delay_file`` (see
+    :func:`write_sim_delay_file`; None without delays). ``python`` is the
     interpreter that runs the scene."""
     cmd = [
         python,
@@ -81,10 +84,7 @@ def scene_command(
         cmd += ["--seed", str(seed)]
     if render_mode is not None:
         cmd += ["--render-mode", render_mode]
-    if real_time:
-        cmd += ["--real-time", "--real-time-factor", repr(float(real_time_factor))]
-        if real_time_mode != "elastic":
-            cmd += ["--real-time-mode", real_time_mode]
+    cmd += run.scene_arguments()
     if delay_file is not None:
         cmd += ["--delay-file", delay_file]
     return cmd + list(extra_args)

@@ -5,7 +5,7 @@ an env drives": it starts them (or attaches to running ones), names each
 one's endpoint and liveness, connects to them, relaunches one, and closes.
 :class:`remoteenv.OpenAIRemoteEnv` and :class:`remoteenv.RemoteVectorEnv`
 drive any object with this shape (their ``launcher=`` argument) through
-:class:`remoteenv.agent.session.session.SimSession`, and never learn which kind it is.
+:class:`remoteenv.agent.session.sim_session.SimSession`, and never learn which kind it is.
 
 Implementations:
 
@@ -34,11 +34,8 @@ from typing import Any, Protocol, runtime_checkable
 
 from remoteenv.agent.connection.sim_connection import SimConnection
 from remoteenv.agent.errors import LimitError
-from remoteenv.wire.delays.channel_rules import ChannelRules
-from remoteenv.wire.delays.delay_file import delay_file_text
-from remoteenv.wire.delays.delays import SECONDS, TICKS, DelaySpec, as_delay
 from remoteenv.wire.files.keys import KeyPair
-from remoteenv.wire.real_time_modes import ELASTIC, check_real_time_mode
+from remoteenv.wire.run_options.options import RunOptions
 
 #: Longest JSON text of a launch's env kwargs (characters): they travel on the
 #: sim's command line (a fork request below the zygote's control-message limit,
@@ -59,17 +56,9 @@ class LaunchSpec:
             (its world ``w``: ``+ w``); None leaves the sims unseeded.
         env_kwargs: keyword arguments for the scene's env class (JSON-able).
         render_mode: passed to the scene's env.
-        real_time: run each sim on a paced wall clock.
-        real_time_factor: simulated seconds per wall-clock second.
-        real_time_mode: real time; the regime, ``"elastic"`` or ``"fixed_step"``
-            (:mod:`remoteenv.wire.real_time_modes`).
-        action_delay: lock-step; an action takes effect this many ticks later
-            (an int, or a :mod:`remoteenv.delays` spec in ticks).
-        obs_delay: lock-step; observations arrive this many ticks late (the same).
-        link_delay: real time; emulated extra link delay per action in wall
-            seconds (a number, or a spec with ``unit="s"``); None: none.
-        channel: lock-step; delivery rules and delayed rewards
-            (:class:`~remoteenv.wire.delays.channel_rules.ChannelRules`; None: the default).
+        run: how the sims' worlds run: lock-step or real time, the delays
+            (:class:`~remoteenv.wire.run_options.options.RunOptions`, checked
+            when it was made, so a bad combination fails before any process starts).
         startup_timeout: seconds to wait for each sim to start (and, by
             default, to answer the handshake).
     """
@@ -80,42 +69,14 @@ class LaunchSpec:
     seed: int | None = None
     env_kwargs: Mapping[str, Any] = field(default_factory=dict)
     render_mode: str | None = None
-    real_time: bool = False
-    real_time_factor: float = 1.0
-    real_time_mode: str = ELASTIC
-    action_delay: int | DelaySpec = 0
-    obs_delay: int | DelaySpec = 0
-    link_delay: float | DelaySpec | None = None
+    run: RunOptions = field(default_factory=RunOptions)
     startup_timeout: float = 60.0
-    channel: ChannelRules | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scene", os.fspath(self.scene))
         object.__setattr__(self, "env_kwargs", dict(self.env_kwargs))
-        if self.channel is not None and self.channel.is_default:
-            object.__setattr__(self, "channel", None)  # one spelling of the default
         if self.num_instances < 1 or self.worlds_per_instance < 1:
             raise ValueError("num_instances and worlds_per_instance must be >= 1")
-        # Checked here so a bad delay fails in the agent, before any process starts.
-        lock_step_delayed = not (as_delay(self.action_delay, TICKS).is_zero and as_delay(self.obs_delay, TICKS).is_zero)
-        link_delayed = self.link_delay is not None and not as_delay(self.link_delay, SECONDS).is_zero
-        if self.real_time and lock_step_delayed:
-            raise ValueError(
-                "action_delay and obs_delay are lock-step's reproducible twin of real_time; use one or the "
-                "other (an emulated link in real time is link_delay)"
-            )
-        if self.real_time and self.channel is not None and not self.channel.is_default:
-            raise ValueError(
-                "action_delivery, obs_delivery and delayed_rewards are rules of lock-step's delays; "
-                "real time has none of them"
-            )
-        check_real_time_mode(self.real_time_mode)
-        if self.real_time_mode != ELASTIC and not self.real_time:
-            raise ValueError(f"real_time_mode={self.real_time_mode!r} is a real-time regime: add real_time=True")
-        if link_delayed and not self.real_time:
-            raise ValueError(
-                "link_delay emulates a network in real time (real_time=True); in lock-step use action_delay/obs_delay"
-            )
         try:
             size = len(json.dumps(self.env_kwargs))
         except TypeError as exc:
@@ -126,14 +87,9 @@ class LaunchSpec:
                 "command line carries: pass large data as a file path the scene reads instead"
             )
 
-    def delay_file_text(self) -> str | None:
-        """The text of each sim's delay file (see :mod:`remoteenv.wire.delays.delay_file`):
-        every delay's wire form in JSON; None without delays."""
-        return delay_file_text(self.action_delay, self.obs_delay, self.link_delay, self.channel)
-
     def layout(self, source: str) -> SimLayout:
         """The layout of the sims this spec starts; ``source`` names who started them, for messages."""
-        return SimLayout(self.num_instances, self.worlds_per_instance, self.real_time, source=source)
+        return SimLayout(self.num_instances, self.worlds_per_instance, self.run.real_time, source=source)
 
     def instance_seed(self, instance: int) -> int | None:
         """The seed of sim ``instance`` (of its world 0), or None."""

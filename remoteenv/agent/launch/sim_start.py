@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from remoteenv.agent.launch.sim_process import ProcessHandle
 from remoteenv.agent.launch.zygote import registry as zygotes
 from remoteenv.agent.launch.zygote.process import Zygote, ZygoteUnavailable
-from remoteenv.wire.zygote_channel import ForkRequest
+from remoteenv.wire.messages.zygote_channel import ForkRequest
 
 
 @dataclass

@@ -3,7 +3,7 @@
 
 Runs in the agent process. :class:`SceneReach` sends the three commands of
 the spec (:mod:`remoteenv.wire.protocol`) over a
-:class:`~remoteenv.agent.session.session.SimSession`; both env classes build their
+:class:`~remoteenv.agent.session.sim_session.SimSession`; both env classes build their
 Gymnasium-facing ``call``/``get_attr``/``set_attr`` (and the single env's
 ``get_wrapper_attr``) on it. A scene method read with :meth:`SceneReach.get`
 comes back as a :class:`SceneMethod`, a callable that calls it remotely, so
@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 from remoteenv.agent.errors import RemoteEnvError
 
 if TYPE_CHECKING:
-    from remoteenv.agent.session.session import SimSession
+    from remoteenv.agent.session.sim_session import SimSession
 
 #: The commands of this module, as a handshake's ``commands`` lists them.
 COMMANDS = ("get_attr", "set_attr", "call")

@@ -19,7 +19,7 @@ from contextlib import AbstractContextManager, contextmanager
 from typing import Any
 
 from remoteenv.agent.errors import RemoteEnvError
-from remoteenv.agent.session.session import SimSession
+from remoteenv.agent.session.sim_session import SimSession
 
 
 class Pauser:

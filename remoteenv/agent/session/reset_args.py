@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from remoteenv.agent.errors import StateError
-from remoteenv.wire.errors import short_repr
+from remoteenv.wire.wire_errors import short_repr
 
 
 def is_int_seed(seed: Any) -> bool:

@@ -1,4 +1,4 @@
-"""The attributes both env classes read from their :class:`~remoteenv.agent.session.session.SimSession`.
+"""The attributes both env classes read from their :class:`~remoteenv.agent.session.sim_session.SimSession`.
 
 Runs in the agent process.
 """
@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from remoteenv.agent.launch.restart import RestartBudget
 from remoteenv.agent.launch.sim_group import SimGroup
-from remoteenv.agent.session.session import SimSession
-from remoteenv.wire.handshake import Handshake
+from remoteenv.agent.session.sim_session import SimSession
+from remoteenv.wire.messages.handshake import Handshake
 
 
 class SessionAttributes:

@@ -1,1 +1,1 @@
-"""The vector env's requests, results, layout and autoreset."""
+"""The vector env's requests, results, layout and autoreset. Runs in the agent process."""

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from remoteenv.agent.vector.vector_episodes import VectorEpisodes
-from remoteenv.wire.batch import AddInfo
+from remoteenv.wire.messages.batch_encoding import AddInfo
 
 
 class PoolAPI:

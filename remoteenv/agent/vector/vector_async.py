@@ -27,12 +27,12 @@ from typing import Any
 import numpy as np
 import zmq
 
-from remoteenv.agent.connection.shared_lane import RegionReply, SharedLanes
+from remoteenv.agent.connection.shared_lane_client import RegionReply, SharedLanes
 from remoteenv.agent.connection.sim_connection import LIVENESS_CHECK_S
 from remoteenv.agent.errors import RemoteEnvError, RemoteEnvTimeout, StateError
-from remoteenv.agent.session.session import SimSession
+from remoteenv.agent.session.sim_session import SimSession
 from remoteenv.agent.vector.vector_results import ObsBatch, assemble
-from remoteenv.wire.batch import AddInfo
+from remoteenv.wire.messages.batch_encoding import AddInfo
 
 #: One reply's worth of worlds: their global ids, their ops and the ``step_batch`` reply.
 Chunk = tuple[np.ndarray, np.ndarray, dict[str, Any]]

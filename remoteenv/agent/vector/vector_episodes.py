@@ -27,14 +27,14 @@ from gymnasium.vector.utils import batch_space, iterate
 from remoteenv.agent.errors import StateError
 from remoteenv.agent.launch.restart import restarted_info
 from remoteenv.agent.session.reset_args import split_reset_mask, world_seeds
-from remoteenv.agent.session.session import SimSession
+from remoteenv.agent.session.sim_session import SimSession
 from remoteenv.agent.vector.autoreset import after_reset, after_step, plan_ops
 from remoteenv.agent.vector.vector_async import AsyncWorlds, assemble_chunks
 from remoteenv.agent.vector.vector_layout import check_sims
 from remoteenv.agent.vector.vector_requests import VectorRequests
 from remoteenv.agent.vector.vector_results import ObsBatch, assemble
-from remoteenv.wire.actions import check_actions
-from remoteenv.wire.batch import AddInfo, merge_infos
+from remoteenv.wire.messages.action_rules import check_actions
+from remoteenv.wire.messages.batch_encoding import AddInfo, merge_infos
 
 #: What a vector step returns: ``(obs, rewards, terminated, truncated, infos)``.
 StepResult = tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]

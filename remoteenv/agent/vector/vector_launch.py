@@ -10,11 +10,11 @@ from typing import Any
 
 from remoteenv.agent.errors import BatchTooLargeError, LimitError
 from remoteenv.agent.launch.sim_group import SimGroup
-from remoteenv.agent.session.session import SimSession, open_session
+from remoteenv.agent.session.sim_session import SimSession, open_session
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, world_slices
-from remoteenv.wire.handshake import worlds_that_fit
+from remoteenv.wire.codec.spaces import value_nbytes
 from remoteenv.wire.memory import worlds_problem
-from remoteenv.wire.spaces import value_nbytes
+from remoteenv.wire.messages.handshake import worlds_that_fit
 
 
 def open_worlds(
@@ -32,7 +32,7 @@ def open_worlds(
     capped at ``num_envs``) each: the open session, the K it runs, and what one
     world's tick costs (seconds; None unless measured).
 
-    ``launch``: :func:`~remoteenv.agent.session.session.open_session`'s options.
+    ``launch``: :func:`~remoteenv.agent.session.sim_session.open_session`'s options.
     ``regroup`` (given for the default layout only): the worlds are placed
     again from what one costs (with ``measure_cost``, the first sim measures
     one world's whole tick: physics and every hook, however the scene renders,

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launch.sim_group import SimLayout
-from remoteenv.wire.handshake import Handshake
+from remoteenv.wire.messages.handshake import Handshake
 
 #: A world whose whole control tick costs its sim more than this (wall seconds
 #: on one thread through its per-world hooks, the handshake's

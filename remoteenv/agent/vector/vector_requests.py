@@ -7,7 +7,7 @@ a vector step is one ``step_batch`` per process and a reset one
 each process runs one paced clock) plain ``step``/``reset`` requests carry
 less, and their replies are put in batch form here, so the caller sees one
 shape; every reply is checked against the handshake first
-(:attr:`~remoteenv.agent.session.session.SimSession.checks`). A process lost to a failure the restart budget covers is relaunched
+(:attr:`~remoteenv.agent.session.sim_session.SimSession.checks`). A process lost to a failure the restart budget covers is relaunched
 (:func:`remoteenv.agent.launch.restart.gather_restarting`): its worlds' episodes end
 truncated at their last observation, and a reset is sent again.
 """
@@ -21,10 +21,10 @@ import numpy as np
 
 from remoteenv.agent.connection.fan_in import FanIn
 from remoteenv.agent.connection.reply_checks import ReplyChecks
-from remoteenv.agent.connection.shared_lane import SharedLanes
+from remoteenv.agent.connection.shared_lane_client import SharedLanes
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launch.restart import gather_restarting, restarted_info
-from remoteenv.agent.session.session import SimSession
+from remoteenv.agent.session.sim_session import SimSession
 from remoteenv.agent.vector.vector_results import ObsBatch, reset_reply_as_batch, step_reply_as_batch
 from remoteenv.wire.protocol import OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET
 

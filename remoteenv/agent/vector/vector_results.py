@@ -5,7 +5,7 @@ process answers for its slice of worlds in ``step_batch`` form (see
 :mod:`remoteenv.wire.protocol`: ``obs``, ``reward``, ``terminated``,
 ``truncated``, ``info`` as columns or maps, ``final``); :func:`assemble`
 writes the slices into one obs batch, three arrays and the vector info dict
-(``key`` array plus ``_key`` mask, through :func:`remoteenv.wire.batch.merge_infos`).
+(``key`` array plus ``_key`` mask, through :func:`remoteenv.wire.messages.batch_encoding.merge_infos`).
 Plain ``step``/``reset`` replies (one world per process) are first put in
 that form with :func:`step_reply_as_batch` and :func:`reset_reply_as_batch`.
 """
@@ -19,9 +19,9 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector.utils import concatenate, create_empty_array
 
-from remoteenv.agent.connection.shared_lane import RegionReply
-from remoteenv.wire.batch import AddInfo, merge_infos
-from remoteenv.wire.scalar_types import restore_info, restore_scalars
+from remoteenv.agent.connection.shared_lane_client import RegionReply
+from remoteenv.wire.codec.scalar_types import restore_info, restore_scalars
+from remoteenv.wire.messages.batch_encoding import AddInfo, merge_infos
 
 
 class ObsBatch:
@@ -93,7 +93,7 @@ def reset_reply_as_batch(reply: dict[str, Any], as_step: bool = False) -> dict[s
 
 def _finals(result: dict[str, Any]) -> list[Any]:
     """The ``final`` entries of a ``step_batch`` result, their info values
-    typed as ``final_types`` says (see :mod:`remoteenv.wire.scalar_types`)."""
+    typed as ``final_types`` says (see :mod:`remoteenv.wire.codec.scalar_types`)."""
     final, types = result["final"], result.get("final_types")
     if isinstance(types, list) and len(types) == len(final):
         for (_, _, info), info_types in zip(final, types):
@@ -192,7 +192,7 @@ def _from_regions(
 ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
     """:func:`assemble` when every process answered in its shared region: each
     block copied once into fresh arrays, the info columns merged as
-    :func:`~remoteenv.wire.batch.merge_infos` merges columns every world has."""
+    :func:`~remoteenv.wire.messages.batch_encoding.merge_infos` merges columns every world has."""
     n = obs_batch.num_envs
     space = obs_batch.space
     obs = np.empty((n, *space.shape), dtype=space.dtype)  # type: ignore[misc]

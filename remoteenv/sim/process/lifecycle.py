@@ -14,7 +14,7 @@ import signal
 from typing import Any
 
 from remoteenv.wire.addresses import ipc_path
-from remoteenv.wire.files.files import write_atomic
+from remoteenv.wire.files.safe_writes import write_atomic
 
 
 def exit_on_sigterm() -> None:

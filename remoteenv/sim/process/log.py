@@ -1,7 +1,7 @@
 """Sim-side diagnostics go through :mod:`logging`, under the ``remoteenv.sim`` logger.
 
 Runs in the sim process. Its modules log with ``logging.getLogger(__name__)``
-(``remoteenv.sim.process.pacing_levers``, ``remoteenv.sim.serving.server``, ...). A sim
+(``remoteenv.sim.process.pacing_levers``, ``remoteenv.sim.serving.sim_server``, ...). A sim
 process's stderr is its log file, which the launcher keeps and quotes when
 a sim fails to start; :func:`log_to_stderr` sends the records there, once,
 unless the scene script configured logging itself. To route them elsewhere,

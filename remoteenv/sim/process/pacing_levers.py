@@ -17,7 +17,7 @@ Runs in the sim process (``python <scene script> --rt-priority ...``, see
   so a collection seldom lands in the paced loop; ``off`` disables automatic
   collection (the sim's steady state allocates no cycles; use with care).
 - the spin window: how long before each deadline the loop stops sleeping and
-  spins (:data:`remoteenv.sim.serving.server.DEADLINE_SPIN_S` by default), which
+  spins (:data:`remoteenv.sim.serving.sim_server.DEADLINE_SPIN_S` by default), which
   absorbs the kernel's wake-up latency at the cost of CPU time.
 """
 

@@ -1,7 +1,7 @@
 """What a scene's batched hook returns for the worlds it stepped together.
 
 Runs in the sim process. :meth:`remoteenv.sim.BaseEnv.post_steps` returns a
-:class:`BatchResult` for ``n`` worlds at once; :mod:`remoteenv.sim.stepping.batch`
+:class:`BatchResult` for ``n`` worlds at once; :mod:`remoteenv.sim.stepping.batch_commands`
 turns it into a ``step_batch`` reply. The per-world view of the same
 numbers (:meth:`BatchResult.world_info`) is exactly what the scene's
 per-world :meth:`~remoteenv.sim.BaseEnv.post_step` would have returned.
@@ -58,7 +58,7 @@ class BatchResult:
 
     def wire_columns(self) -> dict[str, Any] | None:
         """The infos in the wire's column form, exactly as
-        :func:`remoteenv.wire.batch.columnar_infos` encodes the per-world maps
+        :func:`remoteenv.wire.messages.batch_encoding.columnar_infos` encodes the per-world maps
         (an array column goes as an array of its dtype, a list as a list), or
         None if they are maps or a column is not bool, int or float."""
         if isinstance(self.infos, list):

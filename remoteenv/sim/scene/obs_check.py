@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from remoteenv.wire.errors import short_repr
+from remoteenv.wire.wire_errors import short_repr
 
 
 class ObservationError(TypeError):

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from remoteenv.sim.scene.batch_result import BatchResult
-from remoteenv.wire.errors import short_repr
+from remoteenv.wire.wire_errors import short_repr
 
 
 class StepResultError(TypeError):

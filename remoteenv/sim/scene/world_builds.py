@@ -7,7 +7,7 @@ makes its renderers: a camera world's largest cost, ~42 MB under llvmpipe
 against ~0.8 MB for a state world) is the figure each of the others is taken
 to cost; if they do not fit in the memory this machine has available
 (:mod:`remoteenv.wire.memory`), the sim refuses before building them, with
-the figures and the fix on one line (:data:`~remoteenv.wire.errors.RESOURCES_MARKER`),
+the figures and the fix on one line (:data:`~remoteenv.wire.wire_errors.RESOURCES_MARKER`),
 instead of swapping or being killed halfway through a launch.
 """
 

@@ -1,1 +1,1 @@
-"""The server loop: commands, attributes and the stepping mode it serves."""
+"""The server loop: commands, attributes and the stepping mode it serves. Runs in the sim process."""

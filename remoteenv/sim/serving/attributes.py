@@ -23,7 +23,7 @@ from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.transport.channels import Channel
 from remoteenv.sim.transport.checks import RequestError, world_index
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import ATTRIBUTE, PROTOCOL, UNSENDABLE, short_repr
+from remoteenv.wire.wire_errors import ATTRIBUTE, PROTOCOL, UNSENDABLE, short_repr
 
 #: BaseEnv methods that drive the world: only the server's stepping calls them.
 DRIVING_METHODS = frozenset(

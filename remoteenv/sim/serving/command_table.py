@@ -1,7 +1,7 @@
 """The sim server's command table: which commands it answers, a request
 dispatched to its handler, a reply encoded, none of it ever raising.
 
-Runs in the sim process (:class:`~remoteenv.sim.serving.server.RemoteControlledAgent`
+Runs in the sim process (:class:`~remoteenv.sim.serving.sim_server.RemoteControlledAgent`
 holds one). :func:`build_table` puts together the common commands
 (:mod:`~remoteenv.sim.serving.commands`), the scene-attribute commands
 (:mod:`~remoteenv.sim.serving.attributes`) and those of the stepping mode
@@ -22,12 +22,14 @@ from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.serving.attributes import AttributeCommands
 from remoteenv.sim.serving.commands import Commands, Handler
 from remoteenv.sim.serving.stepping_modes import stepping_and_commands
-from remoteenv.sim.stepping.stepping import Stepping
+from remoteenv.sim.stepping.interfaces import Stepping
+from remoteenv.sim.stepping.real_time import Clock
 from remoteenv.sim.transport.channels import Channel, PipeChannel
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.sim.transport.drivers import Drivers
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import INVALID_ACTION, PROTOCOL, SCENE, InvalidAction, short_repr
+from remoteenv.wire.run_options.options import RunOptions
+from remoteenv.wire.wire_errors import INVALID_ACTION, PROTOCOL, SCENE, InvalidAction, short_repr
 
 
 class CommandTable:
@@ -43,7 +45,7 @@ class CommandTable:
 
     def handle(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
         """The reply to a decoded request (never raises), or None if it comes later
-        (see :meth:`remoteenv.sim.serving.server.RemoteControlledAgent.handle`)."""
+        (see :meth:`remoteenv.sim.serving.sim_server.RemoteControlledAgent.handle`)."""
         seq = msg["seq"]
         handler = self.handlers.get(msg["cmd"])
         if handler is None:
@@ -69,16 +71,19 @@ def build_table(
     instance: int,
     stop: Callable[[], None],
     pipe: PipeChannel | None,
+    run: RunOptions,
+    *,
+    seed: int | None,
+    clock: Clock,
     world_factory: Callable[[], BaseEnv] | None = None,
-    **stepping_options: Any,
 ) -> tuple[Stepping, CommandTable, Drivers]:
     """The stepping strategy, command table and driver rule of a server of
-    ``envs``. ``stop`` ends serving (``close``); ``pipe`` is the launcher's
-    channel, if any; ``world_factory`` makes a scratch world for the
-    handshake's cost measurement (:class:`~remoteenv.sim.serving.commands.Commands`); ``stepping_options`` are
-    :func:`~remoteenv.sim.serving.stepping_modes.stepping_and_commands`'s
-    (``real_time``, ``real_time_factor``, the delays, ``seed``, ``clock``)."""
-    stepping, mode_commands = stepping_and_commands(envs, instance, **stepping_options)
+    ``envs`` run as ``run`` says. ``stop`` ends serving (``close``); ``pipe`` is
+    the launcher's channel, if any; ``seed`` and ``clock`` are
+    :func:`~remoteenv.sim.serving.stepping_modes.stepping_and_commands`'s;
+    ``world_factory`` makes a scratch world for the handshake's cost
+    measurement (:class:`~remoteenv.sim.serving.commands.Commands`)."""
+    stepping, mode_commands = stepping_and_commands(envs, instance, run, seed=seed, clock=clock)
     common = Commands(envs, stepping, instance, stop, launcher_channel=pipe, world_factory=world_factory)
     handlers: dict[str, Handler] = common.handlers()
     handlers.update(AttributeCommands(envs, instance).handlers())

@@ -5,7 +5,7 @@ it came on and whom to answer there, and returns the reply's fields (the
 server adds ``seq`` and ``ok``), or None when the reply comes later (a
 real-time step). A refused request raises
 :class:`~remoteenv.sim.transport.checks.RequestError` or
-:class:`~remoteenv.wire.errors.InvalidAction`; the server turns either into a
+:class:`~remoteenv.wire.wire_errors.InvalidAction`; the server turns either into a
 typed error reply. The wire form of each command is specified in
 :mod:`remoteenv.wire.protocol`.
 """
@@ -18,7 +18,7 @@ from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.scene.world_cost import measured_cost
-from remoteenv.sim.stepping.stepping import Stepping
+from remoteenv.sim.stepping.interfaces import Stepping
 from remoteenv.sim.transport.channels import Channel
 from remoteenv.sim.transport.checks import (
     options_value,
@@ -29,9 +29,9 @@ from remoteenv.sim.transport.checks import (
 )
 from remoteenv.sim.transport.drivers import Drivers
 from remoteenv.wire import protocol
-from remoteenv.wire import spaces as spaces_codec
-from remoteenv.wire.actions import check_action
-from remoteenv.wire.scalar_types import describe_scalars
+from remoteenv.wire.codec import spaces as spaces_codec
+from remoteenv.wire.codec.scalar_types import describe_scalars
+from remoteenv.wire.messages.action_rules import check_action
 
 #: A command handler: ``(request, channel, reply_to) -> reply fields``, or None
 #: when the reply will be sent later.

@@ -1,6 +1,6 @@
 """How the sim server's loop waits for work, one pass at a time.
 
-Runs in the sim process (:meth:`remoteenv.sim.serving.server.RemoteControlledAgent.serve`).
+Runs in the sim process (:meth:`remoteenv.sim.serving.sim_server.RemoteControlledAgent.serve`).
 With no deadline (lock-step) a pass waits for requests: hot on the local pipe
 while the agent has been answering quickly (:class:`~remoteenv.wire.shared_memory.hot_wait.HotWait`),
 else blocking on every channel for up to :data:`~remoteenv.sim.process.orphan.CHECK_INTERVAL_S`.
@@ -19,7 +19,7 @@ from typing import Any
 import zmq
 
 from remoteenv.sim.process.orphan import CHECK_INTERVAL_S
-from remoteenv.sim.stepping.stepping import Stepping
+from remoteenv.sim.stepping.interfaces import Stepping
 from remoteenv.sim.transport.channels import Channel, Outgoing, PipeChannel, ZmqChannel
 from remoteenv.wire.shared_memory.hot_wait import HotWait
 

@@ -1,1 +1,1 @@
-"""How the worlds advance: lock-step, real time, and batched physics."""
+"""How the worlds advance: lock-step, real time, and batched physics. Runs in the sim process."""

@@ -13,8 +13,8 @@ from __future__ import annotations
 from typing import Any
 
 from remoteenv.wire.delays.delay_line import LINK_STREAM, DelayStream
-from remoteenv.wire.delays.delays import SECONDS, DelaySpec, as_delay
-from remoteenv.wire.stats import RunningStats
+from remoteenv.wire.delays.delay_specs import SECONDS, DelaySpec, as_delay
+from remoteenv.wire.running_stats import RunningStats
 
 
 class EmulatedLink:

@@ -4,7 +4,7 @@ Runs in the sim process. The same seed and the same actions give the same
 trajectory in any process. :class:`LockStepper` steps one world;
 :class:`LockStepping` is the server loop's strategy for all of them (no
 clock: the loop just waits for requests). Both satisfy the interfaces of
-:mod:`remoteenv.sim.stepping.stepping`. The delay rules themselves (counting, the
+:mod:`remoteenv.sim.stepping.interfaces`. The delay rules themselves (counting, the
 newest due action in force, the newest arrived observation returned,
 seeding) are :class:`remoteenv.wire.delays.delay_line.LockStepDelays`'s, written
 down in ``docs/delays.md``.
@@ -17,20 +17,14 @@ from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.transport.channels import Channel, Outgoing
-from remoteenv.wire.delays.channel_rules import ChannelRules
+from remoteenv.wire.codec.scalar_types import describe_scalars
 from remoteenv.wire.delays.delay_line import LockStepDelays
-from remoteenv.wire.delays.delays import TICKS, Constant, DelaySpec, as_delay
-from remoteenv.wire.scalar_types import describe_scalars
+from remoteenv.wire.delays.delay_specs import Constant
+from remoteenv.wire.messages.handshake import LOCK_STEP
+from remoteenv.wire.run_options.options import RunOptions
 
-
-def _tick_delay(value: DelaySpec | int, name: str) -> DelaySpec:
-    """``value`` as a spec in ticks; a negative int is refused naming ``name``."""
-    if not isinstance(value, DelaySpec) and int(value) < 0:
-        raise ValueError(f"{name} must be >= 0 ticks, got {value}")
-    try:
-        return as_delay(value, TICKS)
-    except ValueError as exc:
-        raise ValueError(f"{name}: {exc}") from None
+#: The options of a lock-step world without delays.
+LOCK_STEP_OPTIONS = RunOptions()
 
 
 class LockStepper:
@@ -38,7 +32,7 @@ class LockStepper:
 
     Without delays each action is applied in its own tick and the reply's
     ``info`` is the scene's. With ``action_delay`` and/or ``obs_delay``
-    (ticks: an int, or a :class:`~remoteenv.wire.delays.delays.DelaySpec`) the
+    (ticks: an int, or a :class:`~remoteenv.wire.delays.delay_specs.DelaySpec`) the
     action sent with step ``t`` arrives at tick ``t + d_t`` (or later, in
     order, with ``action_delivery="in_order"``) and the step returns the
     newest observation that has arrived; during the first ticks the scene's
@@ -61,24 +55,20 @@ class LockStepper:
 
     Args:
         env: the world.
-        action_delay, obs_delay: the delay models (ticks).
+        run: its lock-step options: the delay models ``action_delay`` and
+            ``obs_delay`` (ticks) and the channel rules (delivery, delayed
+            rewards; default: newest, not delayed).
         seed: the world's launch seed: seeds the delay streams at the first
             reset when that reset brings no seed (None: OS entropy).
-        rules: delivery rules and delayed rewards (default: newest, not delayed).
     """
 
-    def __init__(
-        self,
-        env: BaseEnv,
-        action_delay: DelaySpec | int = 0,
-        obs_delay: DelaySpec | int = 0,
-        seed: int | None = None,
-        rules: ChannelRules | None = None,
-    ) -> None:
-        action_spec = _tick_delay(action_delay, "action_delay")
-        obs_spec = _tick_delay(obs_delay, "obs_delay")
+    def __init__(self, env: BaseEnv, run: RunOptions = LOCK_STEP_OPTIONS, seed: int | None = None) -> None:
+        if run.real_time:
+            raise ValueError("a lock-step world's run options need real_time=False")
+        action_spec = run.action_delay_spec
+        obs_spec = run.obs_delay_spec
         self.env = env
-        self.delays = LockStepDelays(action_spec, obs_spec, rules)
+        self.delays = LockStepDelays(action_spec, obs_spec, run.channel)
         #: The largest action delay (ticks); the handshake's ``action_delay``.
         self.action_delay = int(action_spec.max)
         self.has_reset = False
@@ -91,7 +81,7 @@ class LockStepper:
         the models are more than a constant action delay: ``obs_delay`` (the
         largest, ticks) and both specs' wire forms; with delays and rules other
         than the default, ``channel`` (:meth:`ChannelRules.to_wire`)."""
-        out: dict[str, Any] = {"mode": "lock_step", "action_delay": self.action_delay}
+        out: dict[str, Any] = {"mode": LOCK_STEP, "action_delay": self.action_delay}
         action, obs = self.delays.action_delay, self.delays.obs_delay
         if not (isinstance(action, Constant) and obs.is_zero):
             out.update(obs_delay=int(obs.max), action_delay_spec=action.to_wire(), obs_delay_spec=obs.to_wire())
@@ -168,28 +158,17 @@ class LockStepping:
 
     Args:
         envs: the worlds, one :class:`LockStepper` each.
-        action_delay, obs_delay: the delay models of every world (ticks); each
-            world draws from its own streams.
+        run: the lock-step options of every world (the delay models and their
+            channel rules); each world draws from its own streams.
         seed: launch seed of world 0 (world ``w`` uses ``seed + w``), seeding
             the delay streams until a reset brings a seed; None: OS entropy.
-        rules: delivery rules and delayed rewards of every world.
     """
 
     #: Lock-step has no clock to start.
     clock_waiting = False
 
-    def __init__(
-        self,
-        envs: Sequence[BaseEnv],
-        action_delay: DelaySpec | int = 0,
-        obs_delay: DelaySpec | int = 0,
-        seed: int | None = None,
-        rules: ChannelRules | None = None,
-    ) -> None:
-        self._worlds = [
-            LockStepper(env, action_delay, obs_delay, seed=None if seed is None else seed + w, rules=rules)
-            for w, env in enumerate(envs)
-        ]
+    def __init__(self, envs: Sequence[BaseEnv], run: RunOptions = LOCK_STEP_OPTIONS, seed: int | None = None) -> None:
+        self._worlds = [LockStepper(env, run, seed=None if seed is None else seed + w) for w, env in enumerate(envs)]
 
     @property
     def worlds(self) -> list[LockStepper]:

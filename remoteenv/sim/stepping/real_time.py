@@ -2,7 +2,7 @@
 
 Runs in the sim process. :class:`RealTimeStepper` owns the schedule and
 action handling of one world; :class:`RealTimeStepping` is the server loop's
-strategy for all of them (see :mod:`remoteenv.sim.stepping.stepping`): the loop
+strategy for all of them (see :mod:`remoteenv.sim.stepping.interfaces`): the loop
 answers requests between physics substeps and fires each world's substeps on
 their deadlines. Both read time from an injected clock (``time.monotonic`` in
 a sim process), in seconds.
@@ -43,7 +43,7 @@ Replay: a reset whose options carry a replay schedule replays a recorded
 episode without the clock (see :mod:`remoteenv.sim.stepping.real_time_replay`).
 
 Emulated link: with ``link_delay`` (seconds: a number or a
-:class:`~remoteenv.wire.delays.delays.DelaySpec` with ``unit="s"``, e.g.
+:class:`~remoteenv.wire.delays.delay_specs.DelaySpec` with ``unit="s"``, e.g.
 ``Uniform(0.005, 0.015, unit="s")`` for jitter) every arriving action is
 held back by a delay drawn for it, on top of the real one, before it can
 take effect at the next substep: the extra round trip of a longer network,
@@ -102,10 +102,9 @@ from collections.abc import Iterator, Sequence
 from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
-from remoteenv.sim.stepping.real_time_world import Clock, RealTimeStepper
+from remoteenv.sim.stepping.real_time_world import REAL_TIME_OPTIONS, Clock, RealTimeStepper
 from remoteenv.sim.transport.channels import Channel, Outgoing
-from remoteenv.wire.delays.delays import DelaySpec
-from remoteenv.wire.real_time_modes import ELASTIC
+from remoteenv.wire.run_options.options import RunOptions
 
 
 class RealTimeStepping:
@@ -113,33 +112,23 @@ class RealTimeStepping:
 
     Args:
         envs: the worlds, one :class:`RealTimeStepper` each.
-        real_time_factor: simulated seconds per wall-clock second (> 0).
+        run: the real-time options of every world (factor, regime, emulated
+            link; see :class:`RealTimeStepper`); each world draws its link
+            delays from its own stream.
         clock: where wall time comes from (seconds, monotonic).
-        link_delay: emulated extra link delay per action (wall seconds; see
-            :class:`RealTimeStepper`); each world draws from its own stream.
         seed: launch seed of world 0 (world ``w``: ``seed + w``) for the link streams.
-        mode: the regime of every world, ``"elastic"`` or ``"fixed_step"``.
     """
 
     def __init__(
         self,
         envs: Sequence[BaseEnv],
-        real_time_factor: float = 1.0,
+        run: RunOptions = REAL_TIME_OPTIONS,
         clock: Clock = time.monotonic,
-        link_delay: DelaySpec | float | None = None,
         seed: int | None = None,
-        mode: str = ELASTIC,
     ) -> None:
         self.clock = clock
         self._worlds = [
-            RealTimeStepper(
-                env,
-                real_time_factor=real_time_factor,
-                clock=clock,
-                link_delay=link_delay,
-                seed=None if seed is None else seed + w,
-                mode=mode,
-            )
+            RealTimeStepper(env, run, clock=clock, seed=None if seed is None else seed + w)
             for w, env in enumerate(envs)
         ]
 

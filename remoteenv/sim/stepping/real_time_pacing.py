@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from remoteenv.wire.stats import RunningStats
+from remoteenv.wire.running_stats import RunningStats
 
 #: Wall seconds a world may fall behind its deadlines and still catch up
 #: (run the missed substeps back to back). A boundary processed later than

@@ -1,7 +1,7 @@
 """A real-time world replaying a recorded episode without a clock (the exact twin).
 
 Runs in the sim process. A ``reset`` whose options carry a replay schedule
-(:mod:`remoteenv.wire.real_time_modes`) puts a
+(:mod:`remoteenv.wire.run_options.real_time_modes`) puts a
 :class:`~remoteenv.sim.stepping.real_time_world.RealTimeStepper` into replay
 for that episode: its clock is not consulted, no substep runs on a deadline,
 and each ``step`` runs the world's substep boundaries back to back, with the
@@ -10,7 +10,7 @@ until the reply real time would have sent. The boundaries are processed by
 the same code as on the wall clock (score the tick with the held action,
 apply the newly arrived one, step), so physics, rewards and flags are
 those of the recorded run, bit for bit. The work one step may cause is
-bounded: at most :data:`~remoteenv.wire.real_time_modes.MAX_REPLAY_STEP_TICKS`
+bounded: at most :data:`~remoteenv.wire.run_options.real_time_modes.MAX_REPLAY_STEP_TICKS`
 ticks, and a scene's cameras render only the ticks whose observation a reply
 carries (the real run's replies), not every tick run on the way.
 """
@@ -20,8 +20,8 @@ from __future__ import annotations
 from typing import Any
 
 from remoteenv.sim.transport.checks import RequestError
-from remoteenv.wire.errors import PROTOCOL
-from remoteenv.wire.real_time_modes import MAX_REPLAY_STEP_TICKS, split_replay_schedule
+from remoteenv.wire.run_options.real_time_modes import MAX_REPLAY_STEP_TICKS, split_replay_schedule
+from remoteenv.wire.wire_errors import PROTOCOL
 
 
 def replay_from_options(
@@ -52,7 +52,7 @@ class ReplayCursor:
     Args:
         action_substeps: per step, the substep (counted from the reset) at
             which its action took effect in the recorded run (checked by
-            :func:`remoteenv.wire.real_time_modes.split_replay`).
+            :func:`remoteenv.wire.run_options.real_time_modes.split_replay`).
         frame_skip: substeps per control tick.
         link_delays: per step, the emulated link delay the recorded run
             reported (wall seconds; None: none recorded, 0.0 is replayed).

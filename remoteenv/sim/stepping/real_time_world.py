@@ -8,7 +8,6 @@ real-time step are written down in :mod:`remoteenv.sim.stepping.real_time`, whos
 
 from __future__ import annotations
 
-import math
 import time
 import traceback
 from collections.abc import Callable
@@ -21,13 +20,16 @@ from remoteenv.sim.stepping.real_time_replay import ReplayCursor, replay_from_op
 from remoteenv.sim.stepping.real_time_reply import PendingStep, SinceReply
 from remoteenv.sim.transport.channels import Channel, Outgoing
 from remoteenv.sim.transport.checks import RequestError
-from remoteenv.wire.delays.delays import DelaySpec
-from remoteenv.wire.errors import PROTOCOL, SCENE
+from remoteenv.wire.messages.handshake import REAL_TIME
 from remoteenv.wire.protocol import error_reply
-from remoteenv.wire.real_time_modes import ELASTIC, FIXED_STEP, check_real_time_mode
+from remoteenv.wire.run_options.options import RunOptions
+from remoteenv.wire.run_options.real_time_modes import FIXED_STEP
+from remoteenv.wire.wire_errors import PROTOCOL, SCENE
 
 #: A clock: seconds, monotonic (``time.monotonic`` in a sim process).
 Clock = Callable[[], float]
+#: The options of a real-time world that asks for nothing else (factor 1, elastic, no emulated link).
+REAL_TIME_OPTIONS = RunOptions(real_time=True)
 
 _IDLE, _READY, _RUNNING, _FROZEN, _FAILED = "idle", "ready", "running", "frozen", "failed"
 
@@ -39,33 +41,31 @@ class RealTimeStepper(PacingFigures):
 
     Args:
         env: the world.
-        real_time_factor: simulated seconds per wall-clock second (> 0).
+        run: its real-time options: ``real_time_factor`` (simulated seconds
+            per wall-clock second), ``real_time_mode`` (the regime,
+            :mod:`remoteenv.wire.run_options.real_time_modes`) and
+            ``link_delay`` (the emulated link's extra delay per action, wall
+            seconds; None or 0: none).
         clock: where wall time comes from (seconds, monotonic).
-        link_delay: emulated extra link delay per action (wall seconds, a
-            number or a spec in seconds); None or 0: none.
         seed: the world's launch seed: seeds the link stream at the first
             reset when that reset brings no seed (None: OS entropy).
-        mode: the regime, ``"elastic"`` or ``"fixed_step"``
-            (:mod:`remoteenv.wire.real_time_modes`).
     """
 
     def __init__(
         self,
         env: BaseEnv,
-        real_time_factor: float = 1.0,
+        run: RunOptions = REAL_TIME_OPTIONS,
         clock: Clock = time.monotonic,
-        link_delay: DelaySpec | float | None = None,
         seed: int | None = None,
-        mode: str = ELASTIC,
     ) -> None:
-        self.mode = check_real_time_mode(mode)
-        factor = float(real_time_factor)
-        if not (math.isfinite(factor) and factor > 0):
-            raise ValueError(f"real_time_factor must be a finite number > 0, got {real_time_factor!r}")
+        if not run.real_time:
+            raise ValueError("a real-time world's run options need real_time=True")
+        self.mode = run.real_time_mode
+        factor = float(run.real_time_factor)
         self.env = env
         self.factor = factor
         self.clock = clock
-        self._link = EmulatedLink(link_delay, seed)
+        self._link = EmulatedLink(run.link_delay, seed)
         #: The emulated link delay's draws (None: no emulated link).
         self.link = self._link.stream
         super().__init__(float(env.model.opt.timestep) / factor, self._link.delays)
@@ -105,7 +105,7 @@ class RealTimeStepper(PacingFigures):
         return self._t0 + self._n * self.period
 
     def describe(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"mode": "real_time", "real_time_factor": self.factor, "action_delay": 0}
+        out: dict[str, Any] = {"mode": REAL_TIME, "real_time_factor": self.factor, "action_delay": 0}
         out["real_time_mode"] = self.mode
         self._link.describe(out)
         return out

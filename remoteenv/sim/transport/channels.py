@@ -17,8 +17,8 @@ import zmq
 
 from remoteenv.sim.transport.limits import BACKLOG_BYTES, FRAMES_PER_DRAIN, MAX_PEERS, OTHERS_BYTES_PER_PASS
 from remoteenv.wire import protocol
-from remoteenv.wire.errors import PROTOCOL, STATE
 from remoteenv.wire.shared_memory.hot_wait import HotWait
+from remoteenv.wire.wire_errors import PROTOCOL, STATE
 
 #: Routing ids whose connection is noted at most (beyond: drivers' only).
 _MAX_PEERS_NOTED = 4 * MAX_PEERS
@@ -182,7 +182,7 @@ def _source_fd(frame: Any) -> int:
 
 
 class LaneWatch(Protocol):
-    """The fast lane of a pipe's shared region (:class:`remoteenv.sim.transport.shared_lane.SharedLane`)."""
+    """The fast lane of a pipe's shared region (:class:`remoteenv.sim.transport.shared_lane_server.SharedLane`)."""
 
     def posted(self) -> int:
         """``seq`` of a request posted in the region and not yet served (0: none)."""

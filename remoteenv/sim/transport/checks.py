@@ -4,8 +4,8 @@ Runs in the sim process. Single and batch commands share these, so a field
 is accepted or refused by the same rule whichever command carries it. Each
 check raises :class:`RequestError`, which the server turns into a typed error
 reply; messages echo at most a bounded repr of the offending value. Actions
-are checked by :mod:`remoteenv.wire.actions` (the agent applies the same
-rules), whose :class:`~remoteenv.wire.errors.InvalidAction` the server maps
+are checked by :mod:`remoteenv.wire.messages.action_rules` (the agent applies the same
+rules), whose :class:`~remoteenv.wire.wire_errors.InvalidAction` the server maps
 to the ``invalid_action`` kind.
 """
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from remoteenv.wire.errors import PROTOCOL, STATE, short_repr
+from remoteenv.wire.wire_errors import PROTOCOL, STATE, short_repr
 
 
 class RequestError(Exception):

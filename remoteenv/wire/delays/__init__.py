@@ -1,1 +1,1 @@
-"""Delay specs, their file form, and the delay line that applies them."""
+"""Delay specs, their file form, and the delay line that applies them. Both processes use it."""

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from remoteenv.wire.errors import ProtocolError, short_repr
+from remoteenv.wire.wire_errors import ProtocolError, short_repr
 
 #: The newest item that has arrived is in force (an older one arriving later is dropped).
 NEWEST = "newest"

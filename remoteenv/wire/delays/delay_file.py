@@ -3,13 +3,13 @@
 Both processes use this module: a launcher (the local one in the agent
 process, or a Ray actor on the sim's node) writes the file, the sim reads it
 at start (``--delay-file``). A delay spec may hold up to
-:data:`~remoteenv.wire.delays.delays.MAX_VALUES` values (a recorded
-:class:`~remoteenv.wire.delays.delays.Trace`), far more than a command line takes
+:data:`~remoteenv.wire.delays.delay_specs.MAX_VALUES` values (a recorded
+:class:`~remoteenv.wire.delays.delay_specs.Trace`), far more than a command line takes
 (Linux caps one argument at 128 KiB), so specs never travel as arguments.
 
 Format: UTF-8 JSON, one map with any of the keys ``"action_delay"``,
 ``"obs_delay"`` (ticks) and ``"link_delay"`` (seconds), each the wire form
-of a spec (:meth:`~remoteenv.wire.delays.delays.DelaySpec.to_wire`), and
+of a spec (:meth:`~remoteenv.wire.delays.delay_specs.DelaySpec.to_wire`), and
 ``"channel"``: lock-step's delivery rules and delayed rewards
 (:meth:`~remoteenv.wire.delays.channel_rules.ChannelRules.to_wire`), present
 only when they differ from the default and a lock-step delay is there for
@@ -25,7 +25,7 @@ Reading (:func:`read_delay_file`) treats the file as hostile: opened without
 following a symlink and without blocking (a FIFO there cannot stall the
 sim), refused unless it is a regular file, at most
 :data:`MAX_DELAY_FILE_BYTES` read, every spec rebuilt by
-:func:`~remoteenv.wire.delays.delays.delay_from_wire` (which checks every field).
+:func:`~remoteenv.wire.delays.delay_specs.delay_from_wire` (which checks every field).
 """
 
 from __future__ import annotations
@@ -37,10 +37,10 @@ from collections.abc import Mapping
 from typing import Any
 
 from remoteenv.wire.delays.channel_rules import ChannelRules
-from remoteenv.wire.delays.delays import MAX_VALUES, SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
-from remoteenv.wire.errors import ProtocolError, short_repr
+from remoteenv.wire.delays.delay_specs import MAX_VALUES, SECONDS, TICKS, DelaySpec, as_delay, delay_from_wire
 from remoteenv.wire.files.file_reads import UnreadableFile, parse_json
-from remoteenv.wire.files.files import create_new
+from remoteenv.wire.files.safe_writes import create_new
+from remoteenv.wire.wire_errors import ProtocolError, short_repr
 
 #: The keys of a delay file and each one's unit.
 DELAY_KEYS: dict[str, str] = {"action_delay": TICKS, "obs_delay": TICKS, "link_delay": SECONDS}

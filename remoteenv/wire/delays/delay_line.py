@@ -75,7 +75,7 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 
 from remoteenv.wire.delays.channel_rules import IN_ORDER, NEWEST, ChannelRules
-from remoteenv.wire.delays.delays import TICKS, Delay, DelaySpec, as_delay
+from remoteenv.wire.delays.delay_specs import TICKS, Delay, DelaySpec, as_delay
 
 T = TypeVar("T")
 

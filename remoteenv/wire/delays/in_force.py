@@ -34,7 +34,7 @@ delays are independent of action delays.
 
 This is the RDMDP's point (Bouteiller et al. 2021): with alpha and omega,
 the buffer's in-force action is Markov; ``docs/latency.md`` shows the
-calibration on the engine itself (:mod:`remoteenv.latency_study.markov_check`).
+calibration on the engine itself (:mod:`remoteenv.latency.study.markov_check`).
 """
 
 from __future__ import annotations
@@ -42,14 +42,14 @@ from __future__ import annotations
 import numpy as np
 
 from remoteenv.wire.delays.channel_rules import IN_ORDER, NEWEST
-from remoteenv.wire.delays.delays import TICKS, Categorical, Constant, DelaySpec, Uniform, as_delay
+from remoteenv.wire.delays.delay_specs import TICKS, Categorical, Constant, DelaySpec, Uniform, as_delay
 
 
 def delay_pmf(spec: DelaySpec | int) -> np.ndarray:
     """``pmf[d]``: the probability of an action delay of ``d`` ticks, ``d = 0 .. spec.max``.
 
     For :class:`Constant`, :class:`Uniform` and :class:`Categorical` specs in
-    ticks; a :class:`~remoteenv.wire.delays.delays.Trace` is not i.i.d. and raises ``TypeError``."""
+    ticks; a :class:`~remoteenv.wire.delays.delay_specs.Trace` is not i.i.d. and raises ``TypeError``."""
     spec = as_delay(spec, TICKS)
     if spec.unit != TICKS:
         raise ValueError(f"delay_pmf needs a delay in ticks, got {spec!r}")

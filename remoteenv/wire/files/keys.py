@@ -9,7 +9,7 @@ the CURVE handshake and gets nothing.
 Key files are text: comment lines starting with ``#`` and one line holding a
 40-character Z85 key. Secret key files are created with mode 0600 and never
 overwritten; no key file is written through a symlink
-(:func:`remoteenv.wire.files.files.create_new`). A file of allowed client keys holds one public key per line.
+(:func:`remoteenv.wire.files.safe_writes.create_new`). A file of allowed client keys holds one public key per line.
 Key files are read as :mod:`remoteenv.wire.files.file_reads` reads any file a
 user names: never blocking, regular files only, at most
 :data:`MAX_KEY_FILE_BYTES`.
@@ -25,7 +25,7 @@ import zmq
 from zmq.utils import z85
 
 from remoteenv.wire.files.file_reads import read_bytes
-from remoteenv.wire.files.files import create_new
+from remoteenv.wire.files.safe_writes import create_new
 
 #: Length of a Z85-encoded 32-byte CURVE key.
 Z85_KEY_LENGTH = 40

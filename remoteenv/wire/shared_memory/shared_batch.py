@@ -51,8 +51,8 @@ from typing import Any
 
 import numpy as np
 
-from remoteenv.wire.arrays import ARRAY_DTYPES
-from remoteenv.wire.errors import ProtocolError, short_repr
+from remoteenv.wire.codec.arrays import ARRAY_DTYPES
+from remoteenv.wire.wire_errors import ProtocolError, short_repr
 
 #: Largest region (bytes) either side creates or maps.
 MAX_SHARED_BYTES = 1 << 28

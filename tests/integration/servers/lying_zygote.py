@@ -8,7 +8,7 @@ import os
 import socket
 import sys
 
-from remoteenv.wire.zygote_channel import channel_pair, close_fds, receive_message, send_message
+from remoteenv.wire.messages.zygote_channel import channel_pair, close_fds, receive_message, send_message
 
 control = socket.socket(fileno=int(sys.argv[sys.argv.index("--control-fd") + 1]))
 gone_r, gone_w = os.pipe()

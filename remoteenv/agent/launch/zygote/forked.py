@@ -2,7 +2,7 @@
 
 Runs in the agent process. The sim is the zygote's child, not ours, so its
 exit status comes from the zygote, down the sim's own status channel (see
-:mod:`remoteenv.wire.zygote_channel`); a pidfd of the sim says whether it
+:mod:`remoteenv.wire.messages.zygote_channel`); a pidfd of the sim says whether it
 still runs should the zygote be gone before it could report.
 """
 
@@ -15,8 +15,8 @@ import threading
 import time
 import weakref
 
-from remoteenv.wire.errors import ProtocolError
-from remoteenv.wire.zygote_channel import close_fds, int_field, receive_message
+from remoteenv.wire.messages.zygote_channel import close_fds, int_field, receive_message
+from remoteenv.wire.wire_errors import ProtocolError
 
 #: The exit status given to a sim whose zygote died before it could report the real one.
 LOST_STATUS = 1

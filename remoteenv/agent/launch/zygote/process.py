@@ -20,8 +20,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from remoteenv.agent.launch.zygote.forked import ForkedProcess
-from remoteenv.wire.errors import ProtocolError
-from remoteenv.wire.zygote_channel import (
+from remoteenv.wire.messages.zygote_channel import (
     ForkRequest,
     channel_pair,
     close_fds,
@@ -29,6 +28,7 @@ from remoteenv.wire.zygote_channel import (
     receive_message,
     send_message,
 )
+from remoteenv.wire.wire_errors import ProtocolError
 
 #: The zygote's script, found by path (the agent side imports nothing of the sim side).
 START_SCRIPT = str(Path(__file__).resolve().parents[3] / "sim" / "process" / "zygote" / "start.py")

@@ -4,7 +4,7 @@ Runs as its own process, started by the agent's launcher
 (:mod:`remoteenv.agent.launch.zygote`) with ``python start.py``. It imports what a
 sim needs (numpy, MuJoCo, Gymnasium, pyzmq, :mod:`remoteenv.sim`, and what
 each scene script it serves imports at its top, see :mod:`.preload`), then
-waits on its control channel (:mod:`remoteenv.wire.zygote_channel`). For
+waits on its control channel (:mod:`remoteenv.wire.messages.zygote_channel`). For
 each fork request it forks a child that becomes the sim exactly as
 ``python <scene script> <arguments>`` would (:mod:`.child`): its own
 session, the launcher's stdout, its log as stderr, the launcher's pipe, the

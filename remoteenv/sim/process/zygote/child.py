@@ -20,7 +20,7 @@ import runpy
 import sys
 from collections.abc import Sequence
 
-from remoteenv.wire.zygote_channel import ForkRequest
+from remoteenv.wire.messages.zygote_channel import ForkRequest
 
 
 def become_sim(request: ForkRequest, fds: Sequence[int]) -> list[str]:

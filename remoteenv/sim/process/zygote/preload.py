@@ -40,7 +40,7 @@ BASE_MODULES = (
     "msgpack",
     "remoteenv.sim",
     "remoteenv.sim.scene.batch_result",
-    "remoteenv.wire.handshake",
+    "remoteenv.wire.messages.handshake",
 )
 
 

@@ -62,6 +62,6 @@ if __name__ == "__main__":
     del sys.path[0]
     _pid = agent_pid_of(sys.argv[1:])
     _watch = EarlyWatch(_pid) if _pid > 0 else None
-    from remoteenv.sim.process.zygote.server import main
+    from remoteenv.sim.process.zygote.fork_server import main
 
     sys.exit(main(sys.argv[1:], _watch))

@@ -1,0 +1,259 @@
+"""The sim's end of the shared-memory region of the local pipe (``shared_batch``).
+
+Runs in the sim process (lock-step). The launching agent asks for the region
+once with ``shared_batch``; after that its ``step_batch`` requests may carry
+``"shared": true`` instead of ``actions`` (read from the region), and a
+plain step (every world stepped, none reset) answers with its arrays in the
+region. The region also holds the fast lane (:mod:`remoteenv.wire.shared_memory.doorbell`):
+a request posted in the region (ops, worlds and actions, announced by its
+sequence word, or by a ``{"cmd": "step_batch", "region": true}`` frame when
+this sim sleeps) is served like any ``step_batch``; its reply goes into the region with its infos as typed
+columns, and no frame at all while the agent watches the region. Layout and
+rules: :mod:`remoteenv.wire.shared_memory.shared_batch`; wire form: :mod:`remoteenv.wire.protocol`.
+Only the launching agent's pipe may use it: a ZeroMQ client gets a ``state`` error.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from remoteenv.sim.scene.batch_result import BatchResult
+from remoteenv.sim.transport.channels import Channel, PipeChannel
+from remoteenv.sim.transport.checks import RequestError
+from remoteenv.wire.codec.arrays import wire_dtype
+from remoteenv.wire.protocol import OPS
+from remoteenv.wire.shared_memory.doorbell import Doorbell
+from remoteenv.wire.shared_memory.shared_batch import SharedArrays, SharedLayout, create_region
+from remoteenv.wire.wire_errors import PROTOCOL, STATE
+
+#: Info columns the region of a sim holds for the fast lane.
+INFO_COLUMNS = 16
+#: The dtype an info column of python scalars travels in, by numpy kind.
+_WIDE = {"b": np.dtype(np.bool_), "i": np.dtype("<i8"), "u": np.dtype("<i8"), "f": np.dtype("<f8")}
+_LAST_OP = max(OPS)
+
+
+def layout_for(action_space: spaces.Space, obs_space: spaces.Space, worlds: int) -> SharedLayout | None:
+    """The region's layout for ``worlds`` worlds of these spaces, or None when
+    they do not fit one (actions Box or Discrete, observations Box)."""
+    if not isinstance(obs_space, spaces.Box):
+        return None
+    try:
+        obs_dtype = wire_dtype(np.dtype(obs_space.dtype))
+        if isinstance(action_space, spaces.Box):
+            action: tuple[str, tuple[int, ...]] = (wire_dtype(np.dtype(action_space.dtype)), action_space.shape)
+        elif isinstance(action_space, spaces.Discrete):
+            action = ("<i8", ())
+        else:
+            return None
+    except TypeError:  # a dtype the wire does not carry
+        return None
+    return SharedLayout(worlds, action[0], tuple(action[1]), obs_dtype, tuple(obs_space.shape))
+
+
+class SharedLane:
+    """The region of one sim process's worlds, created on the agent's first ``shared_batch``.
+
+    Args:
+        action_space, obs_space: the worlds' spaces.
+        worlds: how many worlds the process hosts.
+    """
+
+    def __init__(self, action_space: spaces.Space, obs_space: spaces.Space, worlds: int) -> None:
+        base = layout_for(action_space, obs_space, worlds)
+        self.layout = None if base is None else dataclasses.replace(base, info_columns=INFO_COLUMNS)
+        self._fd: int | None = None
+        self._arrays: SharedArrays | None = None
+        #: The fast lane's doorbell (once the region exists).
+        self.doorbell: Doorbell | None = None
+        #: ``seq`` of the last request taken from the region.
+        self.served = 0
+        self._info_version = 0
+        self._info_signature: tuple[tuple[str, str, bool], ...] | None = None
+        #: Why the region is no longer used (its header was tampered with), or None.
+        self.tampered: str | None = None
+
+    @property
+    def offered(self) -> bool:
+        """Whether the spaces fit a region (else ``shared_batch`` is not advertised)."""
+        return self.layout is not None
+
+    def attach(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:
+        """The ``shared_batch`` command: the region's pid, descriptor and layout."""
+        if not isinstance(channel, PipeChannel) or self.layout is None:
+            raise RequestError(STATE, "shared_batch is offered to the launching agent over its local pipe only")
+        if self._arrays is None:
+            self._fd, self._arrays = create_region(self.layout)
+            assert self._arrays.header is not None
+            self.doorbell = Doorbell(self._arrays.header)
+        channel.lane = self  # its waits look at the doorbell too
+        return {"pid": os.getpid(), "fd": self._fd, "layout": self.layout.to_wire()}
+
+    # ------------------------------------------------------------ the pipe channel's watch
+
+    def posted(self) -> int:
+        """``seq`` of a request posted in the region and not yet served (0: none)."""
+        return 0 if self.doorbell is None else self.doorbell.posted(self.served)
+
+    def settle(self) -> int:
+        """The sim is about to block: stop watching the region (a request posted
+        from now on comes with its frame); a request that came meanwhile (0: none)."""
+        if self.doorbell is None or self._found_tampered():
+            return 0
+        return self.doorbell.sim_sleeps(self.served)
+
+    def _found_tampered(self) -> bool:
+        """Whether the header is not what the two sides can have written: then
+        the region is dropped (poisoned for the agent to see, see
+        :mod:`remoteenv.wire.shared_memory.doorbell`) and every later step takes the pipe."""
+        doorbell = self.doorbell
+        if doorbell is None:
+            return self.tampered is not None
+        why = doorbell.sim_tampered(self.served)
+        if why is None:
+            return False
+        doorbell.poison()
+        self.doorbell = None
+        self.tampered = why
+        print(
+            f"remoteenv sim: the shared-memory region was tampered with ({why}); it is no longer used, "
+            "batched steps take the pipe",
+            file=sys.stderr,
+            flush=True,
+        )
+        return True
+
+    def _refuse_tampered(self) -> None:
+        if self._found_tampered():
+            raise RequestError(STATE, f"the shared-memory region was tampered with ({self.tampered}) and is not used")
+
+    # ------------------------------------------------------------ requests
+
+    def actions(self, n: int, channel: Channel | None) -> np.ndarray:
+        """A copy of the actions of request positions ``0 .. n-1`` (checked by the caller)."""
+        arrays = self._arrays
+        if arrays is None or not isinstance(channel, PipeChannel):
+            raise RequestError(STATE, "a 'shared' step_batch needs the region of shared_batch, over the local pipe")
+        self._refuse_tampered()
+        if not 0 < n <= len(arrays.actions):
+            raise RequestError(PROTOCOL, f"a 'shared' step_batch covers 1..{len(arrays.actions)} worlds, got {n}")
+        return arrays.actions[:n].copy()
+
+    def take(self, seq: int, channel: Channel | None) -> tuple[np.ndarray, list[int] | None, int] | None:
+        """The request ``seq`` posted in the region: ``(ops, worlds, n)`` (copies,
+        ops checked; worlds as listed, None for ``0 .. n-1``), or None if it was
+        served already (its frame came after the watch found it: nothing to answer)."""
+        self._refuse_tampered()
+        arrays, doorbell = self._arrays, self.doorbell
+        if arrays is None or doorbell is None or not isinstance(channel, PipeChannel):
+            raise RequestError(STATE, "a region step_batch needs the region of shared_batch, over the local pipe")
+        if seq <= self.served:
+            return None
+        posted, n, named = doorbell.request()
+        if posted != seq:
+            raise RequestError(PROTOCOL, f"a region step_batch {seq}, but the region holds request {posted}")
+        self.served = seq
+        k = arrays.layout.worlds
+        if not 0 < n <= k:
+            raise RequestError(PROTOCOL, f"a region request covers 1..{k} worlds, got {n}")
+        assert arrays.ops is not None and arrays.worlds is not None
+        ops = arrays.ops[:n].copy()
+        if ops.min() < 0 or ops.max() > _LAST_OP:
+            raise RequestError(PROTOCOL, f"a region request's ops must be in {OPS}")
+        worlds = arrays.worlds[:n].tolist() if named else None
+        return ops, worlds, n
+
+    # ------------------------------------------------------------ replies
+
+    def reply(self, batch: BatchResult, info: dict[str, Any]) -> dict[str, Any] | None:
+        """Put a plain step's arrays in the region and return the reply's other
+        fields; None if the obs batch does not fit the layout (then the caller
+        answers the usual way)."""
+        if self.tampered is not None or not self._put_arrays(batch):
+            return None
+        return {"shared": True, "info": info, "final": []}
+
+    def answer(self, seq: int, batch: BatchResult) -> tuple[bool, dict[str, Any] | None]:
+        """Answer region request ``seq``, a plain step, in the region if it fits:
+        ``(True, None)`` answered, the agent watches; ``(True, {"region": True})``
+        answered, wake the agent with that reply. Otherwise the caller replies on
+        the pipe: ``(False, fields)`` with the arrays in the region (add the
+        ``info``; a new ``info_layout`` is announced when the infos are columns
+        the region can hold next time), ``(False, None)`` the usual way."""
+        arrays, doorbell = self._arrays, self.doorbell
+        if arrays is None or doorbell is None or self._found_tampered():
+            return False, None
+        if not self._put_arrays(batch):
+            return False, None
+        columns = self._columns(batch)
+        if columns is None:
+            return False, {"shared": True, "final": []}
+        n = len(batch.reward)
+        for c, (_, values, _) in enumerate(columns):
+            arrays.info_column(c, values.dtype)[:n] = values
+        signature = tuple((key, values.dtype.str, python) for key, values, python in columns)
+        if signature != self._info_signature:
+            self._info_version += 1
+            self._info_signature = signature
+            layout = {"version": self._info_version, "columns": [list(entry) for entry in signature]}
+            return False, {"shared": True, "final": [], "info_layout": layout}
+        return True, ({"region": True} if doorbell.reply(seq, self._info_version) else None)
+
+    def obs_rows(self, n: int) -> np.ndarray | None:
+        """The region's observation rows ``0 .. n-1``, where a step may write its
+        observations directly (camera images rendered in place: no copy); None
+        before the region exists."""
+        arrays = self._arrays
+        return None if arrays is None or not 0 < n <= len(arrays.obs) else arrays.obs[:n]
+
+    def _put_arrays(self, batch: BatchResult) -> bool:
+        arrays = self._arrays
+        obs = batch.obs
+        if arrays is None or not isinstance(obs, np.ndarray):
+            return False
+        n = len(batch.reward)
+        rows = arrays.obs[:n]
+        if obs.dtype != rows.dtype or obs.shape != rows.shape:
+            return False
+        if obs.ctypes.data != rows.ctypes.data:  # not written in place (see obs_rows)
+            rows[...] = obs
+        arrays.reward[:n] = batch.reward
+        arrays.terminated[:n] = batch.terminated
+        arrays.truncated[:n] = False
+        return True
+
+    def _columns(self, batch: BatchResult) -> list[tuple[str, np.ndarray, bool]] | None:
+        """The batch's infos as ``(key, values, python)`` columns the region holds, or None."""
+        infos = batch.infos
+        n = len(batch.reward)
+        if not isinstance(infos, dict) or len(infos) > INFO_COLUMNS:
+            return None
+        out = []
+        for key, values in infos.items():
+            if not isinstance(values, np.ndarray) or values.shape != (n,) or values.dtype.kind not in _WIDE:
+                return None
+            python = key in batch.python_scalars
+            if python:
+                values = values.astype(_WIDE[values.dtype.kind], copy=False)
+            elif values.dtype.itemsize > 8:
+                return None
+            out.append((key, values, python))
+        return out
+
+    def close(self) -> None:
+        if self._arrays is not None:
+            self._arrays.close()
+            self._arrays = None
+        self.doorbell = None
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
+__all__ = ["INFO_COLUMNS", "SharedLane", "layout_for"]
