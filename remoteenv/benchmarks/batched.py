@@ -29,7 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 from remoteenv.benchmarks.harness.anchors import CpuHog, PhysicsLimit, cpu_seconds, make_envpool
-from remoteenv.benchmarks.harness.report import emit, machine_record, progress_log
+from remoteenv.benchmarks.harness.report import emit, progress_log, rounds_record
 
 REMOTE_ID = "remoteenv/Reacher-v0"
 GYM_ID = "Reacher-v5"
@@ -211,16 +211,7 @@ def measure(
         }
         for c in contenders
     ]
-    return {
-        "date": time.strftime("%Y-%m-%d %H:%M %Z"),
-        "machine": machine_record(),
-        "load_avg_per_round": loads,
-        "hogs": hog,
-        "duration_s": duration,
-        "rounds": rounds,
-        "rows": rows,
-        "ratios": ratios(rows),
-    }
+    return rounds_record(loads=loads, hogs=hog, duration_s=duration, rounds=rounds, rows=rows, ratios=ratios(rows))
 
 
 def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:

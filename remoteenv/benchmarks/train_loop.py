@@ -28,12 +28,11 @@ import os
 import statistics
 import subprocess
 import sys
-import time
 from collections.abc import Callable
 from typing import IO, Any
 
 from remoteenv.benchmarks.harness.anchors import CpuHog
-from remoteenv.benchmarks.harness.report import emit, machine_record, progress_log
+from remoteenv.benchmarks.harness.report import emit, progress_log, rounds_record
 from remoteenv.benchmarks.train_loop_worker import CONTENDERS, DEFAULT_CONTENDERS
 
 #: (numerator, denominator, N, target) of the ratios of medians reported.
@@ -183,18 +182,16 @@ def measure(
         for t in trainers:
             t.close()
     rows = [_row(t) for t in trainers]
-    return {
-        "date": time.strftime("%Y-%m-%d %H:%M %Z"),
-        "machine": machine_record(),
-        "load_avg_per_round": loads,
-        "hogs": hog,
-        "duration_s": duration,
-        "rounds": rounds,
-        "train_env": env,
-        "skipped": skipped,
-        "rows": rows,
-        "ratios": ratios(rows),
-    }
+    return rounds_record(
+        loads=loads,
+        hogs=hog,
+        duration_s=duration,
+        rounds=rounds,
+        train_env=env,
+        skipped=skipped,
+        rows=rows,
+        ratios=ratios(rows),
+    )
 
 
 def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:

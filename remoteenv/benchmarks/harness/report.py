@@ -11,6 +11,7 @@ import json
 import os
 import platform
 import sys
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -18,6 +19,33 @@ from typing import Any
 def machine_record() -> dict[str, Any]:
     """The machine a benchmark ran on, for its JSON: CPU count, platform, Python version."""
     return {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version()}
+
+
+def rounds_record(
+    *,
+    loads: list[float],
+    hogs: int,
+    duration_s: float,
+    rounds: int,
+    rows: list[dict[str, Any]],
+    ratios: list[dict[str, Any]],
+    **extra: Any,
+) -> dict[str, Any]:
+    """The JSON of a benchmark timed in alternating rounds: when and where it
+    ran, the load average after each round, the CPU hogs beside it, the seconds
+    per contender per round, then ``extra`` (the benchmark's own settings), its
+    rows and the ratios of their medians."""
+    return {
+        "date": time.strftime("%Y-%m-%d %H:%M %Z"),
+        "machine": machine_record(),
+        "load_avg_per_round": loads,
+        "hogs": hogs,
+        "duration_s": duration_s,
+        "rounds": rounds,
+        **extra,
+        "rows": rows,
+        "ratios": ratios,
+    }
 
 
 def progress_log(json_path: str | None) -> Callable[[str], None]:
