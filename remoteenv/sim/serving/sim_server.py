@@ -215,7 +215,8 @@ class RemoteControlledAgent:
         for i, (reply_to, frame) in enumerate(frames):
             reply: dict[str, Any] | None
             try:
-                msg = protocol.decode_request(frame)
+                # A request found in the pipe's region comes decoded (channels.region_request).
+                msg = frame if type(frame) is dict else protocol.decode_request(frame)
             except protocol.ProtocolError as exc:
                 reply = protocol.error_reply(-1, PROTOCOL, str(exc))
             else:

@@ -126,12 +126,11 @@ class BatchCommands:
         taken = lane.take(msg["seq"], channel)
         if taken is None:
             return None
-        ops, named, n = taken
+        ops, named, actions = taken
+        n = len(ops)
         worlds = list(range(n)) if named is None else self._request_worlds(named, n)
-        op_list = ops.tolist()
-        self._require_reset(op_list, worlds)
-        actions = check_actions(self._space, lane.actions(n, channel), n)
-        return self._step(op_list, worlds, actions, shared=True, seq=msg["seq"])
+        self._require_reset(ops, worlds)
+        return self._step(ops, worlds, check_actions(self._space, actions, n), shared=True, seq=msg["seq"])
 
     def _require_reset(self, ops: list[int], worlds: list[int]) -> None:
         """A ``state`` error for a world stepped before its first reset (once every

@@ -37,8 +37,9 @@ class Channel(Protocol):
     more: bool
 
     def receive_nowait(self) -> list[tuple[Any, Any]]:
-        """The request frames that have arrived (``bytes`` or another buffer), each
-        with whom to answer (never blocks)."""
+        """The request frames that have arrived (``bytes`` or another buffer; a
+        request the channel read other than as a frame comes as its decoded
+        map), each with whom to answer (never blocks)."""
         ...
 
     def send(self, reply_to: Any, payload: bytes) -> None:
@@ -193,9 +194,11 @@ class LaneWatch(Protocol):
         ...
 
 
-def region_frame(seq: int) -> bytes:
-    """The frame of request ``seq`` posted in the region (as the agent sends it when rung)."""
-    return protocol.pack({"seq": seq, "cmd": "step_batch", "region": True})
+def region_request(seq: int) -> dict[str, Any]:
+    """Request ``seq`` posted in the region, found by the watch: the map its
+    frame decodes to (as the agent sends it when rung), handed to the server
+    without the frame (nothing of it came from the socket)."""
+    return {"seq": seq, "cmd": "step_batch", "region": True}
 
 
 class PipeChannel:
@@ -206,7 +209,8 @@ class PipeChannel:
     ``protocol`` error (``seq`` -1); the frames after it are served as usual.
     Once the agent has the pipe's shared region (:attr:`lane`), a request
     posted there counts as a frame that arrived (:meth:`receive_nowait` looks
-    at the region's doorbell too), and :meth:`settle` must be called before
+    at the region's doorbell too and hands it over decoded, see
+    :func:`region_request`), and :meth:`settle` must be called before
     the loop blocks on the pipe, so that requests posted from then on come
     with a frame (:mod:`remoteenv.wire.shared_memory.doorbell`).
     """
@@ -223,13 +227,13 @@ class PipeChannel:
         #: The fast lane of the pipe's shared region, once the agent has it.
         self.lane: LaneWatch | None = None
 
-    def receive_nowait(self) -> list[tuple[Any, bytes]]:
+    def receive_nowait(self) -> list[tuple[Any, Any]]:
         if self.closed:
             return []
         # The region first: a frame the agent sent before it posted there is then read below.
         lane = self.lane
         posted = lane.posted() if lane is not None else 0
-        out: list[tuple[Any, bytes]] = []
+        out: list[tuple[Any, Any]] = []
         data = self._decoder.recv_from(self.sock)
         if data is not None:
             if not data:
@@ -245,10 +249,10 @@ class PipeChannel:
             at = len(out)
             while at and protocol.peek_seq(out[at - 1][1]) > posted:
                 at -= 1
-            out.insert(at, (None, region_frame(posted)))
+            out.insert(at, (None, region_request(posted)))
         return out
 
-    def settle(self) -> list[tuple[Any, bytes]]:
+    def settle(self) -> list[tuple[Any, Any]]:
         """The loop is about to block: a request posted in the region from now on
         comes with its frame. Returns the one posted meanwhile, if any (then do not block)."""
         lane = self.lane
@@ -257,7 +261,7 @@ class PipeChannel:
         # A request came meanwhile: take it with the frames the agent sent before it (in order).
         return self.receive_nowait() if lane.settle() else []
 
-    def receive_spinning(self, hot: HotWait) -> list[tuple[Any, bytes]]:
+    def receive_spinning(self, hot: HotWait) -> list[tuple[Any, Any]]:
         """Like :meth:`receive_nowait`, but busy-wait while ``hot`` (whose
         :meth:`~remoteenv.wire.shared_memory.hot_wait.HotWait.worth_it` said yes) allows.
 

@@ -76,6 +76,8 @@ class SharedLane:
         self.served = 0
         self._info_version = 0
         self._info_signature: tuple[tuple[str, str, bool], ...] | None = None
+        #: Views of the region's info columns, by column and dtype (made once).
+        self._column_views: dict[tuple[int, np.dtype], np.ndarray] = {}
         #: Why the region is no longer used (its header was tampered with), or None.
         self.tampered: str | None = None
 
@@ -145,9 +147,10 @@ class SharedLane:
             raise RequestError(PROTOCOL, f"a 'shared' step_batch covers 1..{len(arrays.actions)} worlds, got {n}")
         return arrays.actions[:n].copy()
 
-    def take(self, seq: int, channel: Channel | None) -> tuple[np.ndarray, list[int] | None, int] | None:
-        """The request ``seq`` posted in the region: ``(ops, worlds, n)`` (copies,
-        ops checked; worlds as listed, None for ``0 .. n-1``), or None if it was
+    def take(self, seq: int, channel: Channel | None) -> tuple[list[int], list[int] | None, np.ndarray] | None:
+        """The request ``seq`` posted in the region: ``(ops, worlds, actions)``
+        for its ``n`` positions (copies; ops checked, worlds as listed or None
+        for ``0 .. n-1``, actions for the caller to check), or None if it was
         served already (its frame came after the watch found it: nothing to answer)."""
         self._refuse_tampered()
         arrays, doorbell = self._arrays, self.doorbell
@@ -163,11 +166,12 @@ class SharedLane:
         if not 0 < n <= k:
             raise RequestError(PROTOCOL, f"a region request covers 1..{k} worlds, got {n}")
         assert arrays.ops is not None and arrays.worlds is not None
-        ops = arrays.ops[:n].copy()
-        if ops.min() < 0 or ops.max() > _LAST_OP:
+        # A list of at most K Python ints is checked faster than numpy reduces its array.
+        ops: list[int] = arrays.ops[:n].tolist()
+        if min(ops) < 0 or max(ops) > _LAST_OP:
             raise RequestError(PROTOCOL, f"a region request's ops must be in {OPS}")
         worlds = arrays.worlds[:n].tolist() if named else None
-        return ops, worlds, n
+        return ops, worlds, arrays.actions[:n].copy()
 
     # ------------------------------------------------------------ replies
 
@@ -195,8 +199,12 @@ class SharedLane:
         if columns is None:
             return False, {"shared": True, "final": []}
         n = len(batch.reward)
+        views = self._column_views
         for c, (_, values, _) in enumerate(columns):
-            arrays.info_column(c, values.dtype)[:n] = values
+            view = views.get((c, values.dtype))
+            if view is None:
+                view = views[c, values.dtype] = arrays.info_column(c, values.dtype)
+            view[:n] = values
         signature = tuple((key, values.dtype.str, python) for key, values, python in columns)
         if signature != self._info_signature:
             self._info_version += 1
@@ -247,6 +255,7 @@ class SharedLane:
         return out
 
     def close(self) -> None:
+        self._column_views.clear()
         if self._arrays is not None:
             self._arrays.close()
             self._arrays = None
