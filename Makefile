@@ -26,14 +26,19 @@ demo: install
 	$(PY) -m remoteenv demo hexapod --episodes 1
 
 # The unit, integration and Ray suites all run even when one fails; the target
-# fails if any did, naming which.
+# fails if any did, naming which. The unit and integration tests run TEST_WORKERS at a
+# time (pytest-xdist), then the timing-sensitive ones (marked serial in
+# tests/conftest.py) alone.
 PYTEST ?= $(VENV)/bin/pytest
 RAY_SUITE ?= tests/ray/run.sh
+TEST_WORKERS ?= 2
 
 test: install lint
-	@failed=""; \
-	$(PYTEST) tests/unit || failed="$$failed unit"; \
-	$(PYTEST) tests/integration || failed="$$failed integration"; \
+	@failed=""; integration=""; \
+	$(PYTEST) -n $(TEST_WORKERS) tests/unit || failed="$$failed unit"; \
+	$(PYTEST) -n $(TEST_WORKERS) -m "not serial" tests/integration || integration=failed; \
+	$(PYTEST) -m serial tests/integration || integration=failed; \
+	if [ -n "$$integration" ]; then failed="$$failed integration"; fi; \
 	$(RAY_SUITE) || failed="$$failed ray"; \
 	if [ -n "$$failed" ]; then echo "make test: these suites failed:$$failed" >&2; exit 1; fi; \
 	echo "make test: the unit, integration and ray suites passed"

@@ -24,10 +24,12 @@ from remoteenv.compliance.handshake_check import Handshake, parse_handshake
 from remoteenv.compliance.values import envelope_problem
 from remoteenv.wire import protocol
 from remoteenv.wire.files.keys import KeyPair
-from remoteenv.wire.wire_errors import short_repr
+from remoteenv.wire.wire_errors import refused_for_another_driver, short_repr
 
 #: Frames from the server a probe's socket queues (libzmq stops reading beyond).
 PROBE_RCVHWM = 4
+#: Seconds between the resends of a reset refused because another connection drives the world.
+RELEASE_RETRY_S = 0.02
 
 
 @dataclass(frozen=True)
@@ -165,7 +167,24 @@ class Probe:
 
     def call(self, cmd: str, *, min_seq: int = 0, **args: Any) -> dict[str, Any]:
         """Send ``cmd`` and return its reply, which must echo the request's ``seq``
-        (a fresh one, at least ``min_seq``)."""
+        (a fresh one, at least ``min_seq``).
+
+        A ``reset`` or ``reset_batch`` refused because another connection drives
+        the world is sent again (fresh ``seq``) for up to
+        :data:`~remoteenv.wire.protocol.DRIVER_RELEASE_GRACE_S`, as the spec asks of a
+        client taking a world over: the previous check's connection may have
+        closed a moment before the server heard of it. The last reply is returned.
+        """
+        retry_until = time.monotonic() + protocol.DRIVER_RELEASE_GRACE_S
+        while True:
+            reply = self._call_once(cmd, min_seq, args)
+            if cmd not in ("reset", "reset_batch") or not refused_for_another_driver(reply):
+                return reply
+            if time.monotonic() >= retry_until:
+                return reply
+            time.sleep(RELEASE_RETRY_S)
+
+    def _call_once(self, cmd: str, min_seq: int, args: dict[str, Any]) -> dict[str, Any]:
         seq = self.send(cmd, min_seq=min_seq, **args)
         what = f"'{cmd}' (seq {seq})"
         reply = self.receive(what)

@@ -272,7 +272,12 @@ ZeroMQ peer, known by its routing id: a client keeps its routing id when it
 reconnects). A sim with a local pipe is driven by the pipe, every world and
 for good. Otherwise nobody drives a world until a connection resets or
 steps it; that connection then drives it until its connection ends (the
-sim's socket monitor reports the disconnect). A ``state`` error answers
+sim's socket monitor reports the disconnect). That report comes a moment
+after the close, on its own path: a client that resets a world right after
+the previous driver's connection closed may be refused for that moment, so
+a client taking over a world retries a refusal that names another driver
+for up to :data:`DRIVER_RELEASE_GRACE_S` before it gives up (the checker
+and the reference agent do). A ``state`` error answers
 ``reset``, ``reset_batch``, ``step`` or ``step_batch`` on a world another
 connection drives; and ``close``, ``pause`` or ``resume`` from a connection
 that does not drive every world somebody drives (the sim's owner: its pipe,
@@ -334,6 +339,11 @@ from remoteenv.wire.codec.value_count import values_within
 from remoteenv.wire.wire_errors import ProtocolError, short_repr
 
 PROTOCOL_VERSION = 1
+
+#: Seconds a client taking over a world keeps retrying a reset refused because
+#: another connection drives it (see "Drivers" above): the sim frees a world
+#: when its socket monitor reports the driver's disconnect, a moment after it.
+DRIVER_RELEASE_GRACE_S = 2.0
 
 
 #: ``step_batch`` operations, one per world (see the spec above).
@@ -524,6 +534,7 @@ def error_reply(seq: int, kind: str, message: str, traceback: str = "") -> dict[
 
 __all__ = [
     "ARRAY_DTYPES",
+    "DRIVER_RELEASE_GRACE_S",
     "MAX_ERROR_CHARS",
     "MAX_MESSAGE_BYTES",
     "MAX_REPLY_VALUES",

@@ -24,6 +24,25 @@ UNSENDABLE = "unsendable"
 #: The kinds an error reply may carry.
 ERROR_KINDS = frozenset({PROTOCOL, INVALID_ACTION, SCENE, STATE, ATTRIBUTE, UNSENDABLE})
 
+#: The words of a ``state`` refusal because another connection drives the world
+#: (see "Drivers" in :mod:`remoteenv.wire.protocol`); a client taking a world over
+#: retries such a refusal for up to ``DRIVER_RELEASE_GRACE_S``.
+ANOTHER_DRIVER = "is driven by another connection"
+
+
+def refused_for_another_driver(reply: object) -> bool:
+    """Whether ``reply`` is a ``state`` error that names another driver of the world."""
+    if not isinstance(reply, dict) or reply.get("ok") is not False:
+        return False
+    error = reply.get("error")
+    return (
+        isinstance(error, dict)
+        and error.get("kind") == STATE
+        and isinstance(error.get("message"), str)
+        and ANOTHER_DRIVER in error["message"]
+    )
+
+
 #: Exit status of a sim process whose env factory refused its keyword
 #: arguments; it also writes :data:`SCENE_ARGS_MARKER` and the reason to
 #: stderr, which the launcher raises as a ``TypeError`` (see ``run_scene``).

@@ -13,6 +13,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -129,6 +130,81 @@ def test_a_second_tcp_client_cannot_take_over_the_world_of_an_agent_attached_to_
     finally:
         if launch.poll() is None:
             launch.send_signal(signal.SIGTERM)
+        launch.wait(timeout=60)
+        launch.stderr.close()  # type: ignore[union-attr]
+    assert all(wait_gone(p, 30.0) for p in pids)
+
+
+def _launched(tmp_path, *args: str) -> tuple[subprocess.Popen, list[dict]]:
+    """A ``python -m remoteenv launch cartpole`` server and its launch-info instances."""
+    out = tmp_path / "launch.json"
+    launch = subprocess.Popen(
+        [sys.executable, "-m", "remoteenv", "launch", "cartpole", "--out", str(out), *args],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "MUJOCO_GL": "egl"},
+    )
+    deadline = time.monotonic() + 120
+    while not out.exists():
+        assert launch.poll() is None, launch.stderr.read()  # type: ignore[union-attr]
+        assert time.monotonic() < deadline, "launch wrote no launch-info file"
+        time.sleep(0.05)
+    return launch, json.loads(out.read_text())["instances"]
+
+
+@pytest.mark.parametrize("kind", ["single", "vector"])
+def test_an_agent_gets_the_world_its_previous_driver_lets_go_of_while_it_resets(tmp_path, wait_gone, kind):
+    # The sim frees a world when its socket monitor reports the driver's
+    # disconnect, a moment after the close: an agent whose reset comes in
+    # that moment resends it (for up to DRIVER_RELEASE_GRACE_S, 2 s) instead of
+    # failing. Here the previous driver still holds the world when the reset
+    # is first sent and lets go 0.3 s later (well inside the grace).
+    launch, instances = _launched(tmp_path, "--worlds", "2")
+    pids = [s["pid"] for s in instances]
+    try:
+        holder = ZmqConnection(instances[0]["endpoint"], timeout=20.0)
+        holder.request("reset_batch", worlds=[0, 1], seeds=None)
+        with pytest.raises(StateError, match="driven by another connection"):
+            ZmqConnection(instances[0]["endpoint"], timeout=20.0).request("reset", world=0, seed=0)
+        if kind == "single":
+            agent = OpenAIRemoteEnv.attach(tmp_path / "launch.json", timeout=20.0)
+        else:
+            agent = RemoteVectorEnv.attach(tmp_path / "launch.json", timeout=20.0)
+        try:
+            letting_go = threading.Timer(0.3, holder.close)
+            letting_go.start()
+            obs, _ = agent.reset(seed=3)
+            letting_go.join()
+            agent.step(agent.action_space.sample())
+            assert obs.shape == ((4,) if kind == "single" else (2, 4))
+        finally:
+            agent.close()
+    finally:
+        launch.send_signal(signal.SIGTERM)
+        launch.wait(timeout=60)
+        launch.stderr.close()  # type: ignore[union-attr]
+    assert all(wait_gone(p, 30.0) for p in pids)
+
+
+def test_a_world_still_driven_after_the_grace_is_refused(tmp_path, wait_gone):
+    launch, instances = _launched(tmp_path)
+    pids = [s["pid"] for s in instances]
+    try:
+        holder = ZmqConnection(instances[0]["endpoint"], timeout=20.0)
+        try:
+            holder.request("reset", seed=0)
+            agent = OpenAIRemoteEnv.attach(tmp_path / "launch.json", timeout=20.0)
+            try:
+                with pytest.raises(StateError, match="driven by another connection"):
+                    agent.reset(seed=1)
+            finally:
+                agent.close()
+            holder.request("step", action=0)  # the holder drives on
+        finally:
+            holder.close()
+    finally:
+        launch.send_signal(signal.SIGTERM)
         launch.wait(timeout=60)
         launch.stderr.close()  # type: ignore[union-attr]
     assert all(wait_gone(p, 30.0) for p in pids)

@@ -40,7 +40,9 @@ def test_make_test_runs_every_suite_and_names_the_ones_that_failed(tmp_path, fai
         env={k: v for k, v in os.environ.items() if not k.startswith("MAKE")},
     )
     ran = log.read_text().splitlines()
-    assert [line.split()[-1] for line in ran] == ["tests/unit", "tests/integration", "ray"], ran
+    # The integration suite runs twice: two tests at a time, then the serial ones alone.
+    assert [line.split()[-1] for line in ran] == ["tests/unit", "tests/integration", "tests/integration", "ray"], ran
+    assert "-m not serial" in ran[1] and "-n" in ran[1].split() and "-m serial" in ran[2], ran
     if failing == "none":
         assert done.returncode == 0, done.stderr
     else:

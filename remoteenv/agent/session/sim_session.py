@@ -24,6 +24,7 @@ import zmq
 
 from remoteenv.agent.connection.connect import SimConnection
 from remoteenv.agent.connection.reply_checks import ReplyChecks
+from remoteenv.agent.connection.take_over import request_taking_over
 from remoteenv.agent.errors import BatchTooLargeError, RemoteEnvError
 from remoteenv.agent.launch.attach import AttachedSims
 from remoteenv.agent.launch.launcher import Launcher
@@ -232,7 +233,10 @@ class SimSession:
         :meth:`timeout_for`), checked against the handshake
         (:class:`~remoteenv.agent.errors.RemoteProtocolError` if it is off)."""
         conn = self.connection(index, cmd)
-        reply = conn.request(cmd, timeout=self.timeout_for(cmd), **args)
+        if cmd in ("reset", "reset_batch"):  # may follow a previous driver's close by a moment
+            reply = request_taking_over(conn, cmd, self.timeout_for(cmd), **args)
+        else:
+            reply = conn.request(cmd, timeout=self.timeout_for(cmd), **args)
         checks = self.checks
         if checks is None:
             return reply

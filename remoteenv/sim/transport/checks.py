@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from remoteenv.wire.wire_errors import PROTOCOL, STATE, short_repr
+from remoteenv.wire.wire_errors import ANOTHER_DRIVER, PROTOCOL, STATE, short_repr
 
 
 class RequestError(Exception):
@@ -90,8 +90,8 @@ def require_driver(owner: Any, sender: Any, world: int, instance: int, cmd: str)
     if owner is not None and owner != sender:
         raise RequestError(
             STATE,
-            f"'{cmd}' refused: world {world} of sim instance {instance} is driven by another "
-            "connection (the launching agent, or the one that reset it first, until its connection "
+            f"'{cmd}' refused: world {world} of sim instance {instance} {ANOTHER_DRIVER} "
+            "(the launching agent, or the one that reset it first, until its connection "
             "ends); only that one may reset, step, pause, resume or close it. Other commands "
             "(handshake, render, timing, attributes) are open to all.",
         )
