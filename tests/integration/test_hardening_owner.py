@@ -8,6 +8,7 @@ launching pipe or, without one, over ZeroMQ itself.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -15,6 +16,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -135,8 +137,10 @@ def test_a_second_tcp_client_cannot_take_over_the_world_of_an_agent_attached_to_
     assert all(wait_gone(p, 30.0) for p in pids)
 
 
-def _launched(tmp_path, *args: str) -> tuple[subprocess.Popen, list[dict]]:
-    """A ``python -m remoteenv launch cartpole`` server and its launch-info instances."""
+@contextlib.contextmanager
+def _launched(tmp_path, *args: str) -> Iterator[list[dict]]:
+    """A ``python -m remoteenv launch cartpole`` server for the ``with`` block
+    (its launch-info instances); stopped after it, its sims gone."""
     out = tmp_path / "launch.json"
     launch = subprocess.Popen(
         [sys.executable, "-m", "remoteenv", "launch", "cartpole", "--out", str(out), *args],
@@ -145,52 +149,59 @@ def _launched(tmp_path, *args: str) -> tuple[subprocess.Popen, list[dict]]:
         text=True,
         env={**os.environ, "MUJOCO_GL": "egl"},
     )
-    deadline = time.monotonic() + 120
-    while not out.exists():
-        assert launch.poll() is None, launch.stderr.read()  # type: ignore[union-attr]
-        assert time.monotonic() < deadline, "launch wrote no launch-info file"
-        time.sleep(0.05)
-    return launch, json.loads(out.read_text())["instances"]
+    instances: list[dict] = []
+    try:
+        deadline = time.monotonic() + 120
+        while not out.exists():
+            assert launch.poll() is None, launch.stderr.read()  # type: ignore[union-attr]
+            assert time.monotonic() < deadline, "launch wrote no launch-info file"
+            time.sleep(0.05)
+        instances = json.loads(out.read_text())["instances"]
+        yield instances
+    finally:
+        launch.send_signal(signal.SIGTERM)
+        launch.wait(timeout=60)
+        launch.stderr.close()  # type: ignore[union-attr]
+    assert all(_gone(s["pid"]) for s in instances)
 
 
 @pytest.mark.parametrize("kind", ["single", "vector"])
-def test_an_agent_gets_the_world_its_previous_driver_lets_go_of_while_it_resets(tmp_path, wait_gone, kind):
+def test_an_agent_gets_the_world_its_previous_driver_lets_go_of_while_it_resets(tmp_path, kind):
     # The sim frees a world when its socket monitor reports the driver's
     # disconnect, a moment after the close: an agent whose reset comes in
     # that moment resends it (for up to DRIVER_RELEASE_GRACE_S, 2 s) instead of
     # failing. Here the previous driver still holds the world when the reset
     # is first sent and lets go 0.3 s later (well inside the grace).
-    launch, instances = _launched(tmp_path, "--worlds", "2")
-    pids = [s["pid"] for s in instances]
-    try:
+    with _launched(tmp_path, "--worlds", "2") as instances:
         holder = ZmqConnection(instances[0]["endpoint"], timeout=20.0)
-        holder.request("reset_batch", worlds=[0, 1], seeds=None)
-        with pytest.raises(StateError, match="driven by another connection"):
-            ZmqConnection(instances[0]["endpoint"], timeout=20.0).request("reset", world=0, seed=0)
-        if kind == "single":
-            agent = OpenAIRemoteEnv.attach(tmp_path / "launch.json", timeout=20.0)
-        else:
-            agent = RemoteVectorEnv.attach(tmp_path / "launch.json", timeout=20.0)
+        letting_go = threading.Timer(0.3, holder.close)
         try:
-            letting_go = threading.Timer(0.3, holder.close)
-            letting_go.start()
-            obs, _ = agent.reset(seed=3)
-            letting_go.join()
-            agent.step(agent.action_space.sample())
-            assert obs.shape == ((4,) if kind == "single" else (2, 4))
+            holder.request("reset_batch", worlds=[0, 1], seeds=None)
+            other = ZmqConnection(instances[0]["endpoint"], timeout=20.0)
+            try:
+                with pytest.raises(StateError, match="driven by another connection"):
+                    other.request("reset", world=0, seed=0)
+            finally:
+                other.close()
+            attach = OpenAIRemoteEnv.attach if kind == "single" else RemoteVectorEnv.attach
+            agent = attach(tmp_path / "launch.json", timeout=20.0)
+            try:
+                letting_go.start()
+                obs, _ = agent.reset(seed=3)
+                letting_go.join()
+                agent.step(agent.action_space.sample())
+                assert obs.shape == ((4,) if kind == "single" else (2, 4))
+            finally:
+                agent.close()
         finally:
-            agent.close()
-    finally:
-        launch.send_signal(signal.SIGTERM)
-        launch.wait(timeout=60)
-        launch.stderr.close()  # type: ignore[union-attr]
-    assert all(wait_gone(p, 30.0) for p in pids)
+            letting_go.cancel()
+            if letting_go.ident is not None:
+                letting_go.join()
+            holder.close()
 
 
-def test_a_world_still_driven_after_the_grace_is_refused(tmp_path, wait_gone):
-    launch, instances = _launched(tmp_path)
-    pids = [s["pid"] for s in instances]
-    try:
+def test_a_world_still_driven_after_the_grace_is_refused(tmp_path):
+    with _launched(tmp_path) as instances:
         holder = ZmqConnection(instances[0]["endpoint"], timeout=20.0)
         try:
             holder.request("reset", seed=0)
@@ -203,8 +214,3 @@ def test_a_world_still_driven_after_the_grace_is_refused(tmp_path, wait_gone):
             holder.request("step", action=0)  # the holder drives on
         finally:
             holder.close()
-    finally:
-        launch.send_signal(signal.SIGTERM)
-        launch.wait(timeout=60)
-        launch.stderr.close()  # type: ignore[union-attr]
-    assert all(wait_gone(p, 30.0) for p in pids)
