@@ -84,20 +84,19 @@ def test_a_second_client_cannot_step_a_lock_step_vector_sim_over_zeromq():
         env.close()
 
 
-def test_a_second_tcp_client_cannot_take_over_the_world_of_an_agent_attached_to_a_launched_sim(tmp_path, wait_gone):
-    # Issue 35, item 4: a reset from another client took the driver role of a
-    # real-time sim started with `launch`, locking out the attached agent. Now
-    # a driven world stays its driver's until the driver's connection ends.
+@contextlib.contextmanager
+def _launched(tmp_path, *args: str) -> Iterator[list[dict]]:
+    """A ``python -m remoteenv launch cartpole`` server for the ``with`` block
+    (its launch-info instances); stopped after it, its sims gone."""
     out = tmp_path / "launch.json"
     launch = subprocess.Popen(
-        [sys.executable, "-m", "remoteenv", "launch", "cartpole", "--transport", "tcp", "--real-time"],
-        cwd=tmp_path,
+        [sys.executable, "-m", "remoteenv", "launch", "cartpole", "--out", str(out), *args],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
         env={**os.environ, "MUJOCO_GL": "egl"},
     )
-    pids: list[int] = []
+    instances: list[dict] = []
     try:
         deadline = time.monotonic() + 120
         while not out.exists():
@@ -105,7 +104,21 @@ def test_a_second_tcp_client_cannot_take_over_the_world_of_an_agent_attached_to_
             assert time.monotonic() < deadline, "launch wrote no launch-info file"
             time.sleep(0.05)
         instances = json.loads(out.read_text())["instances"]
-        pids = [s["pid"] for s in instances]
+        yield instances
+    finally:
+        if launch.poll() is None:
+            launch.send_signal(signal.SIGTERM)
+        launch.wait(timeout=60)
+        launch.stderr.close()  # type: ignore[union-attr]
+    assert all(_gone(s["pid"]) for s in instances)
+
+
+def test_a_second_tcp_client_cannot_take_over_the_world_of_an_agent_attached_to_a_launched_sim(tmp_path):
+    # Issue 35, item 4: a reset from another client took the driver role of a
+    # real-time sim started with `launch`, locking out the attached agent. Now
+    # a driven world stays its driver's until the driver's connection ends.
+    out = tmp_path / "launch.json"
+    with _launched(tmp_path, "--transport", "tcp", "--real-time") as instances:
         agent = OpenAIRemoteEnv.attach(out, timeout=20.0)
         try:
             agent.reset(seed=0)
@@ -129,40 +142,6 @@ def test_a_second_tcp_client_cannot_take_over_the_world_of_an_agent_attached_to_
             late.step(late.action_space.sample())
         finally:
             late.close()
-    finally:
-        if launch.poll() is None:
-            launch.send_signal(signal.SIGTERM)
-        launch.wait(timeout=60)
-        launch.stderr.close()  # type: ignore[union-attr]
-    assert all(wait_gone(p, 30.0) for p in pids)
-
-
-@contextlib.contextmanager
-def _launched(tmp_path, *args: str) -> Iterator[list[dict]]:
-    """A ``python -m remoteenv launch cartpole`` server for the ``with`` block
-    (its launch-info instances); stopped after it, its sims gone."""
-    out = tmp_path / "launch.json"
-    launch = subprocess.Popen(
-        [sys.executable, "-m", "remoteenv", "launch", "cartpole", "--out", str(out), *args],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-        env={**os.environ, "MUJOCO_GL": "egl"},
-    )
-    instances: list[dict] = []
-    try:
-        deadline = time.monotonic() + 120
-        while not out.exists():
-            assert launch.poll() is None, launch.stderr.read()  # type: ignore[union-attr]
-            assert time.monotonic() < deadline, "launch wrote no launch-info file"
-            time.sleep(0.05)
-        instances = json.loads(out.read_text())["instances"]
-        yield instances
-    finally:
-        launch.send_signal(signal.SIGTERM)
-        launch.wait(timeout=60)
-        launch.stderr.close()  # type: ignore[union-attr]
-    assert all(_gone(s["pid"]) for s in instances)
 
 
 @pytest.mark.parametrize("kind", ["single", "vector"])

@@ -1,7 +1,7 @@
 """A client taking a world over retries a refusal that names another driver, for a bounded grace.
 
 The sim frees a driven world when its socket monitor reports the driver's
-disconnect, a moment after the close; the agent (``request_taking_over``) and
+disconnect, a moment after the close; the agent (``retry_taking_over``) and
 the checker (``Probe.call``) resend a reset refused in that moment.
 """
 
@@ -42,7 +42,7 @@ class _Conn:
 def test_a_reset_refused_while_the_previous_driver_is_released_is_resent_until_it_passes(monkeypatch):
     monkeypatch.setattr(take_over, "RETRY_S", 0.001)
     conn = _Conn(refusals=3)
-    reply = take_over.request_taking_over(conn, "reset", 5.0, seed=7, options=None)  # type: ignore[arg-type]
+    reply = take_over.retry_taking_over(lambda: conn.request("reset", 5.0, seed=7, options=None))
     assert reply["ok"] is True
     assert conn.sent == [("reset", {"seed": 7, "options": None})] * 4
 
@@ -52,14 +52,14 @@ def test_a_world_still_driven_after_the_grace_raises_the_refusal(monkeypatch):
     monkeypatch.setattr(protocol, "DRIVER_RELEASE_GRACE_S", 0.05)
     conn = _Conn(refusals=10**9)
     with pytest.raises(StateError, match=ANOTHER_DRIVER):
-        take_over.request_taking_over(conn, "reset", 5.0, seed=None, options=None)  # type: ignore[arg-type]
+        take_over.retry_taking_over(lambda: conn.request("reset", 5.0, seed=None, options=None))
     assert len(conn.sent) > 1
 
 
 def test_other_state_errors_are_raised_at_once(monkeypatch):
     conn = _Conn(refusals=1, message="step before reset on world 0 of instance 0")
     with pytest.raises(StateError, match="step before reset"):
-        take_over.request_taking_over(conn, "reset", 5.0, seed=None, options=None)  # type: ignore[arg-type]
+        take_over.retry_taking_over(lambda: conn.request("reset", 5.0, seed=None, options=None))
     assert len(conn.sent) == 1
 
 

@@ -24,7 +24,7 @@ import zmq
 
 from remoteenv.agent.connection.connect import SimConnection
 from remoteenv.agent.connection.reply_checks import ReplyChecks
-from remoteenv.agent.connection.take_over import request_taking_over
+from remoteenv.agent.connection.take_over import retry_taking_over
 from remoteenv.agent.errors import BatchTooLargeError, RemoteEnvError
 from remoteenv.agent.launch.attach import AttachedSims
 from remoteenv.agent.launch.launcher import Launcher
@@ -233,10 +233,11 @@ class SimSession:
         :meth:`timeout_for`), checked against the handshake
         (:class:`~remoteenv.agent.errors.RemoteProtocolError` if it is off)."""
         conn = self.connection(index, cmd)
+        timeout = self.timeout_for(cmd)
         if cmd in ("reset", "reset_batch"):  # may follow a previous driver's close by a moment
-            reply = request_taking_over(conn, cmd, self.timeout_for(cmd), **args)
+            reply = retry_taking_over(lambda: conn.request(cmd, timeout=timeout, **args))
         else:
-            reply = conn.request(cmd, timeout=self.timeout_for(cmd), **args)
+            reply = conn.request(cmd, timeout=timeout, **args)
         checks = self.checks
         if checks is None:
             return reply

@@ -14,22 +14,19 @@ truncated at their last observation, and a reset is sent again.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
-from remoteenv.agent.connection import take_over
 from remoteenv.agent.connection.fan_in import FanIn
 from remoteenv.agent.connection.reply_checks import ReplyChecks
 from remoteenv.agent.connection.shared_lane_client import SharedLanes
-from remoteenv.agent.connection.take_over import refused_for_another_driver
+from remoteenv.agent.connection.take_over import retry_taking_over
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launch.restart import gather_restarting, restarted_info
 from remoteenv.agent.session.sim_session import SimSession
 from remoteenv.agent.vector.vector_results import ObsBatch, reset_reply_as_batch, step_reply_as_batch
-from remoteenv.wire import protocol
 from remoteenv.wire.protocol import OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET
 
 
@@ -91,16 +88,11 @@ class VectorRequests:
                 return conns[p].send("reset", seed=seeds[lo], options=options)
             return conns[p].send("reset_batch", worlds=worlds, seeds=[seeds[lo + w] for w in worlds], options=options)
 
-        retry_until = time.monotonic() + protocol.DRIVER_RELEASE_GRACE_S
-        while True:  # a world may be refused a moment after its previous driver closed (take_over)
-            pending = {p: send_reset(p) for p in worlds_of}
-            try:
-                replies, restarted = self.gather(pending, "reset", resend=send_reset)
-                break
-            except RemoteEnvError as err:
-                if not refused_for_another_driver(err) or time.monotonic() >= retry_until:
-                    raise
-            time.sleep(take_over.RETRY_S)
+        def reset_all() -> tuple[dict[int, dict[str, Any]], dict[int, RemoteEnvError]]:
+            return self.gather({p: send_reset(p) for p in worlds_of}, "reset", resend=send_reset)
+
+        # A world may be refused a moment after its previous driver closed: all are reset again.
+        replies, restarted = retry_taking_over(reset_all)
         checks = self._checks()
         for p, r in replies.items():
             if self.real_time:
