@@ -6,7 +6,7 @@ PIP := $(PY) -m pip
 PYTHON3 ?= python3
 export MUJOCO_GL ?= egl
 
-.PHONY: demo test test-ray lint bench install deps clean
+.PHONY: demo test test-ray ray-venv lint bench install deps clean
 
 $(VENV)/.deps: pyproject.toml Makefile
 	$(PYTHON3) -m venv $(VENV)
@@ -32,8 +32,12 @@ demo: install
 PYTEST ?= $(VENV)/bin/pytest
 RAY_SUITE ?= tests/ray/run.sh
 TEST_WORKERS ?= 2
+# What make test sets up first, two at a time: the main venv, lint and install
+# beside the Ray suite's venv (pip and the linters use one core each).
+TEST_SETUP ?= install lint ray-venv
 
-test: install lint
+test:
+	@$(if $(strip $(TEST_SETUP)),$(MAKE) --no-print-directory -j2 --output-sync=target $(TEST_SETUP))
 	@failed=""; integration=""; \
 	$(PYTEST) -n $(TEST_WORKERS) tests/unit || failed="$$failed unit"; \
 	$(PYTEST) -n $(TEST_WORKERS) -m "not serial" tests/integration || integration=failed; \
@@ -46,6 +50,10 @@ test: install lint
 # Ray and RLlib tests alone: a venv of their own (.venv-ray), a private network namespace.
 test-ray:
 	tests/ray/run.sh
+
+# The Ray suite's venv alone (made on first use, kept while pyproject.toml is older).
+ray-venv:
+	$(RAY_SUITE) --setup
 
 # Lint, format, types and the layer contracts of the source tree (no processes started).
 lint: deps

@@ -1,7 +1,8 @@
 """Issue 28, item 5: ``make test`` runs the unit, integration and Ray suites
 even when one fails, and fails if any did, naming which. The Makefile runs
 from a copy in a temporary folder with stand-in suites (scripts that log
-their call) and install/lint skipped (``make -o``): nothing real is built or run."""
+their call) and the set-up skipped (``TEST_SETUP=``): nothing real is built or run.
+The set-up's wiring is read from a dry run (``make -n``)."""
 
 from __future__ import annotations
 
@@ -32,7 +33,7 @@ def test_make_test_runs_every_suite_and_names_the_ones_that_failed(tmp_path, fai
         script.chmod(0o755)
     shutil.copy(ROOT / "Makefile", tmp_path / "Makefile")
     done = subprocess.run(
-        ["make", "-C", str(tmp_path), "-o", "install", "-o", "lint", "test"]
+        ["make", "-C", str(tmp_path), "test", "TEST_SETUP="]
         + [f"VENV={tmp_path / 'venv'}", f"RAY_SUITE={tmp_path / 'ray-suite'} ray"],
         capture_output=True,
         text=True,
@@ -48,3 +49,24 @@ def test_make_test_runs_every_suite_and_names_the_ones_that_failed(tmp_path, fai
     else:
         assert done.returncode != 0
         assert f"these suites failed: {failing}" in done.stderr, done.stderr
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="make is not installed")
+def test_make_test_sets_up_the_ray_venv_beside_the_main_one_before_any_suite(tmp_path):
+    for name in ("Makefile", "pyproject.toml"):
+        shutil.copy(ROOT / name, tmp_path / name)
+    dry = subprocess.run(
+        ["make", "-n", "-C", str(tmp_path), "test", f"VENV={tmp_path / 'venv'}", "RAY_SUITE=ray-suite"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={k: v for k, v in os.environ.items() if not k.startswith("MAKE")},
+    )
+    assert dry.returncode == 0, dry.stderr
+    lines = dry.stdout.splitlines()
+    setup = next(i for i, line in enumerate(lines) if "--output-sync" in line)
+    assert "-j2" in lines[setup].split() and lines[setup].split()[-3:] == ["install", "lint", "ray-venv"], lines[setup]
+    venv = next(i for i, line in enumerate(lines) if line.endswith(f"-m venv {tmp_path / 'venv'}"))
+    ray_venv = lines.index("ray-suite --setup")
+    first_suite = next(i for i, line in enumerate(lines) if "tests/unit" in line)
+    assert setup < venv < first_suite and setup < ray_venv < first_suite, lines

@@ -13,6 +13,8 @@
 #   leaves the machine. Packages are installed before entering it.
 #
 # Usage: tests/ray/run.sh [pytest arguments]      e.g. tests/ray/run.sh -k spread
+#        tests/ray/run.sh --setup                  make the venv (if needed) and stop
+#                                                  (make test runs it beside the main venv's build)
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
@@ -35,6 +37,9 @@ EOF
 )
     "$VENV/bin/pip" install -qq "${DEPS[@]}"
     touch "$STAMP"
+fi
+if [ "${1:-}" = "--setup" ]; then
+    exit 0
 fi
 
 if ! unshare -n true 2>/dev/null; then
