@@ -30,7 +30,9 @@ GYM_ID = "Reacher-v5"
 #: Contender names, in the order a round runs them. ``remoteenv-torch-kept``:
 #: remoteenv's vector env with ``torch_threads=None`` (torch's threads as they were);
 #: ``remoteenv-os-placed``: with ``place_sims=None`` (the sims left to the OS scheduler);
-#: ``remoteenv-neither``: with both (the vector env without either lever).
+#: ``remoteenv-neither``: with both (the vector env without either lever);
+#: ``process-floor``: the same layout and scene stepping with a bare hand-off
+#: (:mod:`remoteenv.benchmarks.harness.process_floor`).
 CONTENDERS = (
     "remoteenv",
     "EnvPool",
@@ -39,6 +41,7 @@ CONTENDERS = (
     "remoteenv-torch-kept",
     "remoteenv-os-placed",
     "remoteenv-neither",
+    "process-floor",
 )
 #: Contenders a run has unless asked for others.
 DEFAULT_CONTENDERS = CONTENDERS[:4]
@@ -60,6 +63,10 @@ def make_env(contender: str, num_envs: int) -> Any:
         )
     if contender == "EnvPool":
         return make_envpool(GYM_ID, num_envs)
+    if contender == "process-floor":
+        from remoteenv.benchmarks.harness.process_floor import ProcessFloorVectorEnv
+
+        return ProcessFloorVectorEnv(num_envs)
     mode = {"SyncVectorEnv": "sync", "AsyncVectorEnv": "async"}[contender]
     return gym.make_vec(GYM_ID, num_envs, vectorization_mode=mode)
 

@@ -1,0 +1,235 @@
+"""The floor under a lock-step vector step with the sims in their own processes.
+
+Benchmarks only (``bench --train-loop``'s ``process-floor`` contender). A
+vector env of Reacher worlds laid out as remoteenv's default vector env lays
+them out (K worlds per child process, ``max(8, ceil(N / CPUs))``; the
+children made batch work and pinned as ``place_sims="auto"`` does; torch's
+threads lowered as ``torch_threads="auto"`` does), whose children run the
+scene's own stepping (:class:`~remoteenv.sim.stepping.batch_step.WorldsStepper`:
+the stacked hooks, one ``mujoco.batch`` call, the batch and observation
+checks) and nothing else around it: the actions and results in one
+anonymous shared mapping per child, one byte on a pipe each way per step,
+both sides blocking in ``read``. Reacher's 50-step time limit is kept, with
+Gymnasium's default autoreset (the step after a truncation resets the world
+and returns its first observation, reward 0), the reset done by the scene
+in the child. No request or reply is encoded, checked or routed; no infos,
+no latency bookkeeping; no failure handling beyond a child's end of file. What remoteenv's step costs above
+this contender is its lane's own machinery on both ends; what this costs
+above EnvPool is the processes taking turns.
+
+The agent side here and :func:`serve` (the child, ``python -m
+remoteenv.benchmarks.harness.process_floor K SEED REQUEST_FD REPLY_FD
+REGION_FD``) are in one module because they share the region's layout.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import mmap
+import os
+import subprocess
+import sys
+from typing import Any
+
+import numpy as np
+
+from remoteenv.agent.vector.sim_placement import place, placement
+from remoteenv.agent.vector.torch_threads import TorchThreads
+from remoteenv.wire.shared_memory.hot_wait import usable_cpus
+
+OBS_DIM, ACT_DIM = 10, 2
+#: Reacher's time limit (``remoteenv/Reacher-v0`` and Gymnasium's ``Reacher-v5``), in steps.
+MAX_EPISODE_STEPS = 50
+_STEP, _QUIT, _DONE = b"s", b"q", b"r"
+
+
+def _blocks(k: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    return {
+        "actions": ((k, ACT_DIM), np.dtype(np.float32)),
+        "obs": ((k, OBS_DIM), np.dtype(np.float64)),
+        "reward": ((k,), np.dtype(np.float64)),
+        "terminated": ((k,), np.dtype(np.bool_)),
+        "truncated": ((k,), np.dtype(np.bool_)),
+    }
+
+
+def region_size(k: int) -> int:
+    """Bytes of a child's region (each block on its own 64-byte line)."""
+    return sum(-(-int(np.prod(shape)) * dt.itemsize // 64) * 64 for shape, dt in _blocks(k).values())
+
+
+def region_views(buf: Any, k: int) -> dict[str, np.ndarray]:
+    """The region's blocks as arrays over ``buf``."""
+    views, offset = {}, 0
+    for name, (shape, dt) in _blocks(k).items():
+        views[name] = np.ndarray(shape, dt, buffer=buf, offset=offset)
+        offset += -(-int(np.prod(shape)) * dt.itemsize // 64) * 64
+    return views
+
+
+def _reacher_class() -> Any:
+    import remoteenv
+
+    spec = importlib.util.spec_from_file_location("reacher_scene_floor", remoteenv.scene_path("reacher"))
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.ReacherEnv
+
+
+def serve(k: int, seed: int, request_fd: int, reply_fd: int, region_fd: int) -> None:
+    """The child: K Reacher worlds reset with seeds ``seed..seed+K-1``, their
+    first observations in the region, then one tick per request byte (a
+    reset of every world on the tick after their time limit: Reacher never
+    terminates, so the worlds of a child end their episodes together)."""
+    from remoteenv.sim.stepping.batch_commands import BatchCommands
+    from remoteenv.sim.stepping.lock_step import LockStepping
+
+    reacher = _reacher_class()
+    envs = [reacher() for _ in range(k)]
+    commands = BatchCommands(LockStepping(envs).worlds, envs[0].action_space, 0)
+    first = commands.reset_batch({"worlds": list(range(k)), "seeds": list(range(seed, seed + k))}, None, None)
+    stepper = commands.stepper
+    assert stepper is not None
+    region = mmap.mmap(region_fd, region_size(k))
+    views = region_views(region, k)
+    views["obs"][:] = np.asarray(first["obs"])
+    worlds = list(range(k))
+    elapsed = 0
+    try:
+        os.write(reply_fd, _DONE)
+        while os.read(request_fd, 1) == _STEP:
+            if elapsed == MAX_EPISODE_STEPS:
+                views["obs"][:] = np.asarray(commands.reset_batch({"worlds": worlds}, None, None)["obs"])
+                views["reward"][:] = 0.0
+                views["terminated"][:] = False
+                elapsed = 0
+            else:
+                result = stepper.step(worlds, views["actions"].copy())
+                views["obs"][:] = result.obs
+                views["reward"][:] = result.reward
+                views["terminated"][:] = result.terminated
+                elapsed += 1
+            views["truncated"][:] = elapsed == MAX_EPISODE_STEPS
+            os.write(reply_fd, _DONE)
+    finally:
+        commands.close()
+        for env in envs:
+            env.close()
+        del views
+        region.close()
+
+
+class ProcessFloorVectorEnv:
+    """N Reacher worlds in child processes, stepped in lock step through the
+    bare hand-off described in the module docstring (``reset`` and ``step`` as
+    a Gymnasium vector env's with next-step autoreset, without infos)."""
+
+    def __init__(self, num_envs: int, seed: int = 0) -> None:
+        import gymnasium as gym
+
+        self.num_envs = num_envs
+        self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (OBS_DIM,), np.float64)
+        self.single_action_space = gym.spaces.Box(-1.0, 1.0, (ACT_DIM,), np.float32)
+        k = min(num_envs, max(8, math.ceil(num_envs / usable_cpus())))
+        self._slices = [(lo, min(lo + k, num_envs)) for lo in range(0, num_envs, k)]
+        self._procs: list[subprocess.Popen[bytes]] = []
+        self._requests: list[int] = []
+        self._replies: list[int] = []
+        self._regions: list[mmap.mmap] = []
+        self._views: list[dict[str, np.ndarray]] = []
+        try:
+            for lo, hi in self._slices:
+                self._start(hi - lo, seed + lo)
+            for fd in self._replies:
+                self._read_done(fd)
+        except BaseException:
+            self.close()
+            raise
+        pids = [p.pid for p in self._procs]
+        for pid, cpu in zip(pids, placement(pids, sorted(os.sched_getaffinity(0)), True)):
+            place(pid, cpu)
+        TorchThreads("auto", len(pids)).apply()
+
+    def _start(self, k: int, seed: int) -> None:
+        region_fd = os.memfd_create("remoteenv-floor")
+        os.ftruncate(region_fd, region_size(k))
+        request_r, request_w = os.pipe()
+        reply_r, reply_w = os.pipe()
+        theirs = (request_r, reply_w, region_fd)
+        try:
+            self._procs.append(
+                subprocess.Popen(
+                    [sys.executable, "-m", __name__, str(k), str(seed), *map(str, theirs)],
+                    pass_fds=theirs,
+                )
+            )
+            region = mmap.mmap(region_fd, region_size(k))
+        finally:
+            for fd in theirs:
+                os.close(fd)
+        self._requests.append(request_w)
+        self._replies.append(reply_r)
+        self._regions.append(region)
+        self._views.append(region_views(region, k))
+
+    @staticmethod
+    def _read_done(fd: int) -> None:
+        if os.read(fd, 1) != _DONE:
+            raise RuntimeError("a process-floor child ended; its error is above")
+
+    def _gather(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        obs = np.empty((self.num_envs, OBS_DIM))
+        reward = np.empty(self.num_envs)
+        terminated = np.empty(self.num_envs, dtype=np.bool_)
+        truncated = np.empty(self.num_envs, dtype=np.bool_)
+        for (lo, hi), fd, views in zip(self._slices, self._replies, self._views):
+            self._read_done(fd)
+            obs[lo:hi] = views["obs"]
+            reward[lo:hi] = views["reward"]
+            terminated[lo:hi] = views["terminated"]
+            truncated[lo:hi] = views["truncated"]
+        return obs, reward, terminated, truncated
+
+    def reset(self, seed: int | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """The first observations (the children reset their worlds when they started)."""
+        obs = np.concatenate([views["obs"] for views in self._views])
+        return obs, {}
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """One tick of every world."""
+        for (lo, hi), fd, views in zip(self._slices, self._requests, self._views):
+            views["actions"][:] = actions[lo:hi]
+            os.write(fd, _STEP)
+        obs, reward, terminated, truncated = self._gather()
+        return obs, reward, terminated, truncated, {}
+
+    def close(self) -> None:
+        """Stop the children and wait for them."""
+        for fd in self._requests:
+            try:
+                os.write(fd, _QUIT)
+            except OSError:
+                pass
+            os.close(fd)
+        for fd in self._replies:
+            os.close(fd)
+        self._requests, self._replies = [], []
+        for proc in self._procs:
+            try:
+                proc.wait(30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        self._procs = []
+        self._views = []
+        for region in self._regions:
+            region.close()
+        self._regions = []
+
+
+__all__ = ["ProcessFloorVectorEnv", "region_size", "region_views", "serve"]
+
+if __name__ == "__main__":
+    serve(*map(int, sys.argv[1:6]))
