@@ -11,7 +11,7 @@ variables of every training process, e.g. ``OMP_NUM_THREADS=1``, to measure a
 lever). Contenders: remoteenv's default vector env of ``remoteenv/Reacher-v0``,
 EnvPool's ``Reacher-v5`` (skipped with a note when EnvPool is not installed:
 ``pip install 'remoteenv[bench]'``), Gymnasium's ``SyncVectorEnv`` and
-``AsyncVectorEnv`` of ``Reacher-v5``; on request, ``process-floor``: the
+``AsyncVectorEnv`` of ``Reacher-v5``, and ``process-floor``: the
 floor under remoteenv's lock-step lane, its layout and scene stepping with a
 bare hand-off (:mod:`remoteenv.benchmarks.harness.process_floor`). All are built first (one at a time),
 then timed in alternating rounds of whole rollout-and-update iterations, so

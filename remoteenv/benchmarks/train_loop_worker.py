@@ -43,8 +43,8 @@ CONTENDERS = (
     "remoteenv-neither",
     "process-floor",
 )
-#: Contenders a run has unless asked for others.
-DEFAULT_CONTENDERS = CONTENDERS[:4]
+#: Contenders a run has unless asked for others: the anchors and the floor under remoteenv's lane.
+DEFAULT_CONTENDERS = (*CONTENDERS[:4], "process-floor")
 
 
 def make_env(contender: str, num_envs: int) -> Any:
