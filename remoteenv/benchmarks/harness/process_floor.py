@@ -24,7 +24,6 @@ REGION_FD``) are in one module because they share the region's layout.
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import mmap
 import os
@@ -68,25 +67,16 @@ def region_views(buf: Any, k: int) -> dict[str, np.ndarray]:
     return views
 
 
-def _reacher_class() -> Any:
-    import remoteenv
-
-    spec = importlib.util.spec_from_file_location("reacher_scene_floor", remoteenv.scene_path("reacher"))
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.ReacherEnv
-
-
 def serve(k: int, seed: int, request_fd: int, reply_fd: int, region_fd: int) -> None:
     """The child: K Reacher worlds reset with seeds ``seed..seed+K-1``, their
     first observations in the region, then one tick per request byte (a
     reset of every world on the tick after their time limit: Reacher never
     terminates, so the worlds of a child end their episodes together)."""
+    from remoteenv.benchmarks.harness.step_profile import reacher_class
     from remoteenv.sim.stepping.batch_commands import BatchCommands
     from remoteenv.sim.stepping.lock_step import LockStepping
 
-    reacher = _reacher_class()
+    reacher = reacher_class()
     envs = [reacher() for _ in range(k)]
     commands = BatchCommands(LockStepping(envs).worlds, envs[0].action_space, 0)
     first = commands.reset_batch({"worlds": list(range(k)), "seeds": list(range(seed, seed + k))}, None, None)

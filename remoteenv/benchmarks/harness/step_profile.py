@@ -38,7 +38,8 @@ STAGES = [
 ]
 
 
-def _reacher_class() -> Any:
+def reacher_class() -> Any:
+    """The shipped Reacher scene's env class (``ReacherEnv``), loaded from its script."""
     import remoteenv
 
     spec = importlib.util.spec_from_file_location("reacher_scene_profile", remoteenv.scene_path("reacher"))
@@ -52,7 +53,7 @@ def profile(n: int, steps: int = 500) -> tuple[dict[str, float], dict[str, float
     """Mean microseconds per step of each of :data:`STAGES` for N Reacher worlds
     in one process: wall time, and CPU time of the process (every thread's,
     so the physics on threads counts in full and a preempted stage does not)."""
-    reacher = _reacher_class()
+    reacher = reacher_class()
     envs = [reacher() for _ in range(n)]
     lock = LockStepping(envs)
     commands = BatchCommands(lock.worlds, envs[0].action_space, 0)
@@ -116,4 +117,4 @@ def profile(n: int, steps: int = 500) -> tuple[dict[str, float], dict[str, float
     return wall, {stage: float(total / steps * 1e6) for stage, total in zip(STAGES, cpu_totals)}
 
 
-__all__ = ["STAGES", "profile"]
+__all__ = ["STAGES", "profile", "reacher_class"]
