@@ -2,9 +2,10 @@
 
 Benchmarks only (``bench --train-loop``'s ``process-floor`` contender). A
 vector env of Reacher worlds laid out as remoteenv's default vector env lays
-them out (K worlds per child process, ``max(8, ceil(N / CPUs))``; the
-children made batch work and pinned as ``place_sims="auto"`` does; torch's
-threads lowered as ``torch_threads="auto"`` does), whose children run the
+them out (K worlds per child process by remoteenv's own rule,
+``default_envs_per_process``; the children made batch work and pinned as
+``place_sims="auto"`` does; torch's threads lowered as
+``torch_threads="auto"`` does), whose children run the
 scene's own stepping (:class:`~remoteenv.sim.stepping.batch_step.WorldsStepper`:
 the stacked hooks, one ``mujoco.batch`` call, the batch and observation
 checks) and nothing else around it: the actions and results in one
@@ -24,7 +25,6 @@ REGION_FD``) are in one module because they share the region's layout.
 
 from __future__ import annotations
 
-import math
 import mmap
 import os
 import subprocess
@@ -35,7 +35,7 @@ import numpy as np
 
 from remoteenv.agent.vector.sim_placement import place, placement
 from remoteenv.agent.vector.torch_threads import TorchThreads
-from remoteenv.wire.shared_memory.hot_wait import usable_cpus
+from remoteenv.agent.vector.vector_layout import default_envs_per_process, world_slices
 
 OBS_DIM, ACT_DIM = 10, 2
 #: Reacher's time limit (``remoteenv/Reacher-v0`` and Gymnasium's ``Reacher-v5``), in steps.
@@ -122,8 +122,7 @@ class ProcessFloorVectorEnv:
         self.num_envs = num_envs
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (OBS_DIM,), np.float64)
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (ACT_DIM,), np.float32)
-        k = min(num_envs, max(8, math.ceil(num_envs / usable_cpus())))
-        self._slices = [(lo, min(lo + k, num_envs)) for lo in range(0, num_envs, k)]
+        self._slices = world_slices(num_envs, default_envs_per_process(num_envs))
         self._procs: list[subprocess.Popen[bytes]] = []
         self._requests: list[int] = []
         self._replies: list[int] = []
