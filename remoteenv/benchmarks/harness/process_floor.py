@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from remoteenv.agent.vector.sim_placement import place, placement
+from remoteenv.agent.vector.sim_placement import AUTO, SimPlacement
 from remoteenv.agent.vector.torch_threads import TorchThreads
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, world_slices
 
@@ -53,9 +53,14 @@ def _blocks(k: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
     }
 
 
+def _padded(shape: tuple[int, ...], dt: np.dtype) -> int:
+    """Bytes a block takes in the region: each starts on its own 64-byte line."""
+    return -(-int(np.prod(shape)) * dt.itemsize // 64) * 64
+
+
 def region_size(k: int) -> int:
-    """Bytes of a child's region (each block on its own 64-byte line)."""
-    return sum(-(-int(np.prod(shape)) * dt.itemsize // 64) * 64 for shape, dt in _blocks(k).values())
+    """Bytes of a child's region."""
+    return sum(_padded(shape, dt) for shape, dt in _blocks(k).values())
 
 
 def region_views(buf: Any, k: int) -> dict[str, np.ndarray]:
@@ -63,7 +68,7 @@ def region_views(buf: Any, k: int) -> dict[str, np.ndarray]:
     views, offset = {}, 0
     for name, (shape, dt) in _blocks(k).items():
         views[name] = np.ndarray(shape, dt, buffer=buf, offset=offset)
-        offset += -(-int(np.prod(shape)) * dt.itemsize // 64) * 64
+        offset += _padded(shape, dt)
     return views
 
 
@@ -136,16 +141,16 @@ class ProcessFloorVectorEnv:
         except BaseException:
             self.close()
             raise
-        pids = [p.pid for p in self._procs]
-        for pid, cpu in zip(pids, placement(pids, sorted(os.sched_getaffinity(0)), True)):
-            place(pid, cpu)
-        TorchThreads("auto", len(pids)).apply()
+        SimPlacement(AUTO, own_sims=True, real_time=False).apply([p.pid for p in self._procs])
+        TorchThreads(AUTO, len(self._procs)).apply()
 
     def _start(self, k: int, seed: int) -> None:
         region_fd = os.memfd_create("remoteenv-floor")
         os.ftruncate(region_fd, region_size(k))
         request_r, request_w = os.pipe()
         reply_r, reply_w = os.pipe()
+        self._requests.append(request_w)  # ours: closed by close(), even if the child never starts
+        self._replies.append(reply_r)
         theirs = (request_r, reply_w, region_fd)
         try:
             self._procs.append(
@@ -158,8 +163,6 @@ class ProcessFloorVectorEnv:
         finally:
             for fd in theirs:
                 os.close(fd)
-        self._requests.append(request_w)
-        self._replies.append(reply_r)
         self._regions.append(region)
         self._views.append(region_views(region, k))
 
@@ -182,7 +185,9 @@ class ProcessFloorVectorEnv:
         return obs, reward, terminated, truncated
 
     def reset(self, seed: int | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-        """The first observations (the children reset their worlds when they started)."""
+        """The observations in the regions: the first ones before any step (the
+        children reset their worlds when they started, with the seeds given at
+        construction; ``seed`` is ignored, as EnvPool ignores it)."""
         obs = np.concatenate([views["obs"] for views in self._views])
         return obs, {}
 
