@@ -23,7 +23,6 @@ from typing import Any
 import numpy as np
 
 from remoteenv.benchmarks.harness.anchors import context_switches, cpu_seconds, make_envpool, process_tree
-from remoteenv.benchmarks.harness.ppo_shaped_learner import PPOShapedLearner
 
 REMOTE_ID = "remoteenv/Reacher-v0"
 GYM_ID = "Reacher-v5"
@@ -75,6 +74,10 @@ class Loop:
     """The contender's env and its learner, and the loop that trains on them."""
 
     def __init__(self, contender: str, num_envs: int, horizon: int, epochs: int, minibatches: int) -> None:
+        # torch is imported here, not with the module (python -m remoteenv's parser imports it), and
+        # before the env is made, as a trainer imports it: torch_threads="auto" sets an imported torch.
+        from remoteenv.benchmarks.harness.ppo_shaped_learner import PPOShapedLearner
+
         start = time.perf_counter()
         self.env = make_env(contender, num_envs)
         self.build_s = time.perf_counter() - start

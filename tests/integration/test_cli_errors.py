@@ -88,3 +88,25 @@ def test_a_bad_argument_is_one_clear_line_not_a_traceback(files, case):
     assert done.returncode != 0, done.stdout[-1000:]
     assert "Traceback" not in done.stderr, done.stderr[-3000:]
     assert len(lines) == 1 and expected in lines[0], done.stderr[-3000:]
+
+
+def test_the_command_line_parser_imports_no_trainer_or_plot_package(tmp_path):
+    """``python -m remoteenv`` builds the parser of every command (and of every
+    benchmark's arguments) before it reads one. torch, Stable-Baselines3,
+    matplotlib, Ray, TorchRL and EnvPool are imported by the commands that use
+    them, when they run, so that ``--help`` or a mistyped argument answers at once."""
+    code = (
+        "import sys\n"
+        "from remoteenv.cli import main\n"
+        "for command in ['demo', 'bench', 'check', 'launch', 'keys', 'new-scene', 'latency-sweep', 'latency-study']:\n"
+        "    try:\n"
+        "        main([command, '--help'])\n"
+        "    except SystemExit:\n"
+        "        pass\n"
+        "heavy = ('torch', 'stable_baselines3', 'matplotlib', 'ray', 'torchrl', 'envpool')\n"
+        "print(sorted(m for m in heavy if m in sys.modules))\n"
+    )
+    # Run from tmp_path: the installed package is the one imported.
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.splitlines()[-1] == "[]", done.stdout[-2000:]
