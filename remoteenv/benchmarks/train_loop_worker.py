@@ -74,8 +74,9 @@ class Loop:
     """The contender's env and its learner, and the loop that trains on them."""
 
     def __init__(self, contender: str, num_envs: int, horizon: int, epochs: int, minibatches: int) -> None:
-        # torch is imported here, not with the module (python -m remoteenv's parser imports it), and
-        # before the env is made, as a trainer imports it: torch_threads="auto" sets an imported torch.
+        # Imported here, not at the top: python -m remoteenv's parser imports this module, and torch
+        # would cost every command seconds. Before the env is made, as a trainer imports torch:
+        # torch_threads="auto" sets the threads of a torch that is imported.
         from remoteenv.benchmarks.harness.ppo_shaped_learner import PPOShapedLearner
 
         start = time.perf_counter()

@@ -97,8 +97,8 @@ def test_the_command_line_parser_imports_no_trainer_or_plot_package(tmp_path):
     them, when they run, so that ``--help`` or a mistyped argument answers at once."""
     code = (
         "import sys\n"
-        "from remoteenv.cli import main\n"
-        "for command in ['demo', 'bench', 'check', 'launch', 'keys', 'new-scene', 'latency-sweep', 'latency-study']:\n"
+        "from remoteenv.cli import COMMANDS, main\n"
+        "for command in COMMANDS:\n"
         "    try:\n"
         "        main([command, '--help'])\n"
         "    except SystemExit:\n"
