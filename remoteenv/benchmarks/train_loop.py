@@ -13,7 +13,10 @@ EnvPool's ``Reacher-v5`` (skipped with a note when EnvPool is not installed:
 ``pip install 'remoteenv[bench]'``), Gymnasium's ``SyncVectorEnv`` and
 ``AsyncVectorEnv`` of ``Reacher-v5``, and ``process-floor``: the
 floor under remoteenv's lock-step lane, its layout and scene stepping with a
-bare hand-off (:mod:`remoteenv.benchmarks.harness.process_floor`). All are built first (one at a time),
+bare hand-off (:mod:`remoteenv.benchmarks.harness.process_floor`), and, when asked for,
+``agent-floor``: remoteenv's sims under a bare agent end
+(:mod:`remoteenv.benchmarks.harness.agent_floor`), which splits the lane's cost
+between its two ends. All are built first (one at a time),
 then timed in alternating rounds of whole rollout-and-update iterations, so
 load that comes and goes hits them alike. Each row gives steps per wall
 second (env steps, learning included), CPU microseconds per step of the
@@ -49,6 +52,10 @@ TARGETS = [
     ("remoteenv", "process-floor", 64, None),
     ("process-floor", "EnvPool", 16, None),
     ("process-floor", "EnvPool", 64, None),
+    ("remoteenv", "agent-floor", 16, None),
+    ("remoteenv", "agent-floor", 64, None),
+    ("agent-floor", "process-floor", 16, None),
+    ("agent-floor", "process-floor", 64, None),
 ]
 #: Longest a contender may take to build and warm up, or to answer a round beyond its length (seconds).
 _PATIENCE_S = 300.0
@@ -69,7 +76,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=",".join(DEFAULT_CONTENDERS),
         help=f"comma-separated contenders, of {', '.join(CONTENDERS)} (default {','.join(DEFAULT_CONTENDERS)}); "
         "remoteenv-torch-kept is remoteenv with torch_threads=None, remoteenv-os-placed with place_sims=None, remoteenv-neither with both; process-floor is remoteenv's layout "
-        "and scene stepping with a bare hand-off (the floor under its lane); NAME:KEY=VALUE runs one with "
+        "and scene stepping with a bare hand-off (the floor under its lane), agent-floor remoteenv's sims under a bare "
+        "agent end; NAME:KEY=VALUE runs one with "
         "environment variables of its own (e.g. EnvPool:OMP_NUM_THREADS=1 beside EnvPool)",
     )
     g.add_argument(

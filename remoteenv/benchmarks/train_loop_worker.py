@@ -31,7 +31,9 @@ GYM_ID = "Reacher-v5"
 #: ``remoteenv-os-placed``: with ``place_sims=None`` (the sims left to the OS scheduler);
 #: ``remoteenv-neither``: with both (the vector env without either lever);
 #: ``process-floor``: the same layout and scene stepping with a bare hand-off
-#: (:mod:`remoteenv.benchmarks.harness.process_floor`).
+#: (:mod:`remoteenv.benchmarks.harness.process_floor`); ``agent-floor``:
+#: remoteenv's vector env and sims under a bare agent end
+#: (:mod:`remoteenv.benchmarks.harness.agent_floor`).
 CONTENDERS = (
     "remoteenv",
     "EnvPool",
@@ -41,6 +43,7 @@ CONTENDERS = (
     "remoteenv-os-placed",
     "remoteenv-neither",
     "process-floor",
+    "agent-floor",
 )
 #: Contenders a run has unless asked for others: the anchors and the floor under remoteenv's lane.
 DEFAULT_CONTENDERS = (*CONTENDERS[:4], "process-floor")
@@ -66,6 +69,10 @@ def make_env(contender: str, num_envs: int) -> Any:
         from remoteenv.benchmarks.harness.process_floor import ProcessFloorVectorEnv
 
         return ProcessFloorVectorEnv(num_envs)
+    if contender == "agent-floor":
+        from remoteenv.benchmarks.harness.agent_floor import AgentFloorVectorEnv
+
+        return AgentFloorVectorEnv(num_envs)
     mode = {"SyncVectorEnv": "sync", "AsyncVectorEnv": "async"}[contender]
     return gym.make_vec(GYM_ID, num_envs, vectorization_mode=mode)
 

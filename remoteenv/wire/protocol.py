@@ -206,9 +206,12 @@ also holds a header of 16 ``<i8`` doorbell words, the request's ``ops`` and
 ``worlds`` and ``M`` typed info columns (:mod:`remoteenv.wire.shared_memory.shared_batch`).
 The agent may then post a whole ``step_batch`` there: it writes ops, worlds
 (when it names them) and actions, then the words ``REQ_N`` (``n``),
-``REQ_NAMED`` (1: the worlds block names the worlds) and last ``REQ_SEQ``
-(the request's ``seq``), and sends ``{"seq": s, "cmd": "step_batch",
-"region": true}`` on the pipe unless the sim's ``SIM_WATCHING`` word says it
+``REQ_NAMED`` (1: the worlds block names the worlds), ``AGENT_THINK_US``
+(its think time before this request in microseconds, when it tells it; 0
+otherwise: a hint the sim may use to sleep rather than wait hot for the
+next request, never checked) and last ``REQ_SEQ`` (the request's
+``seq``), and sends ``{"seq": s, "cmd": "step_batch", "region": true}`` on
+the pipe unless the sim's ``SIM_WATCHING`` word says it
 will look at ``REQ_SEQ`` before it blocks. The sim serves such a request
 like a sent one (``n``, ops, worlds and actions checked as sent ones are;
 its frame, if it comes after the request was served, is dropped). If every

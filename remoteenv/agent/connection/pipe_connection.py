@@ -109,10 +109,12 @@ class PipeConnection(SimConnection):
 
     # ------------------------------------------------------------ the shared region's fast lane
 
-    def post(self, doorbell: Doorbell, n: int, named: bool) -> int:
+    def post(self, doorbell: Doorbell, n: int, named: bool, think_s: float = 0.0) -> int:
         """Post a ``step_batch`` whose ops, worlds and actions are in the shared
         region (written by the caller; see :mod:`remoteenv.wire.shared_memory.doorbell`);
-        its frame goes on the pipe only when the sim sleeps. Returns its ``seq``:
+        its frame goes on the pipe only when the sim sleeps. ``think_s``: the
+        agent's think time before it (seconds, 0: unknown; the doorbell's
+        ``AGENT_THINK_US``). Returns its ``seq``:
         its reply comes as a frame or in the region (a reply map with
         ``"region": true`` either way)."""
         if self.closed:
@@ -123,7 +125,7 @@ class PipeConnection(SimConnection):
         seq = self._seq
         self._unanswered[seq] = None
         self._watch = (seq, doorbell)
-        if doorbell.post(seq, n, named):
+        if doorbell.post(seq, n, named, think_s):
             self._send_frame(protocol.pack({"seq": seq, "cmd": "step_batch", "region": True}))
         return seq
 

@@ -173,9 +173,11 @@ class SharedLanes:
         ops: np.ndarray,
         actions: Any,
         worlds: np.ndarray | None = None,
+        think_s: float = 0.0,
     ) -> int | None:
         """Post a ``step_batch`` in process ``p``'s region: ``ops`` and ``actions``
-        of positions ``0 .. n-1`` (and the ``worlds`` they address, if given).
+        of positions ``0 .. n-1`` (and the ``worlds`` they address, if given);
+        ``think_s``: the agent's think time before it (seconds, 0: unknown).
         Returns its ``seq``, or None (nothing written: no lane, a request of the
         lane still unread, or actions that are not one array of its dtype)."""
         if p in self._pending:
@@ -190,7 +192,7 @@ class SharedLanes:
         arrays.ops[:n] = ops
         if worlds is not None:
             arrays.worlds[:n] = worlds
-        seq: int = conn.post(bell, n, worlds is not None)  # type: ignore[attr-defined]
+        seq: int = conn.post(bell, n, worlds is not None, think_s)  # type: ignore[attr-defined]
         self._pending[p] = seq
         return seq
 

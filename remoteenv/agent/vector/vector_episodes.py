@@ -35,6 +35,7 @@ from remoteenv.agent.vector.vector_requests import VectorRequests
 from remoteenv.agent.vector.vector_results import ObsBatch, assemble
 from remoteenv.wire.messages.action_rules import check_actions
 from remoteenv.wire.messages.batch_encoding import AddInfo, merge_infos
+from remoteenv.wire.shared_memory.hot_wait import usable_cpus
 
 #: What a vector step returns: ``(obs, rewards, terminated, truncated, infos)``.
 StepResult = tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]
@@ -85,6 +86,11 @@ class VectorEpisodes:
         self.has_reset = False
         #: The last obs batch (internal form, see :class:`ObsBatch`).
         self.obs: Any = None
+        #: ``perf_counter()`` when the last reset or step returned to the caller (None: in flight or never).
+        self._returned_at: float | None = None
+        #: Whether the sims are told the caller's think time: when this machine's sims of the env
+        #: take every CPU, a sim waiting hot through it takes the caller's CPU (docs/performance.md).
+        self._tell_think = session.local_sims >= usable_cpus()
 
     def check_idle(self) -> None:
         """StateError unless nothing is in flight (what ``reset`` needs)."""
@@ -116,6 +122,7 @@ class VectorEpisodes:
         after_reset(mask, self.elapsed, self.needs_reset)
         self.has_reset = True
         self.obs = obs
+        self._returned_at = time.perf_counter()
         return self.obs_batch.for_gym(obs), infos
 
     def start_step(self, actions: Any) -> None:
@@ -124,10 +131,13 @@ class VectorEpisodes:
             raise StateError("step() before reset() or after close(): reset() an open RemoteVectorEnv first")
         if self._pending_step is not None or self.async_worlds.busy:
             raise StateError("a step is in flight: call step_wait() (or recv() what send() sent) first")
+        # The caller's think time (its policy, its update): the sims do not wait hot through a long one.
+        returned_at, self._returned_at = self._returned_at, None
+        think_s = time.perf_counter() - returned_at if returned_at is not None and self._tell_think else 0.0
         acts = self.check_actions(actions, self.num_envs)
         ops = plan_ops(self.mode, self.needs_reset, self.elapsed, self.max_episode_steps)
         started = time.perf_counter()
-        self._pending_step = (ops, acts, self.requests.start_step(ops, acts), started)
+        self._pending_step = (ops, acts, self.requests.start_step(ops, acts, think_s), started)
 
     def finish_step(self, add_info: AddInfo) -> tuple[StepResult, float]:
         """The results of the step :meth:`start_step` sent, and its wall round trip (s)."""
@@ -141,6 +151,7 @@ class VectorEpisodes:
         mode, limit = self.mode, self.max_episode_steps
         truncated, self.elapsed, self.needs_reset = after_step(mode, ops, terminated, truncated, self.elapsed, limit)
         self.obs = obs
+        self._returned_at = time.perf_counter()
         return (self.obs_batch.for_gym(obs), rewards, terminated, truncated, infos), round_trip
 
     def send(self, actions: Any, env_ids: Any = None) -> None:

@@ -109,8 +109,10 @@ class VectorRequests:
         previous call returned (for the worlds of a relaunched process)."""
         return self.finish_step(self.start_step(ops, actions), ops, actions, last_obs, obs_batch)
 
-    def start_step(self, ops: np.ndarray, actions: Any) -> dict[int, int]:
-        """Send the requests of a vector step (see :meth:`step`); returns ``{process: seq}``."""
+    def start_step(self, ops: np.ndarray, actions: Any, think_s: float = 0.0) -> dict[int, int]:
+        """Send the requests of a vector step (see :meth:`step`); returns ``{process: seq}``.
+        ``think_s``: seconds since the previous vector step returned to the
+        caller (0: unknown), told to sims reached through their region."""
         conns = self.session.conns
         if self.plain_steps:
             pending = {}
@@ -126,7 +128,7 @@ class VectorRequests:
         for p, (lo, hi) in enumerate(self.slices):
             acts = actions[lo:hi]
             offered = handshakes[p].offers("shared_batch")
-            seq = lanes.post(p, conns[p], offered, ops[lo:hi], acts)
+            seq = lanes.post(p, conns[p], offered, ops[lo:hi], acts, think_s=think_s)
             if seq is not None:
                 pending[p] = seq
                 continue

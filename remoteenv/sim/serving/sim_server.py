@@ -42,6 +42,10 @@ log = logging.getLogger(__name__)
 
 #: Longest busy-wait (seconds) for the agent's next request on the local pipe.
 SIM_SPIN_S = 1e-3
+#: Longest think time (seconds) of an agent whose next request is waited for
+#: hot: beyond it the agent runs its own code (a policy, an update) on the
+#: CPUs a spinning sim would take from it (see :class:`~remoteenv.sim.serving.waits.ServingWaits`).
+AGENT_THINK_SPIN_S = 200e-6
 #: Wall seconds before a deadline at which waiting turns from sleeping to spinning.
 DEADLINE_SPIN_S = 0.0003
 
@@ -189,6 +193,7 @@ class RemoteControlledAgent:
             self.router,
             pipe,
             hot_window_s=SIM_SPIN_S if pipe is not None and not self.real_time else 0.0,
+            think_limit_s=AGENT_THINK_SPIN_S,
             spin_s=self.deadline_spin_s,
             answer=self._answer,
             send=self._send_later,
@@ -295,4 +300,4 @@ class RemoteControlledAgent:
         remove_ipc_file(self.endpoint)
 
 
-__all__ = ["DEADLINE_SPIN_S", "SIM_SPIN_S", "RemoteControlledAgent"]
+__all__ = ["AGENT_THINK_SPIN_S", "DEADLINE_SPIN_S", "SIM_SPIN_S", "RemoteControlledAgent"]

@@ -2,8 +2,10 @@
 
 Runs in the sim process (:meth:`remoteenv.sim.serving.sim_server.RemoteControlledAgent.serve`).
 With no deadline (lock-step) a pass waits for requests: hot on the local pipe
-while the agent has been answering quickly (:class:`~remoteenv.wire.shared_memory.hot_wait.HotWait`),
-else blocking on every channel for up to :data:`~remoteenv.sim.process.orphan.CHECK_INTERVAL_S`.
+while the agent has been answering quickly (:class:`~remoteenv.wire.shared_memory.hot_wait.HotWait`)
+and, when it posts in the pipe's shared region, said it thinks briefly
+between its vector steps (the doorbell's ``AGENT_THINK_US``), else blocking
+on every channel for up to :data:`~remoteenv.sim.process.orphan.CHECK_INTERVAL_S`.
 With a deadline (real time) a pass sleeps with ``select`` until ``spin_s``
 before it, spins the rest, runs the work due and reads every channel. What
 arrives goes to the server's ``answer``; an ended pipe to its ``pipe_closed``.
@@ -32,6 +34,9 @@ class ServingWaits:
     Args:
         router, pipe: the server's channels (the launching agent's pipe is read first).
         hot_window_s: longest busy-wait (seconds) for the agent's next request on the pipe (0: never).
+        think_limit_s: no busy-wait after a region request whose agent thought
+            longer than this (seconds) before it: the agent's own code (a
+            policy, an update) then runs on the CPUs a spinning sim would take.
         spin_s: wall seconds before a deadline at which waiting turns from sleeping to spinning.
         answer: answers the frames a channel gave.
         send: sends a reply the stepping completed.
@@ -44,6 +49,7 @@ class ServingWaits:
         pipe: PipeChannel | None,
         *,
         hot_window_s: float,
+        think_limit_s: float = float("inf"),
         spin_s: float,
         answer: Callable[[Channel, list[tuple[Any, Any]]], None],
         send: Callable[[Outgoing], None],
@@ -57,6 +63,7 @@ class ServingWaits:
             self.poller.register(channel.pollable, zmq.POLLIN)
         self.fds = [channel.fd for channel in self.served]
         self.spin_s = spin_s
+        self.think_limit_s = think_limit_s
         self._answer, self._send, self._pipe_closed = answer, send, pipe_closed
 
     def for_requests(self) -> bool | None:
@@ -64,7 +71,7 @@ class ServingWaits:
         nothing came (idle), or None when a request was answered from the pipe
         at once (the loop goes round again before anything else)."""
         pipe, router, hot = self.pipe, self.router, self.hot
-        if pipe is not None and hot.worth_it():
+        if pipe is not None and not self._agent_thinks(pipe) and hot.worth_it():
             # The agent has been sending its next request quickly: wait hot.
             frames = pipe.receive_spinning(hot)
             if frames:
@@ -95,6 +102,11 @@ class ServingWaits:
             if channel.closed:
                 self._pipe_closed()
         return not events
+
+    def _agent_thinks(self, pipe: PipeChannel) -> bool:
+        """Whether the agent said it thinks longer than :attr:`think_limit_s` between steps."""
+        lane = pipe.lane
+        return lane is not None and lane.agent_think_s > self.think_limit_s
 
     def until(self, deadline: float, now: float, stepping: Stepping, channels: list[Channel]) -> None:
         """One real-time pass: run what is due at ``now`` (sending the replies it

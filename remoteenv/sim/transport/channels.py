@@ -185,6 +185,9 @@ def _source_fd(frame: Any) -> int:
 class LaneWatch(Protocol):
     """The fast lane of a pipe's shared region (:class:`remoteenv.sim.transport.shared_lane_server.SharedLane`)."""
 
+    #: The agent's think time before the last request taken from the region (seconds, 0: unknown).
+    agent_think_s: float
+
     def posted(self) -> int:
         """``seq`` of a request posted in the region and not yet served (0: none)."""
         ...

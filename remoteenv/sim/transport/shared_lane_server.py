@@ -74,6 +74,8 @@ class SharedLane:
         self.doorbell: Doorbell | None = None
         #: ``seq`` of the last request taken from the region.
         self.served = 0
+        #: The agent's think time before that request (seconds, 0: unknown; the doorbell's ``AGENT_THINK_US``).
+        self.agent_think_s = 0.0
         self._info_version = 0
         self._info_signature: tuple[tuple[str, str, bool], ...] | None = None
         #: Views of the region's info columns, by column and dtype (made once).
@@ -162,6 +164,7 @@ class SharedLane:
         if posted != seq:
             raise RequestError(PROTOCOL, f"a region step_batch {seq}, but the region holds request {posted}")
         self.served = seq
+        self.agent_think_s = doorbell.agent_think_s()
         k = arrays.layout.worlds
         if not 0 < n <= k:
             raise RequestError(PROTOCOL, f"a region request covers 1..{k} worlds, got {n}")

@@ -14,6 +14,12 @@ word  name                writer  meaning
 2     ``REQ_NAMED``       agent   1: the ``worlds`` block names its worlds
 3     ``AGENT_WATCHING``  agent   1: the agent will look at ``REP_SEQ`` before
                                   it blocks (no wake-up frame needed)
+4     ``AGENT_THINK_US``  agent   microseconds from the agent's previous
+                                  vector step returning to its caller to this
+                                  request (its think time), told when its
+                                  sims take every CPU it may use (0: not
+                                  told); a hint for the sim's waits, never
+                                  checked
 8     ``REP_SEQ``         sim     ``seq`` of the last request answered in the
                                   region
 9     ``REP_INFO``        sim     the info layout version of that answer
@@ -21,8 +27,8 @@ word  name                writer  meaning
                                   it blocks (no request frame needed)
 ====  ==================  ======  =============================================
 
-A request: the agent writes ops, worlds and actions, then ``REQ_N`` and
-``REQ_NAMED``, then ``REQ_SEQ``; if ``SIM_WATCHING`` is 0 it also sends
+A request: the agent writes ops, worlds and actions, then ``REQ_N``,
+``REQ_NAMED`` and ``AGENT_THINK_US``, then ``REQ_SEQ``; if ``SIM_WATCHING`` is 0 it also sends
 ``{"seq": s, "cmd": "step_batch", "region": true}`` on the pipe. A reply in the region: the sim
 writes the arrays and info columns, then ``REP_INFO``, then ``REP_SEQ``; if
 ``AGENT_WATCHING`` is 0 it also sends ``{"seq": s, "ok": true, "region":
@@ -62,13 +68,16 @@ import threading
 
 import numpy as np
 
-REQ_SEQ, REQ_N, REQ_NAMED, AGENT_WATCHING = 0, 1, 2, 3
+REQ_SEQ, REQ_N, REQ_NAMED, AGENT_WATCHING, AGENT_THINK_US = 0, 1, 2, 3, 4
 REP_SEQ, REP_INFO, SIM_WATCHING = 8, 9, 10
 #: ``REP_SEQ`` of a region the sim stopped using: it found the header tampered with.
 POISONED = -1
 #: Furthest a posted request's ``seq`` may lie past the last one the sim served
 #: (the agent's other requests in between also take sequence numbers).
 MAX_SEQ_GAP = 1 << 20
+
+#: Largest ``AGENT_THINK_US`` either side writes or believes (an hour).
+MAX_THINK_US = 3_600_000_000
 
 #: Whether this processor keeps stores and loads in order (total store order),
 #: so that a sequence word read from shared memory can vouch for the data
@@ -108,12 +117,15 @@ class Doorbell:
 
     # ------------------------------------------------------------ agent side
 
-    def post(self, seq: int, n: int, named: bool) -> bool:
+    def post(self, seq: int, n: int, named: bool, think_s: float = 0.0) -> bool:
         """Publish request ``seq`` (its blocks written); True if the sim must be
-        rung (it sleeps, or the doorbell is not silent)."""
+        rung (it sleeps, or the doorbell is not silent). ``think_s``: seconds
+        from the agent's previous vector step returning to its caller to this
+        request (0: unknown), written as ``AGENT_THINK_US``."""
         words = self._words
         words[REQ_N] = n
         words[REQ_NAMED] = 1 if named else 0
+        words[AGENT_THINK_US] = min(max(int(think_s * 1e6), 0), MAX_THINK_US)
         words[AGENT_WATCHING] = self._watching
         fence()
         words[REQ_SEQ] = seq
@@ -195,6 +207,11 @@ class Doorbell:
         words[SIM_WATCHING] = 0
         words[REP_SEQ] = POISONED
 
+    def agent_think_s(self) -> float:
+        """Sim side: ``AGENT_THINK_US`` of the request just taken, in seconds
+        (0: unknown; a hint, read as found: clamped to ``0 .. MAX_THINK_US``)."""
+        return min(max(int(self._words[AGENT_THINK_US]), 0), MAX_THINK_US) * 1e-6
+
     def request(self) -> tuple[int, int, int]:
         """``(REQ_SEQ, REQ_N, REQ_NAMED)`` as they are now (after the request's frame)."""
         words = self._words
@@ -233,8 +250,10 @@ class Doorbell:
 
 
 __all__ = [
+    "AGENT_THINK_US",
     "AGENT_WATCHING",
     "MAX_SEQ_GAP",
+    "MAX_THINK_US",
     "POISONED",
     "REP_INFO",
     "REP_SEQ",

@@ -1,0 +1,105 @@
+"""The agent's think time on the fast lane's doorbell (``AGENT_THINK_US``), and the
+sim's waits: no hot wait for the next request after a request whose agent said
+it thinks longer than the limit; a hot wait as before after a short think."""
+
+from __future__ import annotations
+
+import socket
+from typing import Any
+
+import numpy as np
+
+from remoteenv.sim.serving.waits import ServingWaits
+from remoteenv.sim.transport.channels import PipeChannel
+from remoteenv.wire import protocol
+from remoteenv.wire.shared_memory.doorbell import AGENT_THINK_US, MAX_THINK_US, Doorbell
+
+
+def test_the_agent_writes_its_think_time_in_microseconds_and_the_sim_reads_it_clamped() -> None:
+    header = np.zeros(16, dtype="<i8")
+    agent, sim = Doorbell(header, silent=True), Doorbell(header, silent=True)
+    agent.post(1, 3, False, think_s=750e-6)
+    assert header[AGENT_THINK_US] == 750
+    assert sim.agent_think_s() == 750e-6
+    agent.post(2, 3, False)  # not told: 0
+    assert sim.agent_think_s() == 0.0
+    header[AGENT_THINK_US] = -5  # a hint from the peer, read as found: clamped, never an error
+    assert sim.agent_think_s() == 0.0
+    header[AGENT_THINK_US] = 1 << 62
+    assert sim.agent_think_s() == MAX_THINK_US * 1e-6
+    agent.post(3, 3, False, think_s=1e12)
+    assert header[AGENT_THINK_US] == MAX_THINK_US
+
+
+class Lane:
+    """A pipe's fast lane with nothing posted, whose last request told ``agent_think_s``."""
+
+    def __init__(self, agent_think_s: float) -> None:
+        self.agent_think_s = agent_think_s
+
+    def posted(self) -> int:
+        return 0
+
+    def settle(self) -> int:
+        return 0
+
+
+class IdleRouter:
+    """A channel on which nothing comes (the server's ZeroMQ router, here a quiet socket)."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.closed, self.more = False, False
+        self.pollable = self.fd = sock.fileno()
+
+    def receive_nowait(self) -> list[tuple[Any, Any]]:
+        return []
+
+
+def _one_pass(agent_think_s: float) -> tuple[list[Any], int]:
+    """One lock-step pass over a pipe holding one request: what was answered, and
+    how many times the pass waited hot on the pipe."""
+    agent, sim = socket.socketpair()
+    quiet_a, quiet_b = socket.socketpair()
+    pipe = PipeChannel(sim.detach())
+    answered: list[Any] = []
+    try:
+        pipe.lane = Lane(agent_think_s)
+        spins = []
+        receive_spinning = pipe.receive_spinning
+
+        def spy(hot: Any) -> list[tuple[Any, Any]]:
+            spins.append(1)
+            return receive_spinning(hot)
+
+        pipe.receive_spinning = spy  # type: ignore[method-assign]
+        waits = ServingWaits(
+            IdleRouter(quiet_a),  # type: ignore[arg-type]
+            pipe,
+            hot_window_s=0.05,
+            think_limit_s=200e-6,
+            spin_s=0.0,
+            answer=lambda channel, frames: answered.extend(frames),
+            send=lambda outgoing: None,
+            pipe_closed=lambda: None,
+        )
+        waits.hot.window_s = 0.05  # whatever this machine's CPUs or REMOTEENV_NO_SPIN say
+        agent.sendall(protocol.stream_frame(protocol.pack({"seq": 1, "cmd": "ping"})))
+        waits.for_requests()
+        return answered, len(spins)
+    finally:
+        pipe.close()
+        for s in (agent, quiet_a, quiet_b):
+            s.close()
+
+
+def test_after_a_long_think_the_sim_does_not_wait_hot_and_still_serves_the_request() -> None:
+    answered, spins = _one_pass(agent_think_s=1e-3)
+    assert spins == 0
+    assert [protocol.peek_seq(frame) for _, frame in answered] == [1]
+
+
+def test_after_a_short_or_untold_think_the_sim_waits_hot_as_before() -> None:
+    for think in (50e-6, 0.0):
+        answered, spins = _one_pass(agent_think_s=think)
+        assert spins == 1
+        assert [protocol.peek_seq(frame) for _, frame in answered] == [1]
