@@ -211,8 +211,8 @@ The agent may then post a whole ``step_batch`` there: it writes ops, worlds
 otherwise: a hint the sim may use to sleep rather than wait hot for the
 next request, never checked) and last ``REQ_SEQ`` (the request's
 ``seq``), and sends ``{"seq": s, "cmd": "step_batch", "region": true}`` on
-the pipe unless the sim's ``SIM_WATCHING`` word says it
-will look at ``REQ_SEQ`` before it blocks. The sim serves such a request
+the pipe unless the sim's ``SIM_WATCHING`` word says it will look at
+``REQ_SEQ`` before it blocks. The sim serves such a request
 like a sent one (``n``, ops, worlds and actions checked as sent ones are;
 its frame, if it comes after the request was served, is dropped). If every
 world steps, none resets and every info value is a column the region can

@@ -113,7 +113,7 @@ class PipeConnection(SimConnection):
         """Post a ``step_batch`` whose ops, worlds and actions are in the shared
         region (written by the caller; see :mod:`remoteenv.wire.shared_memory.doorbell`);
         its frame goes on the pipe only when the sim sleeps. ``think_s``: the
-        agent's think time before it (seconds, 0: unknown; the doorbell's
+        agent's think time before it (seconds, 0: not told; the doorbell's
         ``AGENT_THINK_US``). Returns its ``seq``:
         its reply comes as a frame or in the region (a reply map with
         ``"region": true`` either way)."""

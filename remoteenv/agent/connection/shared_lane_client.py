@@ -177,7 +177,7 @@ class SharedLanes:
     ) -> int | None:
         """Post a ``step_batch`` in process ``p``'s region: ``ops`` and ``actions``
         of positions ``0 .. n-1`` (and the ``worlds`` they address, if given);
-        ``think_s``: the agent's think time before it (seconds, 0: unknown).
+        ``think_s``: the agent's think time before it (seconds, 0: not told).
         Returns its ``seq``, or None (nothing written: no lane, a request of the
         lane still unread, or actions that are not one array of its dtype)."""
         if p in self._pending:

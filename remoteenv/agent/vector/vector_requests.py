@@ -112,7 +112,7 @@ class VectorRequests:
     def start_step(self, ops: np.ndarray, actions: Any, think_s: float = 0.0) -> dict[int, int]:
         """Send the requests of a vector step (see :meth:`step`); returns ``{process: seq}``.
         ``think_s``: seconds since the previous vector step returned to the
-        caller (0: unknown), told to sims reached through their region."""
+        caller (0: not told), told to sims reached through their region."""
         conns = self.session.conns
         if self.plain_steps:
             pending = {}

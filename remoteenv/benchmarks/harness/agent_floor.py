@@ -6,8 +6,9 @@ vector env of Reacher worlds (same layout, sims, torch threads and
 placement), whose steps between episode ends bypass its agent end: the
 actions go straight into each sim's shared region and are posted on its
 doorbell (:mod:`remoteenv.wire.shared_memory.doorbell`, with the think time
-remoteenv's agent end tells its sims), the agent blocks at once for each reply (no hot wait), and the observations, rewards and flags
-are copied out of the regions. No action check, no reply checks beyond the
+remoteenv's agent end tells its sims), the agent blocks at once for each
+reply (no hot wait), and the observations, rewards and flags are copied out
+of the regions. No action check, no reply checks beyond the
 doorbell's sequence word, no infos, no latency bookkeeping, no failure
 handling beyond a sim's end of file or a frame that is not a wake-up. The
 time limit is kept: a step that resets a world (the one after an episode

@@ -185,7 +185,7 @@ def _source_fd(frame: Any) -> int:
 class LaneWatch(Protocol):
     """The fast lane of a pipe's shared region (:class:`remoteenv.sim.transport.shared_lane_server.SharedLane`)."""
 
-    #: The agent's think time before the last request taken from the region (seconds, 0: unknown).
+    #: The agent's think time before the last request taken from the region (seconds, 0: not told).
     agent_think_s: float
 
     def posted(self) -> int:

@@ -74,7 +74,7 @@ class SharedLane:
         self.doorbell: Doorbell | None = None
         #: ``seq`` of the last request taken from the region.
         self.served = 0
-        #: The agent's think time before that request (seconds, 0: unknown; the doorbell's ``AGENT_THINK_US``).
+        #: The agent's think time before that request (seconds, 0: not told; the doorbell's ``AGENT_THINK_US``).
         self.agent_think_s = 0.0
         self._info_version = 0
         self._info_signature: tuple[tuple[str, str, bool], ...] | None = None

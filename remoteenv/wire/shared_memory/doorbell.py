@@ -28,8 +28,9 @@ word  name                writer  meaning
 ====  ==================  ======  =============================================
 
 A request: the agent writes ops, worlds and actions, then ``REQ_N``,
-``REQ_NAMED`` and ``AGENT_THINK_US``, then ``REQ_SEQ``; if ``SIM_WATCHING`` is 0 it also sends
-``{"seq": s, "cmd": "step_batch", "region": true}`` on the pipe. A reply in the region: the sim
+``REQ_NAMED`` and ``AGENT_THINK_US``, then ``REQ_SEQ``; if ``SIM_WATCHING``
+is 0 it also sends ``{"seq": s, "cmd": "step_batch", "region": true}`` on
+the pipe. A reply in the region: the sim
 writes the arrays and info columns, then ``REP_INFO``, then ``REP_SEQ``; if
 ``AGENT_WATCHING`` is 0 it also sends ``{"seq": s, "ok": true, "region":
 true}``. Any other reply (an error, a reset, infos that are not the announced
@@ -121,7 +122,7 @@ class Doorbell:
         """Publish request ``seq`` (its blocks written); True if the sim must be
         rung (it sleeps, or the doorbell is not silent). ``think_s``: seconds
         from the agent's previous vector step returning to its caller to this
-        request (0: unknown), written as ``AGENT_THINK_US``."""
+        request (0: not told), written as ``AGENT_THINK_US``."""
         words = self._words
         words[REQ_N] = n
         words[REQ_NAMED] = 1 if named else 0
@@ -209,7 +210,7 @@ class Doorbell:
 
     def agent_think_s(self) -> float:
         """Sim side: ``AGENT_THINK_US`` of the request just taken, in seconds
-        (0: unknown; a hint, read as found: clamped to ``0 .. MAX_THINK_US``)."""
+        (0: not told; a hint, read as found: clamped to ``0 .. MAX_THINK_US``)."""
         return min(max(int(self._words[AGENT_THINK_US]), 0), MAX_THINK_US) * 1e-6
 
     def request(self) -> tuple[int, int, int]:
