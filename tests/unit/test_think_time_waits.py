@@ -12,6 +12,7 @@ import numpy as np
 from remoteenv.sim.serving.waits import ServingWaits
 from remoteenv.sim.transport.channels import PipeChannel
 from remoteenv.wire import protocol
+from remoteenv.wire.shared_memory import hot_wait
 from remoteenv.wire.shared_memory.doorbell import AGENT_THINK_US, MAX_THINK_US, Doorbell
 
 
@@ -83,6 +84,7 @@ def _one_pass(agent_think_s: float) -> tuple[list[Any], int]:
             pipe_closed=lambda: None,
         )
         waits.hot.window_s = 0.05  # whatever this machine's CPUs or REMOTEENV_NO_SPIN say
+        hot_wait._Neighbours.cool_until = 0.0  # nor an earlier spin's stall beside a busy neighbour
         agent.sendall(protocol.stream_frame(protocol.pack({"seq": 1, "cmd": "ping"})))
         waits.for_requests()
         return answered, len(spins)
