@@ -14,6 +14,7 @@ import zmq
 
 from remoteenv import Launcher, protocol, scene_path
 from remoteenv.agent.connection.connect import Connection
+from remoteenv.agent.connection.take_over import retry_taking_over
 from remoteenv.wire import protocol as wire_protocol
 
 N_FRAMES = 12_000
@@ -197,7 +198,9 @@ def _garbage(rng: random.Random, valid: list[bytes]) -> bytes:
 
 
 def _trajectory(conn: Connection, actions: list[int]) -> list[np.ndarray]:
-    obs = [conn.request("reset", seed=11)["obs"]]
+    # The fuzzer's valid resets made it the world's driver; the sim frees the world a moment
+    # after its socket closed, and a new client retries its first reset as agents do.
+    obs = [retry_taking_over(lambda: conn.request("reset", seed=11))["obs"]]
     for a in actions:
         obs.append(conn.request("step", action=a)["obs"])
     return obs
@@ -299,7 +302,8 @@ def test_fuzzed_real_time_sim_survives_and_still_steps():
         conn = Connection(sim.endpoint, timeout=60.0, death_check=sim.death)
         try:
             conn.request("handshake", protocol=protocol.PROTOCOL_VERSION)
-            assert conn.request("reset", seed=0)["obs"].shape == (4,)
+            # Taken over from the fuzzer (its valid resets drove the world), as in _trajectory.
+            assert retry_taking_over(lambda: conn.request("reset", seed=0))["obs"].shape == (4,)
             reply = conn.request("step", action=1)
             # Real time: the reply sums the ticks since the last one (how many is
             # the scheduler's affair; +1 per tick is CartPole's).
