@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
+from equality import assert_same_reacher_episodes
 
 from remoteenv.benchmarks.harness.agent_floor import AgentFloorVectorEnv
 from remoteenv.benchmarks.train_loop import ratios
@@ -23,18 +24,7 @@ def test_the_bare_agent_end_steps_the_worlds_remoteenv_steps_and_stops_its_sims(
         obs_b, _ = bare.reset(seed=3)
         obs_r, _ = remote.reset(seed=3)
         np.testing.assert_array_equal(obs_b, obs_r)
-        rng = np.random.default_rng(0)
-        truncations = 0
-        for _ in range(2 * 51 + 3):  # two episodes of Reacher's 50 steps, each world reset on the step after
-            actions = rng.uniform(-1, 1, size=(n, 2)).astype(np.float32)
-            obs_b, rew_b, term_b, trunc_b, _ = bare.step(actions)
-            obs_r, rew_r, term_r, trunc_r, _ = remote.step(actions)
-            np.testing.assert_array_equal(obs_b, obs_r)
-            np.testing.assert_array_equal(rew_b, rew_r)
-            np.testing.assert_array_equal(term_b, term_r)
-            np.testing.assert_array_equal(trunc_b, trunc_r)
-            truncations += int(trunc_b.all())
-        assert truncations == 2
+        assert assert_same_reacher_episodes(bare, remote, n) == 2
         # All but the first step (which attaches the regions) and the two resetting ones went the bare way.
         assert (bare.bare_steps, bare.full_steps) == (2 * 51 + 3 - 3, 3)
     finally:

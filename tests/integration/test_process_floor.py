@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
+from equality import assert_same_reacher_episodes
 
 from remoteenv.benchmarks.harness.process_floor import ProcessFloorVectorEnv
 from remoteenv.benchmarks.train_loop import ratios
@@ -23,18 +24,7 @@ def test_the_floor_steps_the_worlds_remoteenv_steps_and_stops_its_children():
         obs_f, _ = floor.reset()
         obs_r, _ = remote.reset(seed=3)
         np.testing.assert_array_equal(obs_f, obs_r)
-        rng = np.random.default_rng(0)
-        truncations = 0
-        for _ in range(2 * 51 + 3):  # two episodes of Reacher's 50 steps, each world reset on the step after
-            actions = rng.uniform(-1, 1, size=(n, 2)).astype(np.float32)
-            obs_f, rew_f, term_f, trunc_f, _ = floor.step(actions)
-            obs_r, rew_r, term_r, trunc_r, _ = remote.step(actions)
-            np.testing.assert_array_equal(obs_f, obs_r)
-            np.testing.assert_array_equal(rew_f, rew_r)
-            np.testing.assert_array_equal(term_f, term_r)
-            np.testing.assert_array_equal(trunc_f, trunc_r)
-            truncations += int(trunc_f.all())
-        assert truncations == 2
+        assert assert_same_reacher_episodes(floor, remote, n) == 2
     finally:
         floor.close()
         remote.close()

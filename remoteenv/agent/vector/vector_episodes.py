@@ -122,7 +122,7 @@ class VectorEpisodes:
         after_reset(mask, self.elapsed, self.needs_reset)
         self.has_reset = True
         self.obs = obs
-        self._returned_at = time.perf_counter()
+        self.returned()
         return self.obs_batch.for_gym(obs), infos
 
     def start_step(self, actions: Any) -> None:
@@ -131,9 +131,7 @@ class VectorEpisodes:
             raise StateError("step() before reset() or after close(): reset() an open RemoteVectorEnv first")
         if self._pending_step is not None or self.async_worlds.busy:
             raise StateError("a step is in flight: call step_wait() (or recv() what send() sent) first")
-        # The caller's think time (its policy, its update): the sims do not wait hot through a long one.
-        returned_at, self._returned_at = self._returned_at, None
-        think_s = time.perf_counter() - returned_at if returned_at is not None and self._tell_think else 0.0
+        think_s = self.think_s()
         acts = self.check_actions(actions, self.num_envs)
         ops = plan_ops(self.mode, self.needs_reset, self.elapsed, self.max_episode_steps)
         started = time.perf_counter()
@@ -151,8 +149,19 @@ class VectorEpisodes:
         mode, limit = self.mode, self.max_episode_steps
         truncated, self.elapsed, self.needs_reset = after_step(mode, ops, terminated, truncated, self.elapsed, limit)
         self.obs = obs
-        self._returned_at = time.perf_counter()
+        self.returned()
         return (self.obs_batch.for_gym(obs), rewards, terminated, truncated, infos), round_trip
+
+    def returned(self) -> None:
+        """A reset or step returns to the caller now: its think time starts."""
+        self._returned_at = time.perf_counter()
+
+    def think_s(self) -> float:
+        """The caller's think time (its policy, its update) before the step starting
+        now, in seconds: since the last reset or step returned, when the sims are
+        told it (they do not wait hot through a long one), else 0. Counted once."""
+        returned_at, self._returned_at = self._returned_at, None
+        return time.perf_counter() - returned_at if returned_at is not None and self._tell_think else 0.0
 
     def send(self, actions: Any, env_ids: Any = None) -> None:
         """EnvPool's send (see :meth:`remoteenv.RemoteVectorEnv.send`)."""

@@ -24,7 +24,6 @@ sims' end costs: the two ends of the lane, each in the loop users run.
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
@@ -55,13 +54,10 @@ class AgentFloorVectorEnv:
         self.single_action_space = self.env.single_action_space
         #: Per sim: its worlds ``(first, end)``, connection, region arrays and doorbell (once attached).
         self._lanes: list[tuple[int, int, PipeConnection, Any, Any]] | None = None
-        #: ``perf_counter()`` when the last step returned (the think time told to the sims is since then).
-        self._returned_at: float | None = None
         #: Vector steps taken by the bare agent end and by the vector env.
         self.bare_steps = self.full_steps = 0
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        self._returned_at = None
         return self.env.reset(seed=seed, options=options)
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
@@ -69,12 +65,9 @@ class AgentFloorVectorEnv:
         lanes = self._lanes if self._lanes is not None else self._attach()
         if lanes is None or episodes.needs_reset.any():
             self.full_steps += 1
-            result = self.env.step(actions)
-            self._returned_at = time.perf_counter()
-            return result
+            return self.env.step(actions)
         self.bare_steps += 1
-        returned_at, tell = self._returned_at, self._vector._episodes._tell_think
-        think_s = time.perf_counter() - returned_at if returned_at is not None and tell else 0.0
+        think_s = episodes.think_s()  # what remoteenv's agent end tells the sims
         actions = np.asarray(actions, dtype=np.float32)
         posted = []
         for lo, hi, conn, arrays, bell in lanes:
@@ -99,7 +92,7 @@ class AgentFloorVectorEnv:
         elapsed = episodes.elapsed + 1
         truncated = elapsed >= episodes.max_episode_steps if episodes.max_episode_steps else np.zeros_like(terminated)
         episodes.elapsed, episodes.needs_reset, episodes.obs = elapsed, terminated | truncated, obs
-        self._returned_at = time.perf_counter()
+        episodes.returned()
         return obs, reward, terminated, truncated, {}
 
     def _attach(self) -> list[tuple[int, int, PipeConnection, Any, Any]] | None:
