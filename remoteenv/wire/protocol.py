@@ -415,6 +415,13 @@ def peek_seq(frame: Any, prefix: int = 64) -> int:
     return -1
 
 
+def region_ring(seq: int) -> bytes:
+    """The frame that rings a sim for request ``seq`` posted in its shared
+    region: ``{"seq": seq, "cmd": "step_batch", "region": true}`` (see "The
+    fast lane" above)."""
+    return pack({"seq": seq, "cmd": "step_batch", "region": True})
+
+
 def decode_request(frame: bytes) -> dict[str, Any]:
     """Decode and shape-check a request frame (arrays and maps of at most
     :data:`MAX_REQUEST_ITEMS` entries; an int ``seq``, a str ``cmd``)."""
@@ -558,6 +565,7 @@ __all__ = [
     "error_reply",
     "pack",
     "peek_seq",
+    "region_ring",
     "stream_frame",
     "unpack",
     "wire_dtype",

@@ -267,6 +267,8 @@ def test_frame_stacks_on_the_batched_path_follow_each_worlds_episodes():
 
 def test_depth_segmentation_and_two_cameras_as_one_flat_dict_that_sb3_trains_on():
     sb3 = pytest.importorskip("stable_baselines3")
+    from stable_baselines3.common.env_checker import check_env
+
     from remoteenv.sb3 import make_sb3_vec_env
 
     two = {"obs_mode": "state_pixels", "image_size": 36, "cameras": ["agent", "side"]}
@@ -275,7 +277,7 @@ def test_depth_segmentation_and_two_cameras_as_one_flat_dict_that_sb3_trains_on(
         assert set(env.observation_space.spaces) == {"state", "agent_rgb", "side_rgb"}
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # two rgb cameras: SB3's checker has nothing to say
-            sb3.common.env_checker.check_env(env, warn=True, skip_render_check=True)
+            check_env(env, warn=True, skip_render_check=True)
     finally:
         env.close()
     kwargs = {**two, "camera_kind": "rgbd"}
@@ -286,7 +288,7 @@ def test_depth_segmentation_and_two_cameras_as_one_flat_dict_that_sb3_trains_on(
         assert space["agent_depth"] == gym.spaces.Box(0.0, np.inf, (36, 36, 1), np.float32)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            sb3.common.env_checker.check_env(env, warn=True, skip_render_check=True)
+            check_env(env, warn=True, skip_render_check=True)
         # SB3 only notes that the float32 depth images are no uint8 images in [0, 255] (they go to the MLP)
         notes = [str(w.message) for w in caught]
         assert notes and all("_depth is an image but" in note for note in notes), notes

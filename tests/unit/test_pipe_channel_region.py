@@ -47,3 +47,30 @@ def test_a_region_request_comes_decoded_between_the_frames_sent_before_and_after
     finally:
         channel.close()
         agent.close()
+
+
+def test_the_ring_of_the_request_found_in_the_region_is_served_once_from_the_region():
+    """The agent rang a sleeping sim for request 5 (its frame) and the sim finds
+    request 5 in the region as it reads the frame: one request is handed over,
+    the region's, after the frames sent before it; a ring for an earlier
+    request stays a frame (served as such, found served, answered nothing)."""
+    agent, sim = socket.socketpair()
+    channel = PipeChannel(sim.detach())
+    try:
+        channel.lane = PostedOnce(5)
+        ring = protocol.stream_frame(protocol.region_ring(5))
+        agent.sendall(_frame(3) + protocol.stream_frame(protocol.region_ring(4)) + ring)
+        got = []
+        while len(got) < 3:
+            got.extend(channel.receive_nowait())
+        assert [msg["seq"] if isinstance(msg, dict) else protocol.peek_seq(msg) for _, msg in got] == [3, 4, 5]
+        assert got[2][1] == region_request(5)
+        assert protocol.decode_request(got[1][1]) == region_request(4)
+        assert channel.receive_nowait() == []
+    finally:
+        channel.close()
+        agent.close()
+
+
+def test_region_ring_is_the_frame_the_fast_lane_specifies():
+    assert protocol.unpack(protocol.region_ring(7)) == {"seq": 7, "cmd": "step_batch", "region": True}

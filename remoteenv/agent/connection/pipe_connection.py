@@ -126,7 +126,7 @@ class PipeConnection(SimConnection):
         self._unanswered[seq] = None
         self._watch = (seq, doorbell)
         if doorbell.post(seq, n, named, think_s):
-            self._send_frame(protocol.pack({"seq": seq, "cmd": "step_batch", "region": True}))
+            self._send_frame(protocol.region_ring(seq))
         return seq
 
     def _region_reply(self) -> dict[str, Any] | None:

@@ -33,7 +33,7 @@ from remoteenv.agent.vector.vector_async import AsyncWorlds, assemble_chunks
 from remoteenv.agent.vector.vector_layout import check_sims
 from remoteenv.agent.vector.vector_requests import VectorRequests
 from remoteenv.agent.vector.vector_results import ObsBatch, assemble
-from remoteenv.wire.messages.action_rules import check_actions
+from remoteenv.wire.messages.action_rules import BatchCheck, check_actions
 from remoteenv.wire.messages.batch_encoding import AddInfo, merge_infos
 from remoteenv.wire.shared_memory.hot_wait import usable_cpus
 
@@ -75,6 +75,7 @@ class VectorEpisodes:
         self.real_time, self.batch_size = real_time, batch_size
         self.obs_batch = ObsBatch(observation_space, n)
         self._box_act = isinstance(action_space, gym.spaces.Box)
+        self._batch_check = BatchCheck(action_space)
         same_step = autoreset_mode == AutoresetMode.SAME_STEP
         self.requests = VectorRequests(session, self.slices, real_time=real_time, same_step=same_step)
         self.async_worlds = AsyncWorlds(session, self.slices, n, self.requests.lanes)
@@ -196,7 +197,7 @@ class VectorEpisodes:
         """``n`` actions in wire form, indexable by world; ValueError names the world."""
         space = self.action_space
         if self._box_act:
-            return check_actions(space, np.asarray(actions), n)
+            return self._batch_check(np.asarray(actions), n)
         if isinstance(space, gym.spaces.Discrete) and isinstance(actions, np.ndarray) and actions.dtype.kind in "iu":
             return check_actions(space, actions, n)  # one vectorised range check
         batched = self.batched_action_space if n == self.num_envs else batch_space(space, n)

@@ -30,7 +30,7 @@ from remoteenv.sim.transport.channels import Channel
 from remoteenv.sim.transport.checks import RequestError, options_value, require_reset, seed_list, world_list
 from remoteenv.sim.transport.shared_lane_server import SharedLane
 from remoteenv.wire.codec.scalar_types import describe_scalars
-from remoteenv.wire.messages.action_rules import check_actions
+from remoteenv.wire.messages.action_rules import BatchCheck
 from remoteenv.wire.messages.batch_encoding import columnar_infos, stack
 from remoteenv.wire.protocol import OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET, OPS
 from remoteenv.wire.wire_errors import PROTOCOL, STATE, short_repr
@@ -41,7 +41,7 @@ class BatchCommands:
 
     Actions of Box and Discrete spaces are checked for the whole batch at
     once (bounds of every element, NaN rejected); other spaces one world at
-    a time (:func:`remoteenv.wire.messages.action_rules.check_actions`).
+    a time (:class:`remoteenv.wire.messages.action_rules.BatchCheck`).
 
     Args:
         worlds: the lock-step worlds of the process, in world order.
@@ -56,7 +56,7 @@ class BatchCommands:
     ) -> None:
         self.worlds = worlds
         self.instance = instance
-        self._space = action_space
+        self._check = BatchCheck(action_space)
         self._discrete = isinstance(action_space, spaces.Discrete)
         envs = [w.env for w in worlds]
         together = all(w.delays.is_zero for w in worlds) and steps_together(envs)
@@ -107,9 +107,9 @@ class BatchCommands:
         if shared:
             if self.lane is None or msg.get("worlds") is not None:
                 raise RequestError(PROTOCOL, "a 'shared' step_batch needs shared_batch first and no 'worlds'")
-            actions = check_actions(self._space, self.lane.actions(n, channel), n)
+            actions = self._check(self.lane.actions(n, channel), n)
         else:
-            actions = check_actions(self._space, msg.get("actions"), n)
+            actions = self._check(msg.get("actions"), n)
         reply = self._step(ops, worlds, actions, shared=shared)
         assert reply is not None
         return reply
@@ -130,7 +130,7 @@ class BatchCommands:
         n = len(ops)
         worlds = list(range(n)) if named is None else self._request_worlds(named, n)
         self._require_reset(ops, worlds)
-        return self._step(ops, worlds, check_actions(self._space, actions, n), shared=True, seq=msg["seq"])
+        return self._step(ops, worlds, self._check(actions, n), shared=True, seq=msg["seq"])
 
     def _require_reset(self, ops: list[int], worlds: list[int]) -> None:
         """A ``state`` error for a world stepped before its first reset (once every

@@ -77,9 +77,11 @@ class SharedLane:
         #: The agent's think time before that request (seconds, 0: not told; the doorbell's ``AGENT_THINK_US``).
         self.agent_think_s = 0.0
         self._info_version = 0
-        self._info_signature: tuple[tuple[str, str, bool], ...] | None = None
+        self._info_signature: tuple[tuple[str, np.dtype, bool], ...] | None = None
         #: Views of the region's info columns, by column and dtype (made once).
         self._column_views: dict[tuple[int, np.dtype], np.ndarray] = {}
+        #: Views of the region's obs, reward, terminated and truncated rows ``0 .. n-1``, by ``n`` (made once).
+        self._row_views: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
         #: Why the region is no longer used (its header was tampered with), or None.
         self.tampered: str | None = None
 
@@ -208,11 +210,14 @@ class SharedLane:
             if view is None:
                 view = views[c, values.dtype] = arrays.info_column(c, values.dtype)
             view[:n] = values
-        signature = tuple((key, values.dtype.str, python) for key, values, python in columns)
+        signature = tuple((key, values.dtype, python) for key, values, python in columns)
         if signature != self._info_signature:
             self._info_version += 1
             self._info_signature = signature
-            layout = {"version": self._info_version, "columns": [list(entry) for entry in signature]}
+            layout = {
+                "version": self._info_version,
+                "columns": [[key, dtype.str, python] for key, dtype, python in signature],
+            }
             return False, {"shared": True, "final": [], "info_layout": layout}
         return True, ({"region": True} if doorbell.reply(seq, self._info_version) else None)
 
@@ -220,23 +225,34 @@ class SharedLane:
         """The region's observation rows ``0 .. n-1``, where a step may write its
         observations directly (camera images rendered in place: no copy); None
         before the region exists."""
-        arrays = self._arrays
-        return None if arrays is None or not 0 < n <= len(arrays.obs) else arrays.obs[:n]
+        rows = self._rows(n)
+        return None if rows is None else rows[0]
+
+    def _rows(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """The region's obs, reward, terminated and truncated rows ``0 .. n-1`` (None: no region, or ``n`` off)."""
+        rows = self._row_views.get(n)
+        if rows is None:
+            arrays = self._arrays
+            if arrays is None or not 0 < n <= len(arrays.obs):
+                return None
+            rows = self._row_views[n] = (arrays.obs[:n], arrays.reward[:n], arrays.terminated[:n], arrays.truncated[:n])
+        return rows
 
     def _put_arrays(self, batch: BatchResult) -> bool:
-        arrays = self._arrays
         obs = batch.obs
-        if arrays is None or not isinstance(obs, np.ndarray):
+        if not isinstance(obs, np.ndarray):
             return False
-        n = len(batch.reward)
-        rows = arrays.obs[:n]
-        if obs.dtype != rows.dtype or obs.shape != rows.shape:
+        rows = self._rows(len(batch.reward))
+        if rows is None:
             return False
-        if obs.ctypes.data != rows.ctypes.data:  # not written in place (see obs_rows)
-            rows[...] = obs
-        arrays.reward[:n] = batch.reward
-        arrays.terminated[:n] = batch.terminated
-        arrays.truncated[:n] = False
+        obs_rows, reward, terminated, truncated = rows
+        if obs.dtype != obs_rows.dtype or obs.shape != obs_rows.shape:
+            return False
+        if obs is not obs_rows and obs.ctypes.data != obs_rows.ctypes.data:  # not written in place (see obs_rows)
+            obs_rows[...] = obs
+        reward[...] = batch.reward
+        terminated[...] = batch.terminated
+        truncated[...] = False
         return True
 
     def _columns(self, batch: BatchResult) -> list[tuple[str, np.ndarray, bool]] | None:
@@ -259,6 +275,7 @@ class SharedLane:
 
     def close(self) -> None:
         self._column_views.clear()
+        self._row_views.clear()
         if self._arrays is not None:
             self._arrays.close()
             self._arrays = None
