@@ -69,14 +69,19 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         scene: path of the scene script.
         num_envs: N, the number of worlds.
         envs_per_process: K, worlds hosted (and stepped from one request) by
-            each sim process; ``ceil(N / K)`` processes are launched. Default
-            ``max(8, ceil(N / cpu_count))`` capped at N: on a 2-core machine
-            one process up to N = 8, then two up to N = 16; the fastest splits measured
-            there (see :func:`default_envs_per_process`). Where what a world
-            costs could change K (e.g. N = 8 on 2 CPUs), the first sim measures one
-            world's whole tick (physics and every hook, however the scene
-            renders: :attr:`world_cost_s`); costly worlds (e.g. camera
-            images) are then relaunched once, one process per CPU.
+            each sim process; ``ceil(N / K)`` processes are launched. Default:
+            cheap worlds worth two physics threads or more (N >= 16 on 2 CPUs
+            or more) whose scene steps them as one batch run in one process,
+            their physics on ``min(cpu_count, N // 8)`` threads
+            (:attr:`physics_threads`); otherwise ``max(8, ceil(N / cpu_count))``
+            capped at N (on a 2-core machine one process up to N = 8, two up to
+            N = 15); the fastest layouts measured there (see
+            :func:`default_envs_per_process`). Where what a world costs could
+            change K, the first sim measures one world's whole tick (physics
+            and every hook, however the scene renders: :attr:`world_cost_s`)
+            and says whether its scene steps its worlds as one batch; costly
+            worlds (e.g. camera images) and scenes whose Python runs per world
+            are then relaunched once, one process per CPU.
             Must be 1 with ``real_time``.
         autoreset_mode: Gymnasium's :class:`~gymnasium.vector.AutoresetMode`
             (or its string): ``NEXT_STEP`` (default; the step after an episode
@@ -240,6 +245,9 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         )
         #: ``(first, end)`` world indices of each process.
         self.slices: list[tuple[int, int]] = world_slices(self.num_envs, self.envs_per_process)
+        #: Threads each sim process steps its worlds' physics on, as the first sim's handshake says
+        #: (the default layout's one process of cheap worlds steps on several; 1 if it does not say).
+        self.physics_threads: int = self._session.handshake.physics_threads or 1
         try:
             self._set_spaces(self._session.handshake)
             self._episodes = VectorEpisodes(
@@ -252,7 +260,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         self.latency_stats = LatencyStats()
         self._pauser = Pauser(self._session)
         self._reach = SceneReach(self._session)
-        self._torch_threads = TorchThreads(torch_threads, self._session.local_sims)
+        self._torch_threads = TorchThreads(torch_threads, self._session.local_sims * self.physics_threads)
         self._torch_threads.apply()
         own = launcher is None and attach is None and self._session.local_sims == len(self._session.pids)
         self._placement = SimPlacement(place_sims, own_sims=own, real_time=self.real_time)

@@ -174,16 +174,17 @@ def measure(
                 ),
                 1,
             )
+            # Without --envs-per-process the env's default layout (for these cheap scenes stepped as
+            # one batch, the K shown, its physics threads with it).
             k = min(envs_per_process or default_envs_per_process(n), n)
+            layout: dict[str, Any] = {"envs_per_process": k} if envs_per_process else {}
             if k > 1:
                 record(
                     scene,
                     "RemoteVectorEnv batched",
                     n,
                     _measure(
-                        lambda: gym.make_vec(
-                            remote_id, num_envs=n, vectorization_mode="vector_entry_point", envs_per_process=k
-                        ),
+                        lambda: gym.make_vec(remote_id, num_envs=n, vectorization_mode="vector_entry_point", **layout),
                         _vector_rate,
                         duration,
                     ),

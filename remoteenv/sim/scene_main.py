@@ -99,6 +99,7 @@ def run_options_from_arguments(parser: argparse.ArgumentParser, args: argparse.N
         action_delay=args.action_delay,
         obs_delay=args.obs_delay,
         link_delay=args.link_delay,
+        physics_threads=args.physics_threads,
         **channel,
     )
 
@@ -116,6 +117,12 @@ def scene_argument_parser(description: str | None = None) -> argparse.ArgumentPa
     )
     p.add_argument("--instance", type=int, default=0, help="index of this sim process")
     p.add_argument("--worlds", type=int, default=1, help="number of MuJoCo worlds this process hosts")
+    p.add_argument(
+        "--physics-threads",
+        type=int,
+        default=None,
+        help="lock-step: threads the worlds' physics steps on (default: REMOTEENV_SIM_THREADS, else 1)",
+    )
     p.add_argument("--env-kwargs", default="{}", help="JSON map of keyword arguments for the env class")
     p.add_argument("--render-mode", default=None, help="render mode of the env, e.g. rgb_array")
     p.add_argument("--real-time", action="store_true", help="run physics on a paced wall clock")

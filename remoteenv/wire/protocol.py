@@ -108,7 +108,11 @@ command the server answers; a client that finds no such field assumes
 ``reset_batch``/``step_batch`` exist exactly when ``stepping.mode`` is
 ``"lock_step"`` and ``timing`` exactly when it is ``"real_time"``. ``metadata`` holds ``render_modes``, ``render_fps``,
 ``dt`` (seconds of simulated time per env step), ``timestep`` (seconds per
-physics substep), ``frame_skip`` and, optionally, ``world_cost_s`` (wall
+physics substep), ``frame_skip``, optionally (lock-step) ``physics_threads``
+(the threads, 1 or more, the server steps its worlds' physics on) and
+``stacked_hooks`` (true when it steps its worlds as one batch through the
+scene's stacked hooks: its Python runs once per tick, not once per world;
+a vector env's default layout reads both), and, optionally, ``world_cost_s`` (wall
 seconds one world's whole control tick costs the server on one thread: the
 physics and every hook of the scene, images included, measured on a scratch
 world; a hint for how many worlds a process should host). A server measures

@@ -1,16 +1,26 @@
 """The default layout of a vector env follows what one world's whole tick costs:
 physics and every hook, however the scene spends it. A scene that renders its
 image observation in its own hook (no camera declared) is laid out like one
-with a declared camera; cheap worlds keep theirs; where the cost cannot change
-the layout nothing is measured. These tests assert the layout chosen, never a
-speed."""
+with a declared camera; cheap worlds keep theirs: one process stepping its
+physics on threads where they are worth two threads and step as one batch, a
+process per CPU where the scene's Python runs per world; where the cost cannot
+change the layout nothing is measured. These tests assert the layout chosen,
+never a speed."""
 
 from __future__ import annotations
 
+import os
+
 import gymnasium as gym
+import numpy as np
 
 from remoteenv import RemoteVectorEnv
-from remoteenv.agent.vector.vector_layout import COSTLY_WORLD_S, default_envs_per_process
+from remoteenv.agent.vector.vector_layout import (
+    COSTLY_WORLD_S,
+    cost_may_change_layout,
+    default_envs_per_process,
+    default_physics_threads,
+)
 from remoteenv.benchmarks.pixels import HOOK_RENDER_SCENE as HOOK_RENDER
 
 
@@ -35,10 +45,42 @@ def test_cheap_worlds_keep_their_layout_and_are_measured_only_where_it_matters()
         assert env.envs_per_process == default_envs_per_process(8, None)
     finally:
         env.close()
-    env = gym.make_vec("remoteenv/Reacher-v0", num_envs=64, vectorization_mode="vector_entry_point").unwrapped
+    n = next(n for n in (15, 12, 1) if not cost_may_change_layout(n))
+    env = gym.make_vec("remoteenv/Reacher-v0", num_envs=n, vectorization_mode="vector_entry_point").unwrapped
     try:
         assert env.world_cost_s is None  # both rules give the same K: nothing to measure
-        assert env.envs_per_process == default_envs_per_process(64, None)
+        assert env.envs_per_process == default_envs_per_process(n, None)
+    finally:
+        env.close()
+
+
+def test_cheap_worlds_stepped_as_one_batch_run_in_one_process_on_threads():
+    threads = default_physics_threads(16)
+    env = gym.make_vec("remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point").unwrapped
+    try:
+        assert env.world_cost_s is not None and env.world_cost_s <= COSTLY_WORLD_S
+        assert env.envs_per_process == default_envs_per_process(16, env.world_cost_s)
+        if threads > 1:  # two CPUs or more: one process of 16 worlds, its physics on the threads
+            assert env.envs_per_process == 16 and len(env.pids) == 1
+        assert env.physics_threads == threads
+        assert [hs.physics_threads for hs in env._session.handshakes] == [threads] * len(env.pids)
+        assert all(hs.stacked_hooks for hs in env._session.handshakes)
+        env.reset(seed=0)
+        obs, reward, *_ = env.step(np.zeros((16, 2), np.float32))
+        assert obs.shape == (16, 10) and reward.shape == (16,)
+    finally:
+        env.close()
+
+
+def test_a_scene_whose_python_runs_per_world_keeps_a_process_per_cpu():
+    scene = os.path.join(os.path.dirname(__file__), "scenes", "per_world_scene.py")
+    env = RemoteVectorEnv(scene, num_envs=16)
+    try:
+        assert all(hs.stacked_hooks is False for hs in env._session.handshakes)
+        assert env.envs_per_process == default_envs_per_process(16, env.world_cost_s, stacked_hooks=False)
+        assert env.physics_threads == 1 and len(env.pids) == len(env.slices)
+        env.reset(seed=0)
+        env.step(np.ones(16, dtype=np.int64))
     finally:
         env.close()
 

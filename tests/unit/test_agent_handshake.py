@@ -109,12 +109,52 @@ def test_the_world_cost_hint_is_read_and_bounded():
             parse_handshake(reply)
 
 
+def test_how_the_physics_steps_is_read_and_bounded():
+    reply = copy.deepcopy(REPLY)
+    hs = parse_handshake(reply)
+    assert hs.physics_threads is None and hs.stacked_hooks is None  # optional
+    reply["metadata"].update(physics_threads=2, stacked_hooks=True)
+    hs = parse_handshake(reply)
+    assert hs.physics_threads == 2 and hs.stacked_hooks is True
+    for bad in (0, -1, 10**6, True, "2", 2.0):
+        with pytest.raises(ProtocolError, match="physics_threads"):
+            parse_handshake({**reply, "metadata": {**reply["metadata"], "physics_threads": bad}})
+    for bad in (1, "yes"):
+        with pytest.raises(ProtocolError, match="stacked_hooks"):
+            parse_handshake({**reply, "metadata": {**reply["metadata"], "stacked_hooks": bad}})
+
+
 def test_costly_worlds_get_one_process_per_cpu(monkeypatch):
     from remoteenv.agent.vector import vector_layout
 
     monkeypatch.setattr(vector_layout.os, "cpu_count", lambda: 2)
     layout = vector_layout.default_envs_per_process
     assert layout(8) == layout(8, 12e-6) == layout(8, 50e-6) == 8  # microseconds of physics: one process
-    assert layout(16) == 8
+    assert layout(12) == 8  # fewer than two threads' worth: a process per CPU
+    assert layout(16) == 16  # two threads' worth of cheap worlds: one process (test_default_layout_threads below)
     assert layout(8, 6e-4) == 4 and layout(16, 6e-4) == 8 and layout(64, 6e-4) == 32  # camera images: 2 processes
     assert layout(1, 6e-4) == 1 and layout(3, 6e-4) == 2
+
+
+def test_default_layout_threads(monkeypatch):
+    """Cheap worlds worth two physics threads or more run in one process on
+    that many threads (at most one per CPU); costly worlds, and layouts of
+    several processes, get the sims' own default (None)."""
+    from remoteenv.agent.vector import vector_layout
+
+    threads, layout, per = (
+        vector_layout.default_physics_threads,
+        vector_layout.default_envs_per_process,
+        vector_layout.layout_threads,
+    )
+    monkeypatch.setattr(vector_layout.os, "cpu_count", lambda: 2)
+    assert [threads(n) for n in (1, 8, 15, 16, 64, 1024)] == [1, 1, 1, 2, 2, 2]
+    assert threads(16, 6e-4) == 1 and layout(16, 6e-4) == 8
+    assert per(16, 16) == per(64, 64) == 2
+    assert per(16, 8) is None and per(8, 8) is None and per(12, 8) is None
+    monkeypatch.setattr(vector_layout.os, "cpu_count", lambda: 1)
+    assert threads(64) == 1 and layout(64) == 64 and per(64, 64) is None
+    monkeypatch.setattr(vector_layout.os, "cpu_count", lambda: 4)
+    assert threads(24) == 3 and layout(24) == 24 and per(24, 24) == 3
+    assert threads(64) == 4 and layout(64) == 64
+    assert layout(64, 6e-4) == 16 and per(64, 16) is None

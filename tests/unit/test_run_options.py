@@ -59,3 +59,27 @@ def test_the_options_are_one_frozen_object_and_checked_when_made():
     assert RunOptions(action_delay=0, obs_delay=Trace([0, 0])).delay_file_text() is None
     assert RunOptions(action_delay=2).timed_steps and RunOptions(real_time=True).timed_steps
     assert not RunOptions().timed_steps and RunOptions().scene_arguments() == []
+
+
+def test_the_physics_threads_travel_to_the_sim_and_are_checked(tmp_path):
+    run = RunOptions(physics_threads=2)
+    cmd = scene_command(
+        "/s/scene.py",
+        "ipc:///x",
+        instance=0,
+        worlds=16,
+        env_kwargs={},
+        parent_pid=1,
+        ready_file="r",
+        private_dir=str(tmp_path),
+        run=run,
+    )
+    assert cmd[cmd.index("--physics-threads") + 1] == "2"
+    parser = scene_argument_parser()
+    assert run_options_from_arguments(parser, parser.parse_args(cmd[2:])).physics_threads == 2
+    assert "--physics-threads" not in RunOptions().scene_arguments()
+    for bad in (0, -2, True, 2.0):
+        with pytest.raises(ValueError, match="physics_threads"):
+            RunOptions(physics_threads=bad)
+    with pytest.raises(ValueError, match="physics_threads is lock-step's"):
+        RunOptions(real_time=True, physics_threads=2)

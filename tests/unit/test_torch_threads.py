@@ -40,7 +40,7 @@ def fake_torch(monkeypatch):
 
 
 def test_auto_leaves_the_sims_their_cpus_once_and_says_so(fake_torch):
-    with pytest.warns(TorchThreadsNotice, match=r"torch's CPU threads to 1 \(was 4\).*4 sim processes"):
+    with pytest.warns(TorchThreadsNotice, match=r"torch's CPU threads to 1 \(was 4\).*on 4 of this machine.s 4 CPUs"):
         TorchThreads("auto", local_sims=4).apply()
     assert fake_torch.calls == [1]
     fake_torch.threads = 3  # the user raised it again after: remoteenv does not fight them

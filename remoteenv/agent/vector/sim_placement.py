@@ -34,7 +34,7 @@ from remoteenv.wire.shared_memory.hot_wait import usable_cpus
 #: ``place_sims`` value that places the sims.
 AUTO = "auto"
 #: Environment variable of the sims' physics threads (:mod:`remoteenv.sim.stepping.batch_physics`).
-_THREADS_ENV = "REMOTEENV_SIM_THREADS"
+SIM_THREADS_ENV = "REMOTEENV_SIM_THREADS"
 
 
 def check_place_sims(value: object) -> str | None:
@@ -45,7 +45,7 @@ def check_place_sims(value: object) -> str | None:
 
 
 def _one_physics_thread() -> bool:
-    value = os.environ.get(_THREADS_ENV, "")
+    value = os.environ.get(SIM_THREADS_ENV, "")
     return not value.strip() or value.strip() == "1"
 
 
@@ -100,4 +100,4 @@ class SimPlacement:
             place(pid, cpu)
 
 
-__all__ = ["AUTO", "SimPlacement", "check_place_sims", "place", "placement"]
+__all__ = ["AUTO", "SIM_THREADS_ENV", "SimPlacement", "check_place_sims", "place", "placement"]

@@ -47,9 +47,10 @@ def check_torch_threads(value: object) -> int | str | None:
 
 
 class TorchThreads:
-    """The ``torch_threads`` choice of one vector env whose ``local_sims``
-    processes run on this machine; :meth:`apply` acts on it when torch is
-    loaded (at the env's construction and at each ``reset``)."""
+    """The ``torch_threads`` choice of one vector env whose sims step on
+    ``local_sims`` of this machine's CPUs (a process each, or the threads of
+    a process that steps its physics on several); :meth:`apply` acts on it
+    when torch is loaded (at the env's construction and at each ``reset``)."""
 
     def __init__(self, choice: int | str | None, local_sims: int) -> None:
         self.choice = check_torch_threads(choice)
@@ -77,8 +78,8 @@ class TorchThreads:
             return
         torch.set_num_threads(target)
         warnings.warn(
-            f"remoteenv set torch's CPU threads to {target} (was {now}): this vector env's {self.local_sims} "
-            f"sim processes step on this machine's {cpus} CPUs, where torch's idle threads would spin "
+            f"remoteenv set torch's CPU threads to {target} (was {now}): this vector env's sims step on "
+            f"{self.local_sims} of this machine's {cpus} CPUs, where torch's idle threads would spin "
             "(docs/performance.md, 'The learner beside the sims'). To keep torch's setting, pass "
             "torch_threads=None to the vector env or set OMP_NUM_THREADS.",
             TorchThreadsNotice,

@@ -5,13 +5,16 @@ Runs in the agent process (:class:`remoteenv.RemoteVectorEnv`).
 
 from __future__ import annotations
 
+import dataclasses
+import os
 from collections.abc import Callable
 from typing import Any
 
 from remoteenv.agent.errors import BatchTooLargeError, LimitError
 from remoteenv.agent.launch.sim_group import SimGroup
 from remoteenv.agent.session.sim_session import SimSession, open_session
-from remoteenv.agent.vector.vector_layout import default_envs_per_process, world_slices
+from remoteenv.agent.vector.sim_placement import SIM_THREADS_ENV
+from remoteenv.agent.vector.vector_layout import default_envs_per_process, layout_threads, world_slices
 from remoteenv.wire.codec.spaces import value_nbytes
 from remoteenv.wire.memory import worlds_problem
 from remoteenv.wire.messages.handshake import worlds_that_fit
@@ -42,13 +45,19 @@ def open_worlds(
     group from ``regroup()``. K is also at most what one batch reply carries
     the observations of (a process of 8 worlds of 1280x1280 pixels, 39 MB,
     would be refused: it gets 6): a first launch refused for that is placed
-    again the same way.
+    again the same way. The default layout's processes get its physics
+    threads (:func:`~remoteenv.agent.vector.vector_layout.layout_threads`,
+    in the run options) unless ``REMOTEENV_SIM_THREADS`` sets them.
     """
     per_process = min(envs_per_process, num_envs)
 
     def start(source: SimGroup, k: int, measure: bool = False) -> SimSession:
         slices = len(world_slices(num_envs, k))
-        return open_session(source, label, scene, slices, k, measure_world_cost=measure, **launch)
+        options = launch
+        if regroup is not None:
+            run = dataclasses.replace(launch["run"], physics_threads=default_layout_threads(num_envs, k))
+            options = {**launch, "run": run}
+        return open_session(source, label, scene, slices, k, measure_world_cost=measure, **options)
 
     try:
         session = start(group, per_process, measure_cost)
@@ -65,7 +74,8 @@ def open_worlds(
     if regroup is None:
         return session, per_process, cost
     fit = worlds_that_fit(handshake.observation_space)
-    better = min(default_envs_per_process(num_envs, cost), num_envs, max(1, fit))
+    stacked = handshake.stacked_hooks is not False  # a server that does not say keeps the rule's first guess
+    better = min(default_envs_per_process(num_envs, cost, stacked), num_envs, max(1, fit))
     if better == per_process:
         return session, per_process, cost
     session.close()
@@ -87,4 +97,12 @@ def _bounded(session: SimSession, num_envs: int, label: str) -> SimSession:
     return session
 
 
-__all__ = ["open_worlds"]
+def default_layout_threads(num_envs: int, envs_per_process: int) -> int | None:
+    """The physics threads the default layout asks of its sims (None: the sims'
+    own default), unless the user set them for every sim (``REMOTEENV_SIM_THREADS``)."""
+    if os.environ.get(SIM_THREADS_ENV, "").strip():
+        return None
+    return layout_threads(num_envs, envs_per_process)
+
+
+__all__ = ["default_layout_threads", "open_worlds"]

@@ -1,11 +1,13 @@
 """The floor under a lock-step vector step with the sims in their own processes.
 
 Benchmarks only (``bench --train-loop``'s ``process-floor`` contender). A
-vector env of Reacher worlds laid out as remoteenv's default vector env lays
-them out (K worlds per child process by remoteenv's own rule,
-``default_envs_per_process``; the children made batch work and pinned as
-``place_sims="auto"`` does; torch's threads lowered as
-``torch_threads="auto"`` does), whose children run the
+vector env of Reacher worlds laid out as remoteenv lays out the worlds of a
+scene whose Python runs per world (``default_envs_per_process(N,
+stacked_hooks=False)``: a process per CPU, one physics thread each; with its
+children blocking between steps that layout is this contender's fastest,
+docs/performance.md "One process, its physics on threads"), the children
+made batch work and pinned as ``place_sims="auto"`` does, torch's threads
+lowered as ``torch_threads="auto"`` does. Its children run the
 scene's own stepping (:class:`~remoteenv.sim.stepping.batch_step.WorldsStepper`:
 the stacked hooks, one ``mujoco.batch`` call, the batch and observation
 checks) and nothing else around it: the actions and results in one
@@ -20,7 +22,7 @@ above EnvPool is the processes taking turns.
 
 The agent side here and :func:`serve` (the child, ``python -m
 remoteenv.benchmarks.harness.process_floor K SEED REQUEST_FD REPLY_FD
-REGION_FD``) are in one module because they share the region's layout.
+REGION_FD THREADS``) are in one module because they share the region's layout.
 """
 
 from __future__ import annotations
@@ -72,8 +74,8 @@ def region_views(buf: Any, k: int) -> dict[str, np.ndarray]:
     return views
 
 
-def serve(k: int, seed: int, request_fd: int, reply_fd: int, region_fd: int) -> None:
-    """The child: K Reacher worlds reset with seeds ``seed..seed+K-1``, their
+def serve(k: int, seed: int, request_fd: int, reply_fd: int, region_fd: int, threads: int = 1) -> None:
+    """The child: K Reacher worlds (their physics on ``threads`` threads) reset with seeds ``seed..seed+K-1``, their
     first observations in the region, then one tick per request byte (a
     reset of every world on the tick after their time limit: Reacher never
     terminates, so the worlds of a child end their episodes together)."""
@@ -83,7 +85,7 @@ def serve(k: int, seed: int, request_fd: int, reply_fd: int, region_fd: int) -> 
 
     reacher = reacher_class()
     envs = [reacher() for _ in range(k)]
-    commands = BatchCommands(LockStepping(envs).worlds, envs[0].action_space, 0)
+    commands = BatchCommands(LockStepping(envs).worlds, envs[0].action_space, 0, threads=threads)
     first = commands.reset_batch({"worlds": list(range(k)), "seeds": list(range(seed, seed + k))}, None, None)
     stepper = commands.stepper
     assert stepper is not None
@@ -127,7 +129,8 @@ class ProcessFloorVectorEnv:
         self.num_envs = num_envs
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (OBS_DIM,), np.float64)
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (ACT_DIM,), np.float32)
-        self._slices = world_slices(num_envs, default_envs_per_process(num_envs))
+        self._slices = world_slices(num_envs, default_envs_per_process(num_envs, stacked_hooks=False))
+        self._threads = 1
         self._procs: list[subprocess.Popen[bytes]] = []
         self._requests: list[int] = []
         self._replies: list[int] = []
@@ -142,7 +145,7 @@ class ProcessFloorVectorEnv:
             self.close()
             raise
         SimPlacement(AUTO, own_sims=True, real_time=False).apply([p.pid for p in self._procs])
-        TorchThreads(AUTO, len(self._procs)).apply()
+        TorchThreads(AUTO, len(self._procs) * self._threads).apply()
 
     def _start(self, k: int, seed: int) -> None:
         region_fd = os.memfd_create("remoteenv-floor")
@@ -155,7 +158,7 @@ class ProcessFloorVectorEnv:
         try:
             self._procs.append(
                 subprocess.Popen(
-                    [sys.executable, "-m", __name__, str(k), str(seed), *map(str, theirs)],
+                    [sys.executable, "-m", __name__, str(k), str(seed), *map(str, theirs), str(self._threads)],
                     pass_fds=theirs,
                 )
             )
@@ -226,4 +229,4 @@ class ProcessFloorVectorEnv:
 __all__ = ["ProcessFloorVectorEnv", "region_size", "region_views", "serve"]
 
 if __name__ == "__main__":
-    serve(*map(int, sys.argv[1:6]))
+    serve(*map(int, sys.argv[1:7]))

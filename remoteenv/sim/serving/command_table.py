@@ -83,8 +83,9 @@ def build_table(
     :func:`~remoteenv.sim.serving.stepping_modes.stepping_and_commands`'s;
     ``world_factory`` makes a scratch world for the handshake's cost
     measurement (:class:`~remoteenv.sim.serving.commands.Commands`)."""
-    stepping, mode_commands = stepping_and_commands(envs, instance, run, seed=seed, clock=clock)
+    stepping, mode_commands, physics = stepping_and_commands(envs, instance, run, seed=seed, clock=clock)
     common = Commands(envs, stepping, instance, stop, launcher_channel=pipe, world_factory=world_factory)
+    common.physics = physics
     handlers: dict[str, Handler] = common.handlers()
     handlers.update(AttributeCommands(envs, instance).handlers())
     handlers.update(mode_commands)

@@ -72,6 +72,9 @@ class Commands:
         self.stepping = stepping
         #: Every command the server answers, sent in the handshake (the server fills it in).
         self.advertised: list[str] = []
+        #: How a lock-step process steps its worlds' physics, sent in the handshake's
+        #: metadata (the server fills it in, :meth:`~remoteenv.sim.stepping.batch_commands.BatchCommands.physics`).
+        self.physics: dict[str, Any] = {}
         self._worlds = stepping.worlds
         self.instance = instance
         self._stop = stop
@@ -96,6 +99,7 @@ class Commands:
             "dt": float(env.dt),
             "timestep": float(env.model.opt.timestep),
             "frame_skip": env.frame_skip,
+            **self.physics,
         }
         if msg.get("world_cost") is True:
             metadata["world_cost_s"] = self._world_cost()

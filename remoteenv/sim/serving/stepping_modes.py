@@ -6,6 +6,7 @@ Runs in the sim process.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.serving.commands import Handler
@@ -23,15 +24,17 @@ def stepping_and_commands(
     *,
     seed: int | None,
     clock: Clock,
-) -> tuple[Stepping, dict[str, Handler]]:
-    """The stepping ``run`` asks for and the commands only that mode answers:
-    ``timing``, ``pause`` and ``resume`` in real time, ``reset_batch``,
-    ``step_batch`` (and ``shared_batch`` where the spaces allow) in lock-step.
+) -> tuple[Stepping, dict[str, Handler], dict[str, Any]]:
+    """The stepping ``run`` asks for, the commands only that mode answers
+    (``timing``, ``pause`` and ``resume`` in real time, ``reset_batch``,
+    ``step_batch`` and ``shared_batch`` where the spaces allow in lock-step)
+    and, in lock-step, how the worlds' physics steps (the handshake's
+    ``physics_threads`` and ``stacked_hooks``, see :meth:`BatchCommands.physics`).
     ``seed`` is world 0's launch seed (world ``w``: ``seed + w``) for the delay
     and link streams; ``clock`` real time's (seconds, monotonic)."""
     if run.real_time:
         real = RealTimeStepping(envs, run, clock=clock, seed=seed)
-        return real, {"timing": real.timing, "pause": real.pause, "resume": real.resume}
+        return real, {"timing": real.timing, "pause": real.pause, "resume": real.resume}, {}
     lock = LockStepping(envs, run, seed=seed)
-    batch = BatchCommands(lock.worlds, envs[0].action_space, instance)
-    return lock, batch.handlers()
+    batch = BatchCommands(lock.worlds, envs[0].action_space, instance, threads=run.physics_threads)
+    return lock, batch.handlers(), batch.physics()

@@ -73,6 +73,16 @@ class BatchCommands:
         if self.lane is not None:
             self.lane.close()
 
+    def physics(self) -> dict[str, Any]:
+        """How the process steps its worlds' physics, for the handshake's metadata:
+        ``physics_threads`` (threads, the caller's included) and ``stacked_hooks``
+        (every world in one ``mujoco.batch`` with the scene's stacked hooks: the
+        process's Python runs once per tick, not once per world)."""
+        stepper = self.stepper
+        if stepper is None:
+            return {"physics_threads": 1, "stacked_hooks": False}
+        return {"physics_threads": stepper.threads, "stacked_hooks": stepper.batched is not None}
+
     def handlers(self) -> dict[str, Any]:
         """The commands this object answers (``shared_batch`` when the worlds' spaces fit a region)."""
         out: dict[str, Any] = {"reset_batch": self.reset_batch, "step_batch": self.step_batch}

@@ -63,6 +63,8 @@ class WorldsStepper:
         self._hook = "post_steps" if own else "post_step"
         self._all = list(range(len(self.envs)))
         nthreads = threads if threads is not None else default_threads(len(self.envs))
+        #: Threads the worlds' physics steps on, the caller's included.
+        self.threads = max(1, int(nthreads))
         #: The worlds' physics in one ``mujoco.batch.Batch`` (scenes with stacked hooks), else None.
         self.batched = BatchedWorlds(self.envs, nthreads) if self._cls.stacked_hooks and available() else None
         self.physics = PhysicsThreads(1 if self.batched is not None else nthreads)

@@ -38,6 +38,8 @@ LOCK_STEP = "lock_step"
 REAL_TIME = "real_time"
 #: The largest ``metadata["world_cost_s"]`` a reply may state (seconds).
 MAX_WORLD_COST_S = 60.0
+#: The most ``metadata["physics_threads"]`` a reply may state.
+MAX_PHYSICS_THREADS = 4096
 #: Commands every server answers.
 CORE_COMMANDS = frozenset({"handshake", "reset", "step", "render", "close"})
 #: Commands a server without a ``commands`` list answers in lock-step only...
@@ -91,6 +93,11 @@ class Handshake:
     #: Wall seconds one world's control tick costs the server on one thread
     #: (physics and camera rendering), if it says: a layout hint.
     world_cost_s: float | None = None
+    #: Lock-step: threads the server steps its worlds' physics on, if it says.
+    physics_threads: int | None = None
+    #: Lock-step: whether the server steps its worlds as one batch through the
+    #: scene's stacked hooks (its Python once per tick, not per world), if it says.
+    stacked_hooks: bool | None = None
     #: The reply map as received.
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
@@ -211,6 +218,10 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
     cost = _typed(meta, "world_cost_s", (int, float), "metadata ")
     if cost is not None and not 0 <= cost <= MAX_WORLD_COST_S:
         raise ProtocolError(f"handshake metadata 'world_cost_s' must be 0..{MAX_WORLD_COST_S} s, got {cost!r}")
+    threads = _typed(meta, "physics_threads", int, "metadata ")
+    if threads is not None and not 1 <= threads <= MAX_PHYSICS_THREADS:
+        raise ProtocolError(f"handshake metadata 'physics_threads' must be 1..{MAX_PHYSICS_THREADS}, got {threads!r}")
+    stacked = _typed(meta, "stacked_hooks", bool, "metadata ")
     commands = _typed(reply, "commands", list, "")
     if commands is not None and not all(isinstance(c, str) for c in commands):
         raise ProtocolError(f"handshake 'commands' must be strings: {short_repr(commands)}")
@@ -234,6 +245,8 @@ def parse_handshake(reply: Mapping[str, Any], expected_version: int = PROTOCOL_V
         real_time_mode=_real_time_mode(stepping),
         commands=None if commands is None else frozenset(commands),
         world_cost_s=None if cost is None else float(cost),
+        physics_threads=threads,
+        stacked_hooks=stacked,
         raw=reply,
     )
 

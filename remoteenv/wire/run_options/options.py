@@ -19,7 +19,11 @@ What the options mean (``docs/real-time.md``, ``docs/delays.md``):
 - lock-step's delays, in control ticks: ``action_delay``, ``obs_delay``, and
   their channel rules ``action_delivery``, ``obs_delivery``,
   ``delayed_rewards`` (:class:`~remoteenv.wire.delays.channel_rules.ChannelRules`);
-- real time's emulated link, in wall seconds: ``link_delay``.
+- real time's emulated link, in wall seconds: ``link_delay``;
+- lock-step's physics threads per sim process, ``physics_threads`` (None:
+  the sim's default, :func:`remoteenv.sim.stepping.batch_physics.default_threads`),
+  which the vector env's default layout sets (:mod:`remoteenv.agent.vector.vector_layout`);
+  a world's trajectory does not depend on it.
 
 One mode's delays are refused in the other, and the rules without a lock-step
 delay to act on are moot (not written to the sim). Every check is here, so a
@@ -68,6 +72,8 @@ class RunOptions:
             emulated link.
         action_delivery, obs_delivery, delayed_rewards: lock-step, with a
             delay: the channel rules (:attr:`channel`).
+        physics_threads: lock-step; threads each sim process steps its
+            worlds' physics on (an int >= 1; None: the sim's default).
     """
 
     real_time: bool = False
@@ -79,10 +85,16 @@ class RunOptions:
     action_delivery: str = NEWEST
     obs_delivery: str = NEWEST
     delayed_rewards: bool = False
+    physics_threads: int | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
         set_(self, "real_time", bool(self.real_time))
+        if self.physics_threads is not None:
+            if type(self.physics_threads) is not int or self.physics_threads < 1:
+                raise ValueError(f"physics_threads must be an int >= 1 or None, got {self.physics_threads!r:.40}")
+            if self.real_time:
+                raise ValueError("physics_threads is lock-step's: a real-time sim steps one world")
         _tick_delay(self.action_delay, "action_delay")  # the delays are kept as given, once checked
         _tick_delay(self.obs_delay, "obs_delay")
         if self.link_delay is not None:
@@ -144,9 +156,9 @@ class RunOptions:
 
     def scene_arguments(self) -> list[str]:
         """The scene command line's flags for these options (the delays go in
-        the delay file, :meth:`delay_file_text`): none in lock-step."""
+        the delay file, :meth:`delay_file_text`): in lock-step, the physics threads when set."""
         if not self.real_time:
-            return []
+            return [] if self.physics_threads is None else ["--physics-threads", str(self.physics_threads)]
         flags = ["--real-time", "--real-time-factor", repr(float(self.real_time_factor))]
         if self.real_time_mode != ELASTIC:
             flags += ["--real-time-mode", self.real_time_mode]
