@@ -70,12 +70,12 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         num_envs: N, the number of worlds.
         envs_per_process: K, worlds hosted (and stepped from one request) by
             each sim process; ``ceil(N / K)`` processes are launched. Default:
-            cheap worlds worth two physics threads or more (N >= 16 on 2 CPUs
-            or more) whose scene steps them as one batch run in one process,
-            their physics on ``min(cpu_count, N // 8)`` threads
-            (:attr:`physics_threads`); otherwise ``max(8, ceil(N / cpu_count))``
-            capped at N (on a 2-core machine one process up to N = 8, two up to
-            N = 15); the fastest layouts measured there (see
+            cheap worlds whose scene steps them as one batch, and which that
+            rule would spread over two processes or more (N >= 9 on 2 CPUs),
+            run in one process, their physics on ``min(cpu_count, N // 4)``
+            threads (:attr:`physics_threads`); otherwise ``max(8, ceil(N /
+            cpu_count))`` capped at N (on a 2-core machine one process up to N
+            = 8); the fastest layouts measured there (see
             :func:`default_envs_per_process`). Where what a world costs could
             change K, the first sim measures one world's whole tick (physics
             and every hook, however the scene renders: :attr:`world_cost_s`)

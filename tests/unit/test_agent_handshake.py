@@ -130,8 +130,8 @@ def test_costly_worlds_get_one_process_per_cpu(monkeypatch):
     monkeypatch.setattr(vector_layout.os, "cpu_count", lambda: 2)
     layout = vector_layout.default_envs_per_process
     assert layout(8) == layout(8, 12e-6) == layout(8, 50e-6) == 8  # microseconds of physics: one process
-    assert layout(12) == 8  # fewer than two threads' worth: a process per CPU
-    assert layout(16) == 16  # two threads' worth of cheap worlds: one process (test_default_layout_threads below)
+    assert layout(16) == 16  # cheap worlds stepped as one batch: one process (test_default_layout_threads below)
+    assert layout(16, stacked_hooks=False) == 8  # a scene whose Python runs per world: a process per CPU
     assert layout(8, 6e-4) == 4 and layout(16, 6e-4) == 8 and layout(64, 6e-4) == 32  # camera images: 2 processes
     assert layout(1, 6e-4) == 1 and layout(3, 6e-4) == 2
 
@@ -148,13 +148,17 @@ def test_default_layout_threads(monkeypatch):
         vector_layout.layout_threads,
     )
     monkeypatch.setattr(vector_layout.os, "cpu_count", lambda: 2)
-    assert [threads(n) for n in (1, 8, 15, 16, 64, 1024)] == [1, 1, 1, 2, 2, 2]
+    # One process already up to 8 worlds (1 thread); beyond, one process on both CPUs.
+    assert [threads(n) for n in (1, 4, 8, 9, 12, 16, 64, 1024)] == [1, 1, 1, 2, 2, 2, 2, 2]
+    assert [layout(n) for n in (1, 4, 8, 9, 12, 16, 64)] == [1, 4, 8, 9, 12, 16, 64]
     assert threads(16, 6e-4) == 1 and layout(16, 6e-4) == 8
-    assert per(16, 16) == per(64, 64) == 2
+    assert threads(12, stacked_hooks=False) == 1 and layout(12, stacked_hooks=False) == 8
+    assert per(12, 12) == per(16, 16) == per(64, 64) == 2
     assert per(16, 8) is None and per(8, 8) is None and per(12, 8) is None
     monkeypatch.setattr(vector_layout.os, "cpu_count", lambda: 1)
     assert threads(64) == 1 and layout(64) == 64 and per(64, 64) is None
     monkeypatch.setattr(vector_layout.os, "cpu_count", lambda: 4)
-    assert threads(24) == 3 and layout(24) == 24 and per(24, 24) == 3
+    assert threads(8) == 1 and layout(8) == 8  # a process per CPU would be one process of 8
+    assert threads(24) == 4 and layout(24) == 24 and per(24, 24) == 4
     assert threads(64) == 4 and layout(64) == 64
     assert layout(64, 6e-4) == 16 and per(64, 16) is None

@@ -22,9 +22,11 @@ from remoteenv.wire.messages.handshake import Handshake
 #: in its own hook 1816 us. The bound sits between the two groups, about 3x
 #: from the dearest cheap world and the cheapest rendering one.
 COSTLY_WORLD_S = 500e-6
-#: Worlds per physics thread of the default layout's one process: a thread
-#: of its own for fewer costs more hand-off than the physics it takes.
-WORLDS_PER_THREAD = 8
+#: Fewest worlds per physics thread of the default layout's one process: a
+#: thread for fewer costs more hand-off than the physics it takes (on the
+#: 2-CPU machine 8 worlds on two threads stepped 1.04x as fast as on one, 4
+#: worlds alike).
+WORLDS_PER_THREAD = 4
 
 
 def default_envs_per_process(num_envs: int, world_cost_s: float | None = None, stacked_hooks: bool = True) -> int:
@@ -44,17 +46,17 @@ def default_envs_per_process(num_envs: int, world_cost_s: float | None = None, s
     work shares the machine.
 
     Otherwise, where :func:`default_physics_threads` gives the worlds two
-    threads or more (N >= 16 on 2 CPUs or more) and the scene steps its
+    threads or more (N >= 9 on 2 CPUs) and the scene steps its
     worlds as one batch (``stacked_hooks``, as the first sim's handshake says;
     a scene whose Python runs per world keeps a process per CPU): every world
     in one process, its physics on those threads (``mujoco.batch``'s, the GIL
     released), its hooks stacked in one call. Measured side by side on the
     2-CPU machine (Reacher, rounds taking turns in one process, 2026-11-28,
     docs/performance.md "One process, its physics on threads"), against a
-    process per CPU pinned to it: a PPO-shaped training loop 1.04x as fast
-    at N = 16, 1.05x at N = 32, 1.00x at N = 64; plain stepping 1.08x,
-    1.01x, 1.03x; beside one CPU hog, which a pinned sim waits behind,
-    training 2.4x and plain stepping 4.3x as fast at N = 16.
+    process per CPU pinned to it: a PPO-shaped training loop 1.08x as fast
+    at N = 12, 1.04x at N = 16, 1.05x at N = 32, 1.00x at N = 64; plain
+    stepping 1.28x, 1.08x, 1.01x, 1.03x; beside one CPU hog, which a pinned
+    sim waits behind, training 2.4x and plain stepping 4.3x as fast at N = 16.
 
     Otherwise at least 8 worlds per process,
     and no more processes than CPUs: ``max(8, ceil(N / cpu_count))``, capped at N.
@@ -73,20 +75,28 @@ def default_envs_per_process(num_envs: int, world_cost_s: float | None = None, s
         return max(1, -(-num_envs // cpus))
     if default_physics_threads(num_envs, world_cost_s, stacked_hooks) > 1:
         return num_envs
-    per_cpu = -(-num_envs // cpus)
-    return min(num_envs, max(8, per_cpu))
+    return _per_cpu_layout(num_envs, cpus)
 
 
 def default_physics_threads(num_envs: int, world_cost_s: float | None = None, stacked_hooks: bool = True) -> int:
     """Physics threads of each sim process of the default layout of ``num_envs``
     worlds (see :func:`default_envs_per_process`): for cheap worlds stepped as
-    one batch one per :data:`WORLDS_PER_THREAD` worlds, at most one per CPU;
-    1 for costly worlds (a process per CPU renders them) and for scenes whose
-    Python runs per world (``stacked_hooks`` False: a process per CPU runs it)."""
+    one batch that a process per CPU would spread over two processes or more,
+    one per :data:`WORLDS_PER_THREAD` worlds, at most one per CPU; else 1 (one
+    process of one thread already, costly worlds: a process per CPU renders
+    them, and scenes whose Python runs per world, ``stacked_hooks`` False: a
+    process per CPU runs it)."""
     if not stacked_hooks or (world_cost_s is not None and world_cost_s > COSTLY_WORLD_S):
         return 1
     cpus = max(1, os.cpu_count() or 1)
+    if num_envs <= _per_cpu_layout(num_envs, cpus):
+        return 1
     return max(1, min(cpus, num_envs // WORLDS_PER_THREAD))
+
+
+def _per_cpu_layout(num_envs: int, cpus: int) -> int:
+    """K of a process per CPU, at least 8 worlds each (capped at ``num_envs``)."""
+    return min(num_envs, max(8, -(-num_envs // cpus)))
 
 
 def layout_threads(num_envs: int, envs_per_process: int) -> int | None:
