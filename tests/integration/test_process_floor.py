@@ -1,8 +1,9 @@
 """The training-loop benchmark's ``process-floor`` contender steps the same
 worlds as remoteenv's vector env (same seeds and actions: the same
 observations, rewards and flags, the scene's own stepping, the time limit
-and next-step autoreset included), lays them out as
-remoteenv's default layout does, and leaves no child behind."""
+and next-step autoreset included), lays them out as remoteenv lays out a
+scene whose Python runs per world (a process per CPU, its fastest layout),
+and leaves no child behind."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 from equality import assert_same_reacher_episodes
 
+from remoteenv.agent.vector.vector_layout import default_envs_per_process, world_slices
 from remoteenv.benchmarks.harness.process_floor import ProcessFloorVectorEnv
 from remoteenv.benchmarks.train_loop import ratios
 
@@ -20,7 +22,7 @@ def test_the_floor_steps_the_worlds_remoteenv_steps_and_stops_its_children():
     remote = gym.make_vec("remoteenv/Reacher-v0", n, vectorization_mode="vector_entry_point")
     procs = list(floor._procs)
     try:
-        assert [hi - lo for lo, hi in floor._slices] == [hi - lo for lo, hi in remote.unwrapped.slices]
+        assert floor._slices == world_slices(n, default_envs_per_process(n, stacked_hooks=False))
         obs_f, _ = floor.reset()
         obs_r, _ = remote.reset(seed=3)
         np.testing.assert_array_equal(obs_f, obs_r)
