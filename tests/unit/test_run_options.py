@@ -25,8 +25,8 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("run", CASES, ids=range(len(CASES)))
-def test_the_sim_rebuilds_the_options_the_agent_made(tmp_path, run):
+def _through_the_command_line(tmp_path, run: RunOptions) -> tuple[list[str], RunOptions]:
+    """The scene command line the launcher builds for ``run``, and the options the sim rebuilds from it."""
     spec = LaunchSpec("/s/scene.py", run=run)
     cmd = scene_command(
         spec.scene,
@@ -41,8 +41,12 @@ def test_the_sim_rebuilds_the_options_the_agent_made(tmp_path, run):
         delay_file=write_sim_delay_file(str(tmp_path), 0, spec.run.delay_file_text()),
     )
     parser = scene_argument_parser()
-    args = parser.parse_args(cmd[2:])
-    assert run_options_from_arguments(parser, args).describe() == run.describe()
+    return cmd, run_options_from_arguments(parser, parser.parse_args(cmd[2:]))
+
+
+@pytest.mark.parametrize("run", CASES, ids=range(len(CASES)))
+def test_the_sim_rebuilds_the_options_the_agent_made(tmp_path, run):
+    assert _through_the_command_line(tmp_path, run)[1].describe() == run.describe()
 
 
 def test_the_options_are_one_frozen_object_and_checked_when_made():
@@ -62,21 +66,9 @@ def test_the_options_are_one_frozen_object_and_checked_when_made():
 
 
 def test_the_physics_threads_travel_to_the_sim_and_are_checked(tmp_path):
-    run = RunOptions(physics_threads=2)
-    cmd = scene_command(
-        "/s/scene.py",
-        "ipc:///x",
-        instance=0,
-        worlds=16,
-        env_kwargs={},
-        parent_pid=1,
-        ready_file="r",
-        private_dir=str(tmp_path),
-        run=run,
-    )
+    cmd, rebuilt = _through_the_command_line(tmp_path, RunOptions(physics_threads=2))
     assert cmd[cmd.index("--physics-threads") + 1] == "2"
-    parser = scene_argument_parser()
-    assert run_options_from_arguments(parser, parser.parse_args(cmd[2:])).physics_threads == 2
+    assert rebuilt.physics_threads == 2
     assert "--physics-threads" not in RunOptions().scene_arguments()
     for bad in (0, -2, True, 2.0):
         with pytest.raises(ValueError, match="physics_threads"):

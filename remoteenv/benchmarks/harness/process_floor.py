@@ -22,7 +22,7 @@ above EnvPool is the processes taking turns.
 
 The agent side here and :func:`serve` (the child, ``python -m
 remoteenv.benchmarks.harness.process_floor K SEED REQUEST_FD REPLY_FD
-REGION_FD THREADS``) are in one module because they share the region's layout.
+REGION_FD``) are in one module because they share the region's layout.
 """
 
 from __future__ import annotations
@@ -74,8 +74,8 @@ def region_views(buf: Any, k: int) -> dict[str, np.ndarray]:
     return views
 
 
-def serve(k: int, seed: int, request_fd: int, reply_fd: int, region_fd: int, threads: int = 1) -> None:
-    """The child: K Reacher worlds (their physics on ``threads`` threads) reset with seeds ``seed..seed+K-1``, their
+def serve(k: int, seed: int, request_fd: int, reply_fd: int, region_fd: int) -> None:
+    """The child: K Reacher worlds reset with seeds ``seed..seed+K-1``, their
     first observations in the region, then one tick per request byte (a
     reset of every world on the tick after their time limit: Reacher never
     terminates, so the worlds of a child end their episodes together)."""
@@ -85,7 +85,7 @@ def serve(k: int, seed: int, request_fd: int, reply_fd: int, region_fd: int, thr
 
     reacher = reacher_class()
     envs = [reacher() for _ in range(k)]
-    commands = BatchCommands(LockStepping(envs).worlds, envs[0].action_space, 0, threads=threads)
+    commands = BatchCommands(LockStepping(envs).worlds, envs[0].action_space, 0)
     first = commands.reset_batch({"worlds": list(range(k)), "seeds": list(range(seed, seed + k))}, None, None)
     stepper = commands.stepper
     assert stepper is not None
@@ -130,7 +130,6 @@ class ProcessFloorVectorEnv:
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (OBS_DIM,), np.float64)
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (ACT_DIM,), np.float32)
         self._slices = world_slices(num_envs, default_envs_per_process(num_envs, stacked_hooks=False))
-        self._threads = 1
         self._procs: list[subprocess.Popen[bytes]] = []
         self._requests: list[int] = []
         self._replies: list[int] = []
@@ -145,7 +144,7 @@ class ProcessFloorVectorEnv:
             self.close()
             raise
         SimPlacement(AUTO, own_sims=True, real_time=False).apply([p.pid for p in self._procs])
-        TorchThreads(AUTO, len(self._procs) * self._threads).apply()
+        TorchThreads(AUTO, len(self._procs)).apply()
 
     def _start(self, k: int, seed: int) -> None:
         region_fd = os.memfd_create("remoteenv-floor")
@@ -158,7 +157,7 @@ class ProcessFloorVectorEnv:
         try:
             self._procs.append(
                 subprocess.Popen(
-                    [sys.executable, "-m", __name__, str(k), str(seed), *map(str, theirs), str(self._threads)],
+                    [sys.executable, "-m", __name__, str(k), str(seed), *map(str, theirs)],
                     pass_fds=theirs,
                 )
             )
@@ -229,4 +228,4 @@ class ProcessFloorVectorEnv:
 __all__ = ["ProcessFloorVectorEnv", "region_size", "region_views", "serve"]
 
 if __name__ == "__main__":
-    serve(*map(int, sys.argv[1:7]))
+    serve(*map(int, sys.argv[1:6]))

@@ -249,8 +249,7 @@ class PipeChannel:
                     out.append((None, frame))
         if posted:
             # Its own ring is served once, from the region (decoding and routing it would find it served).
-            ring = protocol.region_ring(posted)
-            if out and out[-1][1] == ring:
+            if out and out[-1][1] == protocol.region_ring(posted):
                 out.pop()
             # Served in the agent's order (its seq numbers increase): after the frames sent before it.
             at = len(out)
