@@ -91,3 +91,41 @@ def test_an_explicit_layout_is_kept_and_not_measured():
         assert env.envs_per_process == 4 and env.world_cost_s is None and len(env.pids) == 1
     finally:
         env.close()
+
+
+def test_a_later_vector_env_of_the_scene_starts_in_the_layout_learnt(monkeypatch):
+    from remoteenv.agent.vector import layout_memory, vector_launch
+
+    layout_memory.forget_all()
+    opened: list[tuple[int, bool]] = []
+    real_open = vector_launch.open_session
+
+    def counted(source, label, scene, slices, k, **options):
+        opened.append((k, options["measure_world_cost"]))
+        return real_open(source, label, scene, slices, k, **options)
+
+    monkeypatch.setattr(vector_launch, "open_session", counted)
+    try:
+        first = gym.make_vec("remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point").unwrapped
+        first.close()
+        learnt = first.envs_per_process
+        assert opened[0][1] and all(not measured for _, measured in opened[1:])  # measured once
+        assert opened[-1][0] == learnt
+        opened.clear()
+        later = gym.make_vec("remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point").unwrapped
+        try:
+            assert opened == [(learnt, False)]  # started where the first ended, measuring nothing
+            assert later.envs_per_process == learnt and later.world_cost_s == first.world_cost_s
+            assert len(later.pids) == len(later.slices)
+            later.reset(seed=0)
+            later.step(np.zeros((16, 2), np.float32))
+        finally:
+            later.close()
+        opened.clear()
+        other = gym.make_vec(
+            "remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point", reward_control_weight=0.5
+        ).unwrapped
+        other.close()
+        assert opened[0][1]  # other scene arguments: measured afresh
+    finally:
+        layout_memory.forget_all()

@@ -75,6 +75,18 @@ def test_forked_sims_draw_their_own_global_random_numbers(zygotes_on, closing):
     assert draws[0][1] != draws[1][1], "Python's random state came from the zygote"
 
 
+def test_the_zygotes_imports_stay_out_of_its_sims_collections(zygotes_on, closing):
+    # A collection (the one at the sim's exit too) would visit every object the
+    # zygote imported, copying its pages into the sim.
+    forked = OpenAIRemoteEnv(DRAWS)
+    plain = OpenAIRemoteEnv(DRAWS, launcher=Launcher(zygote=False))
+    for env in (forked, plain):
+        closing(env)
+    assert forked.launcher.sims[0].zygote_pid is not None and plain.launcher.sims[0].zygote_pid is None
+    assert forked.get_scene_attr("frozen_objects") > 10_000  # numpy, mujoco, gymnasium, remoteenv's sim side
+    assert plain.get_scene_attr("frozen_objects") == 0
+
+
 def test_the_plain_start_when_zygotes_are_off(monkeypatch, closing):
     monkeypatch.setenv(registry.SWITCH, "0")
     env = gym.make(CARTPOLE)

@@ -7,12 +7,14 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import threading
 from collections.abc import Callable
 from typing import Any
 
 from remoteenv.agent.errors import BatchTooLargeError, LimitError
 from remoteenv.agent.launch.sim_group import SimGroup
 from remoteenv.agent.session.sim_session import SimSession, open_session
+from remoteenv.agent.vector.layout_memory import WorldFacts, recall, remember, scene_key
 from remoteenv.agent.vector.sim_placement import SIM_THREADS_ENV
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, layout_threads, world_slices
 from remoteenv.wire.codec.spaces import value_nbytes
@@ -47,7 +49,11 @@ def open_worlds(
     would be refused: it gets 6): a first launch refused for that is placed
     again the same way. The default layout's processes get its physics
     threads (:func:`~remoteenv.agent.vector.vector_layout.layout_threads`,
-    in the run options) unless ``REMOTEENV_SIM_THREADS`` sets them.
+    in the run options) unless ``REMOTEENV_SIM_THREADS`` sets them. What a
+    measuring handshake said is remembered for this process
+    (:mod:`~remoteenv.agent.vector.layout_memory`): a later default layout of
+    the same scene and arguments starts where this one ended, measuring
+    nothing (the cost returned is the one remembered).
     """
     per_process = min(envs_per_process, num_envs)
 
@@ -59,6 +65,11 @@ def open_worlds(
             options = {**launch, "run": run}
         return open_session(source, label, scene, slices, k, measure_world_cost=measure, **options)
 
+    key = scene_key(scene, launch.get("env_kwargs") or {}, launch.get("render_mode")) if measure_cost else None
+    known = recall(key) if regroup is not None else None
+    if known is not None:  # learnt by an earlier vector env of this scene: start where it ended
+        per_process = _placed(num_envs, known)
+        measure_cost = False
     try:
         session = start(group, per_process, measure_cost)
     except BatchTooLargeError as exc:
@@ -73,13 +84,30 @@ def open_worlds(
     cost = handshake.world_cost_s
     if regroup is None:
         return session, per_process, cost
-    fit = worlds_that_fit(handshake.observation_space)
-    stacked = handshake.stacked_hooks is not False  # a server that does not say keeps the rule's first guess
-    better = min(default_envs_per_process(num_envs, cost, stacked), num_envs, max(1, fit))
+    if known is not None:
+        cost = known.cost_s
+    facts = WorldFacts(cost, handshake.stacked_hooks, worlds_that_fit(handshake.observation_space))
+    if cost is not None:
+        remember(key, facts)
+    better = _placed(num_envs, facts)
     if better == per_process:
         return session, per_process, cost
-    session.close()
-    return start(regroup(), better), better, cost
+    # The first layout's sims exit while the new ones start (an exit is
+    # ~30 ms of each sim's CPU: its interpreter's teardown).
+    closing = threading.Thread(target=session.close, name=f"{label}: closing the first layout's sims", daemon=True)
+    closing.start()
+    try:
+        return start(regroup(), better), better, cost
+    finally:
+        closing.join()
+
+
+def _placed(num_envs: int, facts: WorldFacts) -> int:
+    """K for ``num_envs`` worlds of which ``facts`` are known: the rule's
+    (:func:`~remoteenv.agent.vector.vector_layout.default_envs_per_process`),
+    at most what one batch reply carries."""
+    stacked = facts.stacked_hooks is not False  # a server that does not say keeps the rule's first guess
+    return min(default_envs_per_process(num_envs, facts.cost_s, stacked), num_envs, max(1, facts.fit))
 
 
 def _bounded(session: SimSession, num_envs: int, label: str) -> SimSession:
