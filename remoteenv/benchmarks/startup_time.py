@@ -14,7 +14,12 @@ imports Gymnasium and remoteenv first (not timed), then times:
   killed (SIGKILL), then the next ``step`` (which relaunches it) and the
   ``reset`` after it;
 - ``vector``: ``gym.make_vec(id, N, envs_per_process=1)`` → first ``reset``:
-  N sim processes at once (``--startup-vector N``, 0 to skip).
+  N sim processes at once (``--startup-vector N``, 0 to skip);
+- ``default vector`` and ``later default vector``: ``gym.make_vec(id, M)``
+  in the default layout → first ``reset`` (``--startup-default-vector M``, 0
+  to skip), twice: the first measures what a world costs and may relaunch
+  its sims in another layout, the later starts in the layout the first
+  learnt (:mod:`remoteenv.agent.vector.layout_memory`).
 
 Wall seconds (median and min over repeats) and CPU seconds of the agent and
 every process below it. With ``--hog`` a second pass runs with that many
@@ -38,7 +43,7 @@ from remoteenv.benchmarks.harness.report import emit, progress_log
 
 #: The ways of starting sims compared, with the environment each agent runs in.
 MODES = {"zygote": {"REMOTEENV_ZYGOTE": "1"}, "plain": {"REMOTEENV_ZYGOTE": "0"}}
-ROWS = ("first make", "later make", "restart", "vector")
+ROWS = ("first make", "later make", "restart", "vector", "default vector", "later default vector")
 TARGET_S = 0.3
 
 #: One agent process: times its envs and prints one JSON line.
@@ -50,8 +55,8 @@ AGENT = textwrap.dedent(
     from remoteenv.agent.launch.sim_process import kill_group
     from remoteenv.benchmarks.harness.anchors import cpu_seconds
 
-    env_id, later, vector = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
-    out = {"first make": [], "later make": [], "restart": [], "vector": []}
+    env_id, later, vector, default = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+    out = {row: [] for row in ("first make", "later make", "restart", "vector", "default vector", "later default vector")}
 
     def timed(row, work):
         cpu, wall = cpu_seconds(), time.perf_counter()
@@ -89,6 +94,15 @@ AGENT = textwrap.dedent(
 
     if vector:
         timed("vector", make_vector).close()
+
+    def make_default():
+        envs = gym.make_vec(env_id, num_envs=default, vectorization_mode="vector_entry_point")
+        envs.reset(seed=0)
+        return envs
+
+    if default:
+        timed("default vector", make_default).close()
+        timed("later default vector", make_default).close()
     print(json.dumps(out))
     """
 )
@@ -100,6 +114,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--startup-repeats", type=int, default=7, help="fresh agent processes per mode (default 7)")
     g.add_argument("--startup-later", type=int, default=3, help="later makes per agent process (default 3)")
     g.add_argument("--startup-vector", type=int, default=8, help="sims of the vector row (default 8; 0: no row)")
+    g.add_argument(
+        "--startup-default-vector",
+        type=int,
+        default=16,
+        help="worlds of the default-layout rows (default 16; 0: no rows)",
+    )
     g.add_argument("--startup-json", default=None, metavar="PATH", help="also write the result as JSON ('-': stdout)")
     try:  # shared with --batched, which defines it when present
         g.add_argument(
@@ -109,10 +129,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         pass
 
 
-def run_agent(env_id: str, mode: str, later: int, vector: int) -> dict[str, Any]:
+def run_agent(env_id: str, mode: str, later: int, vector: int, default: int = 0) -> dict[str, Any]:
     """One fresh agent process in ``mode``; its timings."""
     env = {**os.environ, **MODES[mode]}
-    argv = [sys.executable, "-c", AGENT, env_id, str(later), str(vector)]
+    argv = [sys.executable, "-c", AGENT, env_id, str(later), str(vector), str(default)]
     done = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=600)
     if done.returncode != 0:
         raise RuntimeError(f"the {mode} agent failed ({done.returncode}):\n{done.stderr[-2000:]}")
@@ -122,7 +142,7 @@ def run_agent(env_id: str, mode: str, later: int, vector: int) -> dict[str, Any]
     return result
 
 
-def measure(env_id: str, repeats: int, later: int, vector: int, log: Any) -> dict[str, Any]:
+def measure(env_id: str, repeats: int, later: int, vector: int, log: Any, default: int = 0) -> dict[str, Any]:
     """``{mode: {row: {"wall": [...], "cpu": [...]}}}`` over ``repeats`` alternating rounds."""
     samples: dict[str, dict[str, dict[str, list[float]]]] = {
         mode: {row: {"wall": [], "cpu": []} for row in ROWS} for mode in MODES
@@ -130,7 +150,7 @@ def measure(env_id: str, repeats: int, later: int, vector: int, log: Any) -> dic
     for r in range(repeats):
         order = list(MODES) if r % 2 == 0 else list(reversed(MODES))
         for mode in order:
-            for row, pairs in run_agent(env_id, mode, later, vector).items():
+            for row, pairs in run_agent(env_id, mode, later, vector, default).items():
                 for wall, cpu in pairs:
                     samples[mode][row]["wall"].append(wall)
                     samples[mode][row]["cpu"].append(cpu)
@@ -158,7 +178,7 @@ def format_table(result: dict[str, Any]) -> str:
     lines = [f"{result['env_id']}: gym.make -> first reset, and a restart (wall s, median / min; CPU s, median)"]
     for name, passes in result["passes"].items():
         lines.append(f"\n{name} (load average {passes['load_before']:.2f} before, {passes['load_after']:.2f} after)")
-        lines.append(f"{'':12s} | {'zygote':^26s} | {'plain':^26s}")
+        lines.append(f"{'':24s} | {'zygote':^26s} | {'plain':^26s}")
         for row in ROWS:
             if row not in passes["summary"]["zygote"]:
                 continue
@@ -166,8 +186,12 @@ def format_table(result: dict[str, Any]) -> str:
             for mode in MODES:
                 c = passes["summary"][mode][row]
                 cells.append(f"{c['median_s']:.3f} / {c['min_s']:.3f}  cpu {c['cpu_median_s']:.3f}")
-            label = f"vector, {result['vector']}" if row == "vector" else row
-            lines.append(f"{label:12s} | {cells[0]:^26s} | {cells[1]:^26s}")
+            label = row
+            if row == "vector":
+                label = f"vector, {result['vector']}"
+            elif "default vector" in row:
+                label = f"{row}, {result.get('default_vector')}"
+            lines.append(f"{label:24s} | {cells[0]:^26s} | {cells[1]:^26s}")
     lines.append(f"\ntarget: gym.make -> first reset <= {TARGET_S} s on a quiet host; {os.cpu_count()} CPUs")
     lines.append(f"{time.strftime('%Y-%m-%d %H:%M %Z')}")
     return "\n".join(lines)
@@ -182,14 +206,26 @@ def run(args: argparse.Namespace) -> int:
         log(f"# {name}")
         load_before = os.getloadavg()[0]
         with CpuHog(hog):
-            samples = measure(args.startup_id, args.startup_repeats, args.startup_later, args.startup_vector, log)
+            samples = measure(
+                args.startup_id,
+                args.startup_repeats,
+                args.startup_later,
+                args.startup_vector,
+                log,
+                args.startup_default_vector,
+            )
         passes[name] = {
             "load_before": load_before,
             "load_after": os.getloadavg()[0],
             "summary": summary(samples),
             "samples": samples,
         }
-    result = {"env_id": args.startup_id, "vector": args.startup_vector, "passes": passes}
+    result = {
+        "env_id": args.startup_id,
+        "vector": args.startup_vector,
+        "default_vector": args.startup_default_vector,
+        "passes": passes,
+    }
     emit(result, args.startup_json, format_table)
     return 0
 
