@@ -70,3 +70,36 @@ def test_a_relaunched_sim_is_placed_again_at_the_next_reset():
         assert os.sched_getscheduler(new[1]) == os.SCHED_BATCH
     finally:
         env.close()
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="pinning needs two CPUs")
+def test_a_pinned_sim_kept_off_its_cpu_by_a_busy_neighbour_takes_its_cpus_back():
+    import subprocess
+    import sys
+    import time
+
+    import numpy as np
+
+    env = _make(envs_per_process=2)
+    hog = None
+    try:
+        pids = env.pids
+        first = os.sched_getaffinity(pids[0])
+        assert len(first) == 1  # pinned, as above
+        # A CPU hog on that CPU alone: the sim there waits for it, time slice after time slice.
+        hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+        os.sched_setaffinity(hog.pid, first)
+        env.reset(seed=0)
+        actions = np.zeros((4, 2), np.float32)
+        deadline = time.monotonic() + 120.0  # generous: this loop ends as soon as the sim moved
+        while os.sched_getaffinity(pids[0]) == first and time.monotonic() < deadline:
+            for _ in range(32):
+                env.step(actions)
+        assert os.sched_getaffinity(pids[0]) == set(_cpus())
+        assert env.pids == pids  # the same sims, still serving
+        env.step(actions)
+    finally:
+        if hog is not None:
+            hog.kill()
+            hog.wait()
+        env.close()

@@ -26,6 +26,7 @@ import zmq
 
 from remoteenv.sim.process.lifecycle import exit_on_sigterm, remove_ipc_file, write_ready_file
 from remoteenv.sim.process.orphan import CHECK_INTERVAL_S, AgentWatch, parent_alive
+from remoteenv.sim.process.pin_release import PinRelease
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.serving.command_table import build_table, pack_reply
 from remoteenv.sim.serving.waits import ServingWaits
@@ -195,7 +196,8 @@ class RemoteControlledAgent:
             hot_window_s=SIM_SPIN_S if pipe is not None and not self.real_time else 0.0,
             think_limit_s=AGENT_THINK_SPIN_S,
             spin_s=self.deadline_spin_s,
-            answer=self._answer,
+            # A sim the agent pinned takes its CPUs back from a busy neighbour (lock step only).
+            answer=self._answer if self.real_time else PinRelease(self.instance).watching(self._answer),
             send=self._send_later,
             pipe_closed=self.pipe_closed,
         )

@@ -1,0 +1,134 @@
+"""A pinned sim takes its CPUs back once, when a window of answers shows it
+waited for its CPU at least OFF_CPU_S and longer than it ran; never while it
+is not pinned, never on a window that says less, never where the kernel
+does not say (the figures are the kernel's, fed here by hand)."""
+
+from __future__ import annotations
+
+import pytest
+
+from remoteenv.sim.process import pin_release
+from remoteenv.sim.process.pin_release import OFF_CPU_S, WINDOW, PinRelease
+
+
+class FakeStat:
+    """``schedstat`` as a test sets it: (seconds run, seconds waited)."""
+
+    def __init__(self) -> None:
+        self.ran = self.waited = 0.0
+        self.reads = 0
+        self.known = True
+        self.closed = False
+
+    def read(self):
+        self.reads += 1
+        return (self.ran, self.waited) if self.known else None
+
+    def close(self) -> None:
+        self.closed = True
+
+
+@pytest.fixture
+def cpus(monkeypatch):
+    """The sim's affinity, and the calls that set it."""
+    state = {"now": {0, 1, 2, 3}, "set": []}
+    monkeypatch.setattr(pin_release, "_affinity", lambda: set(state["now"]))
+
+    def set_affinity(pid, cpus):
+        assert pid == 0
+        state["set"].append(set(cpus))
+        state["now"] = set(cpus)
+
+    monkeypatch.setattr(pin_release.os, "sched_setaffinity", set_affinity)
+    return state
+
+
+def _window(watch: PinRelease) -> None:
+    for _ in range(WINDOW):
+        watch.answered()
+
+
+def test_an_unpinned_sim_reads_nothing_and_changes_nothing(cpus):
+    stat = FakeStat()
+    watch = PinRelease(0, stat)
+    for _ in range(3):
+        stat.waited += 1.0
+        _window(watch)
+    assert stat.reads == 0 and cpus["set"] == [] and not watch.released
+
+
+def test_a_pinned_sim_kept_off_its_cpu_takes_its_cpus_back_once(cpus):
+    stat = FakeStat()
+    watch = PinRelease(3, stat)
+    cpus["now"] = {1}  # the agent pinned it
+    _window(watch)  # the first window only reads where the figures stand
+    stat.ran += 0.004
+    stat.waited += OFF_CPU_S
+    _window(watch)
+    assert cpus["set"] == [{0, 1, 2, 3}] and watch.released and stat.closed
+    cpus["now"] = {2}  # pinned again by someone else: the sim does not fight it
+    stat.waited += 1.0
+    _window(watch)
+    _window(watch)
+    assert cpus["set"] == [{0, 1, 2, 3}]
+
+
+def test_windows_that_say_less_keep_the_sim_pinned(cpus):
+    stat = FakeStat()
+    watch = PinRelease(0, stat)
+    cpus["now"] = {0}
+    _window(watch)
+    stat.ran += 0.001
+    stat.waited += OFF_CPU_S * 0.9  # longer than it ran, but little
+    _window(watch)
+    stat.ran += OFF_CPU_S * 3
+    stat.waited += OFF_CPU_S * 2  # much, but it ran longer
+    _window(watch)
+    stat.ran += 0.001
+    stat.waited += 1.0  # only part of a window: judged at its end
+    for _ in range(WINDOW - 1):
+        watch.answered()
+    assert cpus["set"] == [] and not watch.released
+    watch.answered()
+    assert cpus["set"] == [{0, 1, 2, 3}]
+
+
+def test_where_the_kernel_does_not_say_nothing_changes(cpus):
+    stat = FakeStat()
+    stat.known = False
+    watch = PinRelease(0, stat)
+    cpus["now"] = {0}
+    for _ in range(3):
+        stat.waited += 1.0
+        _window(watch)
+    assert cpus["set"] == [] and not watch.released
+
+
+def test_the_watched_answer_counts_even_when_it_raises(cpus):
+    stat = FakeStat()
+    watch = PinRelease(0, stat)
+    cpus["now"] = {0}
+    calls = []
+
+    def answer(channel, frames):
+        calls.append((channel, frames))
+        raise RuntimeError("boom")
+
+    watched = watch.watching(answer)
+    for _ in range(WINDOW):
+        with pytest.raises(RuntimeError):
+            watched("pipe", [])
+    assert len(calls) == WINDOW and stat.reads == 1
+
+
+def test_the_kernels_figures_of_this_thread_are_read():
+    stat = pin_release.SchedStat()
+    try:
+        first = stat.read()
+        if first is None:
+            pytest.skip("this kernel has no schedstat")
+        sum(range(200_000))
+        second = stat.read()
+        assert second is not None and second[0] > first[0] and second[1] >= first[1]
+    finally:
+        stat.close()
