@@ -25,6 +25,8 @@ def test_the_startup_benchmark_reports_both_ways_and_every_row(tmp_path):
             "1",
             "--startup-vector",
             "2",
+            "--startup-default-vector",
+            "10",
             "--startup-json",
             str(out),
         ],
@@ -34,10 +36,10 @@ def test_the_startup_benchmark_reports_both_ways_and_every_row(tmp_path):
         timeout=600,
     )
     assert done.returncode == 0, done.stderr
-    assert "first make" in done.stdout and "vector, 2" in done.stdout
+    assert "first make" in done.stdout and "vector, 2" in done.stdout and "later default vector, 10" in done.stdout
     result = json.loads(out.read_text())
     (quiet,) = result["passes"].values()
     for mode in ("zygote", "plain"):
         rows = quiet["summary"][mode]
-        assert set(rows) == {"first make", "later make", "restart", "vector"}
+        assert set(rows) == {"first make", "later make", "restart", "vector", "default vector", "later default vector"}
         assert all(row["n"] == 1 and row["median_s"] > 0 for row in rows.values())
