@@ -145,7 +145,9 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
             factor and regime, the delays and their rules), checked once and sent
             whole to the sims (attached sims run what they were launched with).
         world_cost_s: what one world's whole control tick costs its sim on one
-            thread (seconds), where the default layout measured it; else None.
+            thread (seconds), where the default layout measured it (or an
+            earlier vector env of the same scene and arguments in this process
+            did: :mod:`~remoteenv.agent.vector.layout_memory`); else None.
         latency_stats: :class:`remoteenv.agent.session.latency_stats.LatencyStats` of every
             vector step so far: one wall round trip per call, and with
             ``real_time`` or ``action_delay`` each world's action latency.
