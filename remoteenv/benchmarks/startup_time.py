@@ -54,9 +54,10 @@ AGENT = textwrap.dedent(
     import remoteenv
     from remoteenv.agent.launch.sim_process import kill_group
     from remoteenv.benchmarks.harness.anchors import cpu_seconds
+    from remoteenv.benchmarks.startup_time import ROWS
 
     env_id, later, vector, default = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
-    out = {row: [] for row in ("first make", "later make", "restart", "vector", "default vector", "later default vector")}
+    out = {row: [] for row in ROWS}
 
     def timed(row, work):
         cpu, wall = cpu_seconds(), time.perf_counter()
