@@ -77,11 +77,13 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
             cpu_count))`` capped at N (on a 2-core machine one process up to N
             = 8); the fastest layouts measured there (see
             :func:`default_envs_per_process`). Where what a world costs could
-            change K, the first sim measures one world's whole tick (physics
-            and every hook, however the scene renders: :attr:`world_cost_s`)
-            and says whether its scene steps its worlds as one batch; costly
-            worlds (e.g. camera images) and scenes whose Python runs per world
-            are then relaunched once, one process per CPU.
+            change K, a sim measures one world's whole tick (physics and
+            every hook, however the scene renders: :attr:`world_cost_s`) and
+            says whether its scene steps its worlds as one batch: a probe of
+            one world when the scene script sets ``stacked_hooks = True``
+            (the worlds then start once, in their layout), else the first
+            launch, a process per CPU, which is relaunched once if the
+            handshake calls for another layout.
             Must be 1 with ``real_time``.
         autoreset_mode: Gymnasium's :class:`~gymnasium.vector.AutoresetMode`
             (or its string): ``NEXT_STEP`` (default; the step after an episode

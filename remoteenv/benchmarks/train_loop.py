@@ -33,6 +33,7 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 from collections.abc import Callable
 from typing import IO, Any
 
@@ -102,6 +103,9 @@ class Trainer:
             stdin=subprocess.PIPE,
             pass_fds=(write_fd,),
             env={**os.environ, **env},
+            # ``-m`` puts the working directory first on sys.path: a checkout there
+            # (the repository's root) would shadow a contender's own PYTHONPATH.
+            cwd=tempfile.gettempdir() if "PYTHONPATH" in env else None,
             text=True,
         )
         os.close(write_fd)

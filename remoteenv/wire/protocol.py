@@ -100,7 +100,7 @@ version mismatch), ``"invalid_action"``, ``"scene"`` (the env code raised),
 
 Commands (version 1)
 --------------------
-``handshake`` ``{"protocol": int, "world_cost": bool (optional)}`` -> ``{"protocol",
+``handshake`` ``{"protocol": int, "world_cost": bool (optional), "probe": bool (optional)}`` -> ``{"protocol",
 "env_id", "instance", "pid", "num_worlds", "observation_space", "action_space",
 "metadata", "stepping", "commands"}``. The server refuses a protocol version it does not speak,
 naming both versions. ``commands`` (optional; a list of str) names every
@@ -117,7 +117,10 @@ seconds one world's whole control tick costs the server on one thread: the
 physics and every hook of the scene, images included, measured on a scratch
 world; a hint for how many worlds a process should host). A server measures
 it only when the request carries ``"world_cost": true`` (it takes a few ticks'
-time) and may answer without it (then the client keeps its layout); ``stepping`` holds ``mode``
+time) and may answer without it (then the client keeps its layout). With
+``"probe": true`` beside it the client will close the server after the
+handshake (it asked only to learn the scene): the server may measure on its
+own world 0 instead of a scratch world, leaving that world reset and stepped; ``stepping`` holds ``mode``
 (``"lock_step"`` or ``"real_time"``) and that mode's parameters: in lock-step
 ``action_delay`` (ticks; the largest of a random model) and, with delays
 beyond a constant action delay, ``obs_delay`` (the largest, ticks),

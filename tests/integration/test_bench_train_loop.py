@@ -47,3 +47,30 @@ def test_contender_specs_and_ratios():
         "CPU/step: remoteenv / EnvPool, N=16": (2.0, None),
         "CPU/step: remoteenv / SyncVectorEnv, N=16": (0.5, None),
     }
+
+
+def _package(root, marker: str) -> None:
+    """A stand-in ``remoteenv.benchmarks.train_loop_worker`` under ``root`` that answers ``marker``."""
+    worker = root / "remoteenv" / "benchmarks"
+    worker.mkdir(parents=True)
+    (root / "remoteenv" / "__init__.py").write_text("")
+    (worker / "__init__.py").write_text("")
+    (worker / "train_loop_worker.py").write_text(
+        "import json, os, sys\n"
+        "fd = int(sys.argv[sys.argv.index('--out-fd') + 1])\n"
+        f"os.write(fd, (json.dumps({{'module': {marker!r}}}) + '\\n').encode())\n"
+        "sys.stdin.read()\n"
+    )
+
+
+def test_a_contender_with_its_own_pythonpath_runs_that_code_whatever_the_working_directory(tmp_path, monkeypatch):
+    from remoteenv.benchmarks.train_loop import Trainer
+
+    _package(tmp_path / "cwd", "working directory")
+    _package(tmp_path / "checkout", "its PYTHONPATH")
+    monkeypatch.chdir(tmp_path / "cwd")  # e.g. the repository's root, another checkout of the project
+    trainer = Trainer("remoteenv", 4, {"PYTHONPATH": str(tmp_path / "checkout")})
+    try:
+        assert trainer.ready == {"module": "its PYTHONPATH"}
+    finally:
+        trainer.close()

@@ -85,6 +85,60 @@ def test_a_scene_whose_python_runs_per_world_keeps_a_process_per_cpu():
         env.close()
 
 
+def _count_opens(monkeypatch) -> list[tuple[int, int, bool, bool]]:
+    """``(processes, worlds each, measured, probe)`` of every session the default layout opens."""
+    from remoteenv.agent.vector import layout_memory, vector_launch
+
+    layout_memory.forget_all()
+    opened: list[tuple[int, int, bool, bool]] = []
+    real_open = vector_launch.open_session
+
+    def counted(source, label, scene, slices, k, **options):
+        opened.append((slices, k, options["measure_world_cost"], options.get("probe", False)))
+        return real_open(source, label, scene, slices, k, **options)
+
+    monkeypatch.setattr(vector_launch, "open_session", counted)
+    return opened
+
+
+def test_a_scene_that_says_it_steps_as_one_batch_is_probed_then_started_once(monkeypatch):
+    from remoteenv.agent.vector import layout_memory
+
+    opened = _count_opens(monkeypatch)
+    try:
+        env = gym.make_vec("remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point").unwrapped
+        try:
+            k = env.envs_per_process
+            assert k == default_envs_per_process(16, env.world_cost_s)
+            if cost_may_change_layout(16):
+                # one sim of one world measured, then the worlds in their layout, unmeasured: never a relaunch
+                assert opened == [(1, 1, True, True), (len(env.slices), k, False, False)]
+                assert env.world_cost_s is not None
+            else:  # one CPU: nothing to measure, no probe
+                assert opened == [(len(env.slices), k, False, False)]
+            assert len(env.pids) == len(env.slices)
+            env.reset(seed=0)
+            env.step(np.zeros((16, 2), np.float32))
+        finally:
+            env.close()
+    finally:
+        layout_memory.forget_all()
+
+
+def test_a_scene_whose_python_runs_per_world_is_not_probed(monkeypatch):
+    from remoteenv.agent.vector import layout_memory
+
+    opened = _count_opens(monkeypatch)
+    scene = os.path.join(os.path.dirname(__file__), "scenes", "per_world_scene.py")
+    try:
+        env = RemoteVectorEnv(scene, num_envs=16)
+        env.close()
+        measured = cost_may_change_layout(16)
+        assert opened == [(len(env.slices), env.envs_per_process, measured, False)]  # the first launch, kept
+    finally:
+        layout_memory.forget_all()
+
+
 def test_an_explicit_layout_is_kept_and_not_measured():
     env = RemoteVectorEnv(HOOK_RENDER, num_envs=4, envs_per_process=4)
     try:

@@ -46,3 +46,30 @@ def test_a_factory_function_and_keyword_only_parameters(tmp_path) -> None:
 
 def test_a_missing_script_is_left_to_the_launcher(tmp_path) -> None:
     check_scene_kwargs(tmp_path / "nope.py", ["x"])
+
+
+@pytest.mark.parametrize(
+    ("source", "says"),
+    [
+        ("class Env(Base):\n    stacked_hooks = True\nrun_scene(Env)\n", True),
+        ("class Env(Base):\n    stacked_hooks: bool = True\n", True),
+        ("class Env(Base):\n    stacked_hooks = False\n", False),
+        ("class Env(Base):\n    pass\n", False),  # inherited from elsewhere: not seen
+        ("stacked_hooks = True\n", False),  # not a class attribute
+        ("class Env(Base):\n    def f(self):\n        stacked_hooks = True\n", False),  # a local, not the class's
+        ("this is not python", False),
+    ],
+)
+def test_a_script_says_it_steps_its_worlds_as_one_batch_only_in_a_class_body(tmp_path, source, says) -> None:
+    from remoteenv.agent.session.scene_signature import declares_stacked_hooks
+
+    path = tmp_path / "scene.py"
+    path.write_text(source)
+    assert declares_stacked_hooks(path) is says
+
+
+def test_the_shipped_scenes_say_they_step_as_one_batch(tmp_path) -> None:
+    from remoteenv.agent.session.scene_signature import declares_stacked_hooks
+
+    assert all(declares_stacked_hooks(remoteenv.scene_path(name)) for name in ("cartpole", "reacher", "hexapod"))
+    assert not declares_stacked_hooks(tmp_path / "missing.py")

@@ -91,6 +91,28 @@ def test_the_handshake_measures_only_when_asked(tmp_path):
         server.shutdown()
 
 
+def test_a_probe_is_measured_on_its_own_world_which_stays_open(tmp_path):
+    SlowHookCartPole.made.clear()
+    world = SlowHookCartPole(continuous=True)
+    made: list[int] = []
+
+    def factory() -> SlowHookCartPole:
+        made.append(1)
+        return SlowHookCartPole(continuous=True)
+
+    server = RemoteControlledAgent([world], f"ipc://{tmp_path}/sim.sock", world_factory=factory)
+    try:
+        request = handshake_request(world_cost=True, probe=True)
+        assert request == {"protocol": protocol.PROTOCOL_VERSION, "world_cost": True, "probe": True}
+        reply = server.handle_frame(protocol.pack({"seq": 1, "cmd": "handshake", **request}))
+        assert parse_handshake(reply).world_cost_s >= HOOK_S  # the hook's work, on world 0 itself
+        assert not made and SlowHookCartPole.made == [world]  # no scratch world
+        assert world.resets[0] == 0 and len(world.actions) >= 2 and not world.closed
+    finally:
+        server.shutdown()
+    assert handshake_request(probe=True) == {"protocol": protocol.PROTOCOL_VERSION}  # a probe only with a measure
+
+
 def test_the_cost_is_measured_only_where_it_can_change_the_layout(monkeypatch):
     monkeypatch.setattr(vector_layout.os, "cpu_count", lambda: 2)
     may = vector_layout.cost_may_change_layout

@@ -1,4 +1,5 @@
-"""Checking an env's scene keyword arguments before any sim process starts.
+"""What a scene script says of itself, read before any sim process starts:
+the keyword arguments its env takes, and whether it steps its worlds as one batch.
 
 Runs in the agent process, which never imports scene code (a scene script
 belongs to the sim side and may need what the agent lacks). Instead it reads
@@ -14,6 +15,10 @@ When the source does not say (a factory imported from elsewhere, a class
 without its own ``__init__``, a ``**kwargs`` parameter), nothing is refused
 here; the sim process then reports a rejected keyword itself, as the same
 error (see :func:`remoteenv.sim.scene_main.run_scene`).
+
+:func:`declares_stacked_hooks` tells whether a class of the script sets
+``stacked_hooks = True``: a hint for the default layout's first launch,
+which the first sim's handshake then confirms or corrects.
 """
 
 from __future__ import annotations
@@ -30,13 +35,30 @@ from remoteenv.wire.files.file_reads import read_text
 MAX_SCRIPT_BYTES = 4 << 20
 
 
+@functools.lru_cache(maxsize=16)
+def _tree(path: str, mtime_ns: int) -> ast.Module | None:
+    """The script's syntax tree (None: unreadable, too large or not Python)."""
+    try:
+        return ast.parse(read_text(path, MAX_SCRIPT_BYTES, what="scene script"), filename=path)
+    except (OSError, SyntaxError, ValueError):  # UnreadableFile is a ValueError
+        return None
+
+
+def _script_tree(scene: str | os.PathLike[str]) -> ast.Module | None:
+    path = os.fspath(scene)
+    try:
+        mtime = os.stat(path).st_mtime_ns
+    except OSError:
+        return None
+    return _tree(path, mtime)
+
+
 @functools.lru_cache(maxsize=64)
 def _accepted(path: str, mtime_ns: int) -> tuple[str, frozenset[str]] | None:
     """``(callable's name, keyword names it takes)`` from the script's source, or
     None when the source does not tell (or takes any keyword)."""
-    try:
-        tree = ast.parse(read_text(path, MAX_SCRIPT_BYTES, what="scene script"), filename=path)
-    except (OSError, SyntaxError, ValueError):  # UnreadableFile is a ValueError
+    tree = _tree(path, mtime_ns)
+    if tree is None:
         return None
     factory = None
     for node in ast.walk(tree):
@@ -90,4 +112,27 @@ def check_scene_kwargs(scene: str | os.PathLike[str], names: Iterable[str]) -> N
             )
 
 
-__all__ = ["check_scene_kwargs"]
+def declares_stacked_hooks(scene: str | os.PathLike[str]) -> bool:
+    """Whether a class in the scene script's source sets ``stacked_hooks = True``
+    (a class that inherits it from a scene elsewhere is not seen: False)."""
+    tree = _script_tree(scene)
+    if tree is None:
+        return False
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.ClassDef):
+            continue
+        for statement in node.body:
+            value: ast.expr | None
+            if isinstance(statement, ast.Assign):
+                targets, value = statement.targets, statement.value
+            elif isinstance(statement, ast.AnnAssign):
+                targets, value = [statement.target], statement.value
+            else:
+                continue
+            named = any(isinstance(target, ast.Name) and target.id == "stacked_hooks" for target in targets)
+            if named and isinstance(value, ast.Constant) and value.value is True:
+                return True
+    return False
+
+
+__all__ = ["check_scene_kwargs", "declares_stacked_hooks"]

@@ -83,6 +83,9 @@ class SimSession:
         label: how messages name the env, e.g. ``"OpenAIRemoteEnv (cartpole_scene.py)"``.
         measure_world_cost: ask the first sim's handshake to measure what one
             world's tick costs (``Handshake.world_cost_s``; a vector env's default layout reads it).
+        probe: the session is opened only to learn the scene and closed after
+            its handshake: its first sim may measure on its own world (the
+            handshake's ``"probe"``).
     """
 
     def __init__(
@@ -97,9 +100,11 @@ class SimSession:
         max_restarts: int = 3,
         label: str = "env",
         measure_world_cost: bool = False,
+        probe: bool = False,
     ) -> None:
         self.restarts = RestartBudget(restart_on_failure, max_restarts)
         self.measure_world_cost = measure_world_cost
+        self.probe = probe
         if restart_on_failure and not group.owns_sims:
             raise ValueError(
                 "restart_on_failure needs sims this env launched; attached sims belong to the launch command"
@@ -135,7 +140,10 @@ class SimSession:
                 self.conns.append(self.group.connect(index, self.timeout))
             timeout = self.timeout_for("handshake")
             seqs = [
-                conn.send("handshake", **handshake_request(world_cost=self.measure_world_cost and index == 0))
+                conn.send(
+                    "handshake",
+                    **handshake_request(world_cost=self.measure_world_cost and index == 0, probe=self.probe),
+                )
                 for index, conn in enumerate(self.conns)
             ]
             self.handshakes = [
@@ -286,6 +294,7 @@ def open_session(
     restart_on_failure: bool,
     max_restarts: int,
     measure_world_cost: bool = False,
+    probe: bool = False,
     **launch: Any,
 ) -> SimSession:
     """An open session over ``group``, as an env's constructor makes it.
@@ -296,7 +305,7 @@ def open_session(
     each, with ``startup_timeout`` and the ``launch`` options (the spec's other
     fields: ``seed``, ``env_kwargs``, ``render_mode``, ``real_time``,
     ``real_time_factor``, ``real_time_mode``, ``action_delay``, ``obs_delay``, ``link_delay``).
-    ``label`` and the other arguments (``measure_world_cost`` too) are :class:`SimSession`'s.
+    ``label`` and the other arguments (``measure_world_cost`` and ``probe`` too) are :class:`SimSession`'s.
     """
     spec = (
         None
@@ -313,6 +322,7 @@ def open_session(
         max_restarts=max_restarts,
         label=label,
         measure_world_cost=measure_world_cost,
+        probe=probe,
     )
     session.open()
     return session

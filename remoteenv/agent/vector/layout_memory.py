@@ -1,7 +1,8 @@
 """What the default layout learnt of a scene's worlds, remembered for the rest of this agent process.
 
 Runs in the agent process. The default layout places a vector env's worlds
-from what its first sim's handshake says of them (one world's measured cost,
+from what a sim's handshake says of them (a probe's, or the first launch's:
+one world's measured cost,
 whether the scene steps its worlds as one batch, how many observations one
 reply carries; see :func:`~remoteenv.agent.vector.vector_launch.open_worlds`);
 when that differs from the first guess, the sims are closed and started

@@ -1,4 +1,4 @@
-"""Starting a vector env's sims, and relaunching costly worlds over more processes.
+"""Starting a vector env's sims in the layout that what one world costs gives.
 
 Runs in the agent process (:class:`remoteenv.RemoteVectorEnv`).
 """
@@ -13,6 +13,7 @@ from typing import Any
 
 from remoteenv.agent.errors import BatchTooLargeError, LimitError
 from remoteenv.agent.launch.sim_group import SimGroup
+from remoteenv.agent.session.scene_signature import declares_stacked_hooks
 from remoteenv.agent.session.sim_session import SimSession, open_session
 from remoteenv.agent.vector.layout_memory import WorldFacts, recall, remember, scene_key
 from remoteenv.agent.vector.sim_placement import SIM_THREADS_ENV
@@ -39,15 +40,22 @@ def open_worlds(
 
     ``launch``: :func:`~remoteenv.agent.session.sim_session.open_session`'s options.
     ``regroup`` (given for the default layout only): the worlds are placed
-    again from what one costs (with ``measure_cost``, the first sim measures
-    one world's whole tick: physics and every hook, however the scene renders,
-    the handshake's ``world_cost_s``, see :mod:`remoteenv.sim.scene.world_cost`
-    and :func:`~remoteenv.agent.vector.vector_layout.default_envs_per_process`):
-    if that gives another K, the sims are closed and relaunched once in a
-    group from ``regroup()``. K is also at most what one batch reply carries
-    the observations of (a process of 8 worlds of 1280x1280 pixels, 39 MB,
-    would be refused: it gets 6): a first launch refused for that is placed
-    again the same way. The default layout's processes get its physics
+    from what one costs (with ``measure_cost``: one world's whole tick,
+    physics and every hook however the scene renders, the handshake's
+    ``world_cost_s``, see :mod:`remoteenv.sim.scene.world_cost`), whether
+    the scene steps its worlds as one batch, and how many observations one
+    reply carries (:func:`~remoteenv.agent.vector.vector_layout.default_envs_per_process`).
+    Where the scene script says it steps its worlds as one batch
+    (:func:`~remoteenv.agent.session.scene_signature.declares_stacked_hooks`:
+    cheap ones then move into one process) a probe asks first, one sim of one
+    world from ``group``, and the worlds start once, in the layout it gives,
+    from ``regroup()``, while the probe exits. Otherwise the first launch (a
+    process per CPU: right for costly worlds and for a scene whose Python
+    runs per world) is asked, and if its handshake gives another K, its sims
+    are closed and relaunched once from ``regroup()``. K is also at most
+    what one batch reply carries the observations of (a process of 8 worlds
+    of 1280x1280 pixels, 39 MB, would be refused: it gets 6): a first launch
+    refused for that is placed again the same way. The default layout's processes get its physics
     threads (:func:`~remoteenv.agent.vector.vector_layout.layout_threads`,
     in the run options) unless ``REMOTEENV_SIM_THREADS`` sets them. What a
     measuring handshake said is remembered for this process
@@ -67,7 +75,13 @@ def open_worlds(
 
     key = scene_key(scene, launch.get("env_kwargs") or {}, launch.get("render_mode")) if measure_cost else None
     known = recall(key) if regroup is not None else None
-    if known is not None:  # learnt by an earlier vector env of this scene: start where it ended
+    probe_exit: threading.Thread | None = None
+    if known is None and measure_cost and regroup is not None and declares_stacked_hooks(scene):
+        known, probe_exit = _probe(group, label, scene, launch)
+        group = regroup()
+        if known.cost_s is not None:
+            remember(key, known)
+    if known is not None:  # learnt by the probe or an earlier vector env of this scene
         per_process = _placed(num_envs, known)
         measure_cost = False
     try:
@@ -79,6 +93,9 @@ def open_worlds(
             raise
         per_process = exc.worlds_that_fit
         return _bounded(start(regroup(), per_process), num_envs, label), per_process, None
+    finally:
+        if probe_exit is not None:
+            probe_exit.join()
     _bounded(session, num_envs, label)
     handshake = session.handshake
     cost = handshake.world_cost_s
@@ -100,6 +117,19 @@ def open_worlds(
         return start(regroup(), better), better, cost
     finally:
         closing.join()
+
+
+def _probe(group: SimGroup, label: str, scene: str, launch: dict[str, Any]) -> tuple[WorldFacts, threading.Thread]:
+    """What one sim of one world from ``group`` says of the scene's worlds (its
+    measured cost among them), and the thread on which that sim is closing:
+    the caller starts the worlds meanwhile and joins it (an exit is ~30 ms of
+    the sim's CPU: its interpreter's teardown)."""
+    session = open_session(group, f"{label} (probe)", scene, 1, 1, measure_world_cost=True, probe=True, **launch)
+    handshake = session.handshake
+    closing = threading.Thread(target=session.close, name=f"{label}: closing the probe", daemon=True)
+    closing.start()
+    facts = WorldFacts(handshake.world_cost_s, handshake.stacked_hooks, worlds_that_fit(handshake.observation_space))
+    return facts, closing
 
 
 def _placed(num_envs: int, facts: WorldFacts) -> int:

@@ -132,7 +132,8 @@ def plan_layout(
     (a process per CPU; 1 in real time): the layout that holds for every
     scene, and the cheapest to start and relaunch from (a costly world's
     sims start as they stay; the default layout's cheap worlds stepped as
-    one batch move into one process once the first handshake says so, see
+    one batch start in one process once a probe's handshake says so, or move
+    there once the first handshake does, see
     :func:`~remoteenv.agent.vector.vector_launch.open_worlds`). K is not capped at N
     here. The env's other counts, ``max_episode_steps`` and ``batch_size``, are
     checked too. A ValueError says which argument to change."""

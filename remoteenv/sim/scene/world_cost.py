@@ -59,12 +59,12 @@ def world_cost(env: Any) -> float:
     return physics + _fastest(lambda: rig.frames(data))
 
 
-def step_cost(make_world: Callable[[], Any], seed: int = 0) -> float:
+def step_cost(make_world: Callable[[], Any], seed: int = 0, close: bool = True) -> float:
     """Seconds one whole control tick of a world from ``make_world()`` costs on
     one thread: the fastest of :data:`_TRIES` ticks after a first uncounted one
     (fewer once they took :data:`_BUDGET_S`). The world is reset with ``seed``,
     stepped with actions sampled from its action space (seeded alike), reset
-    again if its episode ends, and closed."""
+    again if its episode ends, and closed (unless ``close`` is False)."""
     world = make_world()
     try:
         world.reset(seed=seed)
@@ -85,15 +85,20 @@ def step_cost(make_world: Callable[[], Any], seed: int = 0) -> float:
                 break
         return best
     finally:
-        world.close()
+        if close:
+            world.close()
 
 
-def measured_cost(env: Any, make_world: Callable[[], Any] | None) -> float:
+def measured_cost(env: Any, make_world: Callable[[], Any] | None, on_world: bool = False) -> float:
     """:func:`step_cost` of a world from ``make_world``, or if there is none (or
-    making or stepping one failed: logged) :func:`world_cost`'s estimate for ``env``."""
+    making or stepping one failed: logged) :func:`world_cost`'s estimate for ``env``.
+    ``on_world`` (a probe, see :mod:`remoteenv.wire.protocol`): :func:`step_cost`
+    of ``env`` itself, which is left reset and stepped, open."""
+    if on_world:
+        make_world = lambda: env  # noqa: E731
     if make_world is not None:
         try:
-            return step_cost(make_world)
+            return step_cost(make_world, close=not on_world)
         except Exception as exc:  # the scene's own code: fall back rather than fail the handshake
             log.warning(
                 "could not measure a scratch world's step (%s: %.200s); estimating instead", type(exc).__name__, exc

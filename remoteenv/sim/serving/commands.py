@@ -102,7 +102,7 @@ class Commands:
             **self.physics,
         }
         if msg.get("world_cost") is True:
-            metadata["world_cost_s"] = self._world_cost()
+            metadata["world_cost_s"] = self._world_cost(on_world_0=msg.get("probe") is True)
         return {
             "protocol": protocol.PROTOCOL_VERSION,
             "env_id": env.env_id,
@@ -116,11 +116,12 @@ class Commands:
             "commands": list(self.advertised),
         }
 
-    def _world_cost(self) -> float:
-        """What one world's control tick costs (:func:`~remoteenv.sim.scene.world_cost.measured_cost`), measured once."""
+    def _world_cost(self, on_world_0: bool = False) -> float:
+        """What one world's control tick costs (:func:`~remoteenv.sim.scene.world_cost.measured_cost`),
+        measured once; ``on_world_0`` (a probe's handshake): on the served world 0 itself."""
         cost = getattr(self, "_cost", None)
         if cost is None:
-            cost = self._cost = measured_cost(self.envs[0], self.world_factory)
+            cost = self._cost = measured_cost(self.envs[0], self.world_factory, on_world=on_world_0)
         return cost
 
     def reset(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any]:

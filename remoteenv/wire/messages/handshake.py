@@ -48,10 +48,17 @@ LOCK_STEP_COMMANDS = frozenset({"reset_batch", "step_batch"})
 REAL_TIME_COMMANDS = frozenset({"timing"})
 
 
-def handshake_request(version: int = PROTOCOL_VERSION, world_cost: bool = False) -> dict[str, Any]:
+def handshake_request(version: int = PROTOCOL_VERSION, world_cost: bool = False, probe: bool = False) -> dict[str, Any]:
     """The arguments of a ``handshake`` request (without ``seq``/``cmd``);
-    ``world_cost``: ask the sim to measure one world's whole tick (``metadata["world_cost_s"]``)."""
-    return {"protocol": version, "world_cost": True} if world_cost else {"protocol": version}
+    ``world_cost``: ask the sim to measure one world's whole tick (``metadata["world_cost_s"]``);
+    ``probe`` (with it): the sim will be closed after the handshake, so it may
+    measure on its own world 0 instead of a scratch one."""
+    request: dict[str, Any] = {"protocol": version}
+    if world_cost:
+        request["world_cost"] = True
+        if probe:
+            request["probe"] = True
+    return request
 
 
 @dataclass(frozen=True)
