@@ -38,8 +38,10 @@ from collections.abc import Callable
 from typing import IO, Any
 
 from remoteenv.benchmarks.harness.anchors import CpuHog
+from remoteenv.benchmarks.harness.loop_plot import plot_train_loop
 from remoteenv.benchmarks.harness.report import emit, progress_log, rounds_record
 from remoteenv.benchmarks.train_loop_worker import CONTENDERS, DEFAULT_CONTENDERS
+from remoteenv.wire.files.file_reads import read_text
 
 #: (numerator, denominator, N, target) of the ratios of medians reported.
 TARGETS = [
@@ -87,6 +89,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=[],
         metavar="KEY=VALUE",
         help="an environment variable of every training process (repeatable), e.g. OMP_NUM_THREADS=1",
+    )
+    g.add_argument(
+        "--train-plot",
+        default=None,
+        metavar="PATH",
+        help="also draw the result into this image file (.png, .svg; needs matplotlib)",
+    )
+    g.add_argument(
+        "--train-from",
+        default=None,
+        metavar="JSON",
+        help="run nothing: show (and with --train-plot draw) the result an earlier run wrote with --json",
     )
 
 
@@ -292,6 +306,14 @@ def _contender(spec: str) -> tuple[str, dict[str, str]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.train_plot:
+        import matplotlib  # noqa: F401 - missing: say so before the run, not after it
+    if args.train_from:
+        result = _earlier(args.train_from)
+        emit(result, args.json, format_table)
+        if args.train_plot:
+            plot_train_loop(result, args.train_plot)
+        return 0
     try:
         ns = [int(x) for x in args.train_n.split(",") if x.strip()]
     except ValueError:
@@ -309,4 +331,22 @@ def run(args: argparse.Namespace) -> int:
     log = progress_log(args.json)
     result = measure(ns, contenders, args.train_duration, args.train_rounds, args.hog, _parse_env(args.train_env), log)
     emit(result, args.json, format_table)
+    if args.train_plot:
+        plot_train_loop(result, args.train_plot)
     return 0
+
+
+#: Largest result file --train-from reads.
+_MAX_RESULT_BYTES = 16 << 20
+
+
+def _earlier(path: str) -> dict[str, Any]:
+    """The result an earlier run wrote with ``--json``; SystemExit saying what is wrong otherwise."""
+    try:
+        result = json.loads(read_text(path, _MAX_RESULT_BYTES, what="training-loop result"))
+        rows = result["rows"]
+        for r in rows:
+            float(r["median"]), int(r["num_envs"]), str(r["name"]), [float(x) for x in r["rates"]]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise SystemExit(f"--train-from {path[:200]!r} is not a result of --train-loop --json: {exc}"[:400]) from None
+    return dict(result)

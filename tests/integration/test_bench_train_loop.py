@@ -30,6 +30,17 @@ def test_a_tiny_training_loop_benchmark_writes_every_contender_and_the_ratios(tm
     assert rows["remoteenv"]["processes"] >= 2  # the trainer and its sim
     assert len(result["load_avg_per_round"]) == 2 and result["machine"]["cpus"] >= 1
 
+    # The run shown again and drawn from its JSON, nothing run.
+    figure = tmp_path / "train.png"
+    cmd = [sys.executable, "-m", "remoteenv", "bench", "--train-loop", "--train-from", str(out)]
+    again = subprocess.run(cmd + ["--train-plot", str(figure)], capture_output=True, text=True, timeout=120)
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert "SyncVectorEnv:OMP_NUM_THREADS=1" in again.stdout and "building" not in again.stdout
+    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    (tmp_path / "other.json").write_text('{"rows": [{"name": "x"}]}')
+    bad = subprocess.run(cmd[:-1] + [str(tmp_path / "other.json")], capture_output=True, text=True, timeout=120)
+    assert bad.returncode != 0 and "is not a result of --train-loop --json" in bad.stderr
+
 
 def test_contender_specs_and_ratios():
     assert _contender("EnvPool") == ("EnvPool", {})
