@@ -222,3 +222,20 @@ def test_a_sim_someone_else_placed_meanwhile_is_left_alone(cpus):
     for _ in range(3):
         _window(watch)
     assert cpus["now"] == {2, 3} and watch.pinned_cpus is None and stat.closed
+
+
+def test_a_sim_the_os_will_not_move_stays_where_it_is_and_tries_no_more(cpus, monkeypatch):
+    stat, clock = FakeStat(), Clock()
+    watch = PinRelease(0, stat, clock)
+    cpus["now"] = {1}
+    _window(watch)
+
+    def refuse(pid, cpus_):
+        raise PermissionError("not allowed")
+
+    monkeypatch.setattr(pin_release.os, "sched_setaffinity", refuse)
+    _busy(stat)
+    _window(watch)
+    clock.now += MAX_RETRY_S * 2
+    _window(watch)
+    assert cpus["now"] == {1} and watch.pinned_cpus is None and stat.closed

@@ -156,11 +156,7 @@ class PinRelease:
         if self._trial_left:  # a trial the neighbour ended: wait longer before the next
             self._wait_s = min(self._wait_s * 2, MAX_RETRY_S)
         self._trial_left = 0
-        try:
-            os.sched_setaffinity(0, self.start_cpus)
-        except OSError as exc:
-            log.info("sim instance %d: could not take its CPUs back (%s); it stays pinned", self.instance, exc)
-            self._give_up()
+        if not self._move(self.start_cpus, "pinned"):
             return
         self.pinned_cpus = pinned
         self._retry_at = self._clock() + self._wait_s
@@ -180,16 +176,28 @@ class PinRelease:
         if _affinity() != self.start_cpus:  # someone else placed it meanwhile: theirs to keep
             self._give_up()
             return
-        try:
-            os.sched_setaffinity(0, self.pinned_cpus)
-        except OSError as exc:
-            log.info("sim instance %d: could not pin itself again (%s); it stays unpinned", self.instance, exc)
-            self._give_up()
+        if not self._move(self.pinned_cpus, "unpinned"):
             return
         self.released = False
         self._last = None  # the first window pinned again only reads where the figures stand
         self._trial_left = TRIAL_WINDOWS
         log.info("sim instance %d tries its CPU %s again", self.instance, sorted(self.pinned_cpus))
+
+    def _move(self, cpus: set[int], otherwise: str) -> bool:
+        """Run on ``cpus`` from now on; False (logged, and no more trials) if the OS refuses."""
+        try:
+            os.sched_setaffinity(0, cpus)
+        except OSError as exc:
+            log.info(
+                "sim instance %d could not move to CPUs %s (%s): it stays %s",
+                self.instance,
+                sorted(cpus),
+                exc,
+                otherwise,
+            )
+            self._give_up()
+            return False
+        return True
 
     def _give_up(self) -> None:
         self.pinned_cpus = None
