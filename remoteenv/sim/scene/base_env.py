@@ -61,6 +61,10 @@ class BaseEnv(BatchedHooks, SceneCameras):
             :func:`remoteenv.sim.stepping.batch_worlds.stacked` (never through a world's
             ``data``, nor views of it kept from earlier): the worlds of a process
             may then step in one ``mujoco.batch.Batch`` (see :attr:`data`).
+            Set it in the scene class's body (``stacked_hooks = True``): the
+            agent reads that from the script's source, without running it,
+            and starts a first vector env of the scene through a probe of
+            one world rather than a layout it may have to relaunch.
     """
 
     env_id: ClassVar[str] = "scene"
