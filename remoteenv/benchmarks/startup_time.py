@@ -17,9 +17,11 @@ imports Gymnasium and remoteenv first (not timed), then times:
   N sim processes at once (``--startup-vector N``, 0 to skip);
 - ``default vector`` and ``later default vector``: ``gym.make_vec(id, M)``
   in the default layout → first ``reset`` (``--startup-default-vector M``, 0
-  to skip), twice: the first measures what a world costs and may relaunch
-  its sims in another layout, the later starts in the layout the first
-  learnt (:mod:`remoteenv.agent.vector.layout_memory`).
+  to skip), twice: the first measures what a world costs (through a probe
+  of one world when the scene's source sets ``stacked_hooks = True``, else
+  in its first launch, which may then be relaunched in another layout), the
+  later starts in the layout the first learnt
+  (:mod:`remoteenv.agent.vector.layout_memory`).
 
 Wall seconds (median and min over repeats) and CPU seconds of the agent and
 every process below it. With ``--hog`` a second pass runs with that many

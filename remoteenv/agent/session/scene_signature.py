@@ -44,13 +44,12 @@ def _tree(path: str, mtime_ns: int) -> ast.Module | None:
         return None
 
 
-def _script_tree(scene: str | os.PathLike[str]) -> ast.Module | None:
-    path = os.fspath(scene)
+def _mtime_ns(path: str) -> int | None:
+    """The script's modification time, the key of what is read of it (None: no such file)."""
     try:
-        mtime = os.stat(path).st_mtime_ns
+        return os.stat(path).st_mtime_ns
     except OSError:
         return None
-    return _tree(path, mtime)
 
 
 @functools.lru_cache(maxsize=64)
@@ -96,9 +95,8 @@ def check_scene_kwargs(scene: str | os.PathLike[str], names: Iterable[str]) -> N
     """Raise :class:`SceneArgumentError` if the scene script's env factory
     certainly does not take one of the keyword arguments ``names``."""
     path = os.fspath(scene)
-    try:
-        mtime = os.stat(path).st_mtime_ns
-    except OSError:
+    mtime = _mtime_ns(path)
+    if mtime is None:
         return  # the launcher reports a missing script
     accepted = _accepted(path, mtime)
     if accepted is None:
@@ -115,7 +113,9 @@ def check_scene_kwargs(scene: str | os.PathLike[str], names: Iterable[str]) -> N
 def declares_stacked_hooks(scene: str | os.PathLike[str]) -> bool:
     """Whether a class in the scene script's source sets ``stacked_hooks = True``
     (a class that inherits it from a scene elsewhere is not seen: False)."""
-    tree = _script_tree(scene)
+    path = os.fspath(scene)
+    mtime = _mtime_ns(path)
+    tree = None if mtime is None else _tree(path, mtime)
     if tree is None:
         return False
     for node in ast.walk(tree):

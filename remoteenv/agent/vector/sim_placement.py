@@ -19,9 +19,10 @@ real time:
 
 Nothing of the user's process changes. A sim relaunched after a crash is
 placed again at the next ``reset``. A pinned sim that a busy neighbour
-keeps waiting for its CPU takes the other CPUs back by itself
-(:mod:`remoteenv.sim.process.pin_release`); :attr:`SimPlacement.cpus`
-still says where it was pinned. Where the OS refuses (no
+keeps waiting for its CPU takes the other CPUs back by itself, and tries
+its CPU again later (:mod:`remoteenv.sim.process.pin_release`);
+:attr:`SimPlacement.cpus` says where it was pinned, not where it runs
+while it is released. Where the OS refuses (no
 ``sched_setaffinity``, another user's process) the sims run as they are.
 ``place_sims=None`` leaves the sims to the OS scheduler. Measured gain:
 docs/performance.md ("The learner beside the sims").

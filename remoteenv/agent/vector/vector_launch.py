@@ -20,7 +20,7 @@ from remoteenv.agent.vector.sim_placement import SIM_THREADS_ENV
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, layout_threads, world_slices
 from remoteenv.wire.codec.spaces import value_nbytes
 from remoteenv.wire.memory import worlds_problem
-from remoteenv.wire.messages.handshake import worlds_that_fit
+from remoteenv.wire.messages.handshake import Handshake, worlds_that_fit
 
 
 def open_worlds(
@@ -103,16 +103,13 @@ def open_worlds(
         return session, per_process, cost
     if known is not None:
         cost = known.cost_s
-    facts = WorldFacts(cost, handshake.stacked_hooks, worlds_that_fit(handshake.observation_space))
+    facts = _facts(handshake, cost)
     if cost is not None:
         remember(key, facts)
     better = _placed(num_envs, facts)
     if better == per_process:
         return session, per_process, cost
-    # The first layout's sims exit while the new ones start (an exit is
-    # ~30 ms of each sim's CPU: its interpreter's teardown).
-    closing = threading.Thread(target=session.close, name=f"{label}: closing the first layout's sims", daemon=True)
-    closing.start()
+    closing = _closing(session, f"{label}: closing the first layout's sims")
     try:
         return start(regroup(), better), better, cost
     finally:
@@ -121,15 +118,24 @@ def open_worlds(
 
 def _probe(group: SimGroup, label: str, scene: str, launch: dict[str, Any]) -> tuple[WorldFacts, threading.Thread]:
     """What one sim of one world from ``group`` says of the scene's worlds (its
-    measured cost among them), and the thread on which that sim is closing:
-    the caller starts the worlds meanwhile and joins it (an exit is ~30 ms of
-    the sim's CPU: its interpreter's teardown)."""
+    measured cost among them), and the thread on which that sim is closing
+    (see :func:`_closing`)."""
     session = open_session(group, f"{label} (probe)", scene, 1, 1, measure_world_cost=True, probe=True, **launch)
-    handshake = session.handshake
-    closing = threading.Thread(target=session.close, name=f"{label}: closing the probe", daemon=True)
-    closing.start()
-    facts = WorldFacts(handshake.world_cost_s, handshake.stacked_hooks, worlds_that_fit(handshake.observation_space))
-    return facts, closing
+    return _facts(session.handshake, session.handshake.world_cost_s), _closing(session, f"{label}: closing the probe")
+
+
+def _facts(handshake: Handshake, cost_s: float | None) -> WorldFacts:
+    """What ``handshake`` says of its scene's worlds, with ``cost_s`` as one world's cost."""
+    return WorldFacts(cost_s, handshake.stacked_hooks, worlds_that_fit(handshake.observation_space))
+
+
+def _closing(session: SimSession, name: str) -> threading.Thread:
+    """``session`` closing on a thread of its own, which the caller joins: its
+    sims exit while the caller starts others (an exit is ~30 ms of each sim's
+    CPU: its interpreter's teardown)."""
+    thread = threading.Thread(target=session.close, name=name, daemon=True)
+    thread.start()
+    return thread
 
 
 def _placed(num_envs: int, facts: WorldFacts) -> int:
