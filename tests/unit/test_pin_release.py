@@ -7,6 +7,8 @@ busy neighbour ends, and leaves a sim someone else placed meanwhile alone."""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from remoteenv.sim.process import pin_release
@@ -129,7 +131,11 @@ def test_the_kernels_figures_of_this_thread_are_read():
         first = stat.read()
         if first is None:
             pytest.skip("this kernel has no schedstat")
-        sum(range(200_000))
+        # The kernel books a running thread's time at its ticks and switches, so
+        # run long enough for several ticks (at HZ = 100, 5): a few ms may show nothing.
+        started = time.thread_time()
+        while time.thread_time() - started < 0.05:
+            sum(range(10_000))
         second = stat.read()
         assert second is not None and second[0] > first[0] and second[1] >= first[1]
     finally:
