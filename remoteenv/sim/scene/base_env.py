@@ -12,7 +12,7 @@ from gymnasium.utils import seeding
 
 from remoteenv.sim.scene.camera_rig import CameraRig, cheap_renderer
 from remoteenv.sim.scene.cameras import CameraObservation
-from remoteenv.sim.scene.model_file import model_file
+from remoteenv.sim.scene.model_file import load_model
 from remoteenv.sim.scene.obs_check import check_observation
 from remoteenv.sim.scene.per_world_hooks import BatchedHooks
 from remoteenv.sim.scene.scene_cameras import SceneCameras
@@ -100,7 +100,7 @@ class BaseEnv(BatchedHooks, SceneCameras):
                 f"{type(self).__name__} does not support render_mode={render_mode!r}; "
                 f"supported: {self.metadata['render_modes']}"
             )
-        self.model = mujoco.MjModel.from_xml_path(model_file(os.fspath(model_path), type(self).__name__))
+        self.model = load_model(os.fspath(model_path), type(self).__name__)
         self._data = mujoco.MjData(self.model)
         self.frame_skip = int(frame_skip)
         #: What the hooks return (the state); the observation adds the cameras' images to it.
