@@ -79,11 +79,13 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
             :func:`default_envs_per_process`). Where what a world costs could
             change K, a sim measures one world's whole tick (physics and
             every hook, however the scene renders: :attr:`world_cost_s`) and
-            says whether its scene steps its worlds as one batch: a probe of
-            one world when the scene script sets ``stacked_hooks = True``
-            (the worlds then start once, in their layout), else the first
-            launch, a process per CPU, which is relaunched once if the
-            handshake calls for another layout.
+            says whether its scene steps its worlds as one batch: when the
+            scene script sets ``stacked_hooks = True``, the first sim of the
+            one-process layout measures a scratch world before building
+            its worlds and goes on only if that is their layout (the layout
+            gate; otherwise it ends unbuilt and the worlds start once, in
+            theirs); else the first launch, a process per CPU, which is
+            relaunched once if the handshake calls for another layout.
             Must be 1 with ``real_time``.
         autoreset_mode: Gymnasium's :class:`~gymnasium.vector.AutoresetMode`
             (or its string): ``NEXT_STEP`` (default; the step after an episode

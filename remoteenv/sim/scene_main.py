@@ -9,6 +9,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from remoteenv.sim.process.layout_gate import hold_go, report_and_wait
 from remoteenv.sim.process.log import log_to_stderr
 from remoteenv.sim.process.pacing_levers import GC_MODES, apply_levers
 from remoteenv.sim.scene.base_env import BaseEnv
@@ -196,6 +197,12 @@ def scene_argument_parser(description: str | None = None) -> argparse.ArgumentPa
         help="inherited file descriptor of the launcher's socketpair (the local pipe)",
     )
     p.add_argument(
+        "--layout-gate",
+        default=None,
+        help="first measure a scratch world, write what the layout rule reads to this file and wait "
+        "for the agent's go (SIGUSR1) before building the worlds (remoteenv.sim.process.layout_gate)",
+    )
+    p.add_argument(
         "--private-dir",
         default=None,
         help="the launcher's private dir: if the agent dies, remove this instance's "
@@ -220,7 +227,11 @@ def run_scene(
     scratch_kwargs = dict(env_kwargs)
     if args.render_mode is not None:
         env_kwargs["render_mode"] = args.render_mode
+    if args.layout_gate:
+        hold_go()
     try:
+        if args.layout_gate:
+            report_and_wait(args.layout_gate, lambda: env_factory(**scratch_kwargs), args.parent_pid)
         envs = build_worlds(lambda: env_factory(**env_kwargs), args.worlds, f"sim instance {args.instance}")
     except TypeError as exc:
         if "keyword argument" not in str(exc):

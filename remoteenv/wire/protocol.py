@@ -22,6 +22,22 @@ sim then stops. A frame whose length is above :data:`MAX_MESSAGE_BYTES` is
 skipped (its bytes are read and dropped, so the stream stays in step) and
 answered like an undecodable frame.
 
+The layout gate. Before a sim serves, its launcher may hold it at a gate
+(the command-line option ``--layout-gate FILE``): the sim makes one scratch
+world as it makes a served one (no viewer window; never served), times its
+whole control tick as a ``world_cost`` handshake would, writes ``FILE``
+(JSON, replaced atomically: a reader sees no file or all of it, at most
+4 KiB) ``{"world_cost_s": float >= 0 or null, "stacked_hooks": bool,
+"worlds_that_fit": int >= 0, "pid": int}`` (the seconds one world's tick cost
+on one thread, whether the worlds step as one batch through the scene's
+stacked hooks, how many worlds' observations one batch reply carries, and
+the sim's process id), and waits, before it builds a served world. SIGUSR1
+from the launcher says go: it builds its worlds and serves as any sim. The
+launcher that finds the facts calling for another layout ends it instead
+(SIGTERM); an agent that dies ends it too (the sim watches its parent). The
+launcher reads the file as it reads a reply: bounded, every field checked,
+the pid its own sim's. Only a first launch is gated, never a restart.
+
 Limits
 ------
 No frame, in either direction and on either transport, is longer than

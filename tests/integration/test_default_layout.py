@@ -101,15 +101,21 @@ def _count_opens(monkeypatch) -> list[tuple[int, int, bool, bool]]:
     return opened
 
 
-def test_a_scene_that_says_it_steps_as_one_batch_is_probed_then_started_once(monkeypatch):
+def test_a_scene_that_cannot_pass_the_gate_is_probed_then_started_once(monkeypatch):
+    """Worlds with lock-step delays step one by one, as a scratch world at the
+    layout gate would not show (test_layout_gate.py has the gate): a probe of
+    one world asks first, and they start once, in the layout it gives."""
     from remoteenv.agent.vector import layout_memory
 
     opened = _count_opens(monkeypatch)
     try:
-        env = gym.make_vec("remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point").unwrapped
+        env = gym.make_vec(
+            "remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point", action_delay=1
+        ).unwrapped
         try:
             k = env.envs_per_process
-            assert k == default_envs_per_process(16, env.world_cost_s)
+            assert all(hs.stacked_hooks is False for hs in env._session.handshakes)
+            assert k == default_envs_per_process(16, env.world_cost_s, stacked_hooks=False)
             if cost_may_change_layout(16):
                 # one sim of one world measured, then the worlds in their layout, unmeasured: never a relaunch
                 assert opened == [(1, 1, True, True), (len(env.slices), k, False, False)]
@@ -155,7 +161,8 @@ def test_a_later_vector_env_of_the_scene_starts_in_the_layout_learnt(monkeypatch
     real_open = vector_launch.open_session
 
     def counted(source, label, scene, slices, k, **options):
-        opened.append((k, options["measure_world_cost"]))
+        # measured: in its handshake, or at the layout gate (test_layout_gate.py)
+        opened.append((k, options["measure_world_cost"] or getattr(source, "layout_gate", None) is not None))
         return real_open(source, label, scene, slices, k, **options)
 
     monkeypatch.setattr(vector_launch, "open_session", counted)

@@ -19,11 +19,12 @@ import os
 import signal
 import tempfile
 import weakref
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from remoteenv.agent.connection.connect import SimConnection, connect_sim
 from remoteenv.agent.launch.dir_reaper import watch_dir
+from remoteenv.agent.launch.layout_gate import GateFacts, LayoutRejected, go, wait_facts
 from remoteenv.agent.launch.processes import pid_alive
 from remoteenv.agent.launch.sim_command import wait_ready
 from remoteenv.agent.launch.sim_group import LaunchSpec, SimLayout
@@ -167,6 +168,11 @@ class Launcher:
         self.curve_client_keypair: KeyPair | None = generate_keypair() if (remote or bool(curve)) else None
         #: What was started (None until :meth:`start`).
         self.spec: LaunchSpec | None = None
+        #: Asked once, by the next :meth:`start`, with what its first sim measured of one
+        #: world before building any (:mod:`~remoteenv.agent.launch.layout_gate`): True
+        #: lets the sims go on, False stops the launch (:class:`~remoteenv.agent.launch.layout_gate.LayoutRejected`).
+        #: None: the sims start without the gate. Restarts never pass it.
+        self.layout_gate: Callable[[GateFacts], bool] | None = None
         self._state: LaunchState | None = None
         self._closed = False
         if spec is not None:
@@ -178,7 +184,9 @@ class Launcher:
         """Start ``spec.num_instances`` sims and wait until each serves its endpoint.
 
         Raises :class:`remoteenv.LaunchError` naming the instance that failed to
-        start (the others are stopped first)."""
+        start (the others are stopped first), and
+        :class:`~remoteenv.agent.launch.layout_gate.LayoutRejected` (every sim
+        stopped) when :attr:`layout_gate` turns the launch down."""
         if self.spec is not None or self._closed:
             raise RuntimeError("this Launcher has already started its sims; create another one")
         spec = dataclasses.replace(spec, scene=os.path.abspath(spec.scene))
@@ -189,9 +197,12 @@ class Launcher:
         # Removed even if this process is killed before any sim exists; only this dir, never what replaces it.
         self._state.workdir_id = watch_dir(self._state.workdir)
         self._finalizer = weakref.finalize(self, stop_all, self._state)
+        gate, self.layout_gate = self.layout_gate, None
         try:
             for i in range(spec.num_instances):
-                self._state.sims.append(self._spawn(i))
+                self._state.sims.append(self._spawn(i, gated=gate is not None and i == 0))
+            if gate is not None:
+                self._pass_gate(self._state.sims[0], gate)
             for sim in self._state.sims:
                 self._wait_ready(sim)
         except BaseException:
@@ -287,9 +298,10 @@ class Launcher:
         assert self._state is not None
         return self._state
 
-    def _spawn(self, instance: int) -> SimProcess:
+    def _spawn(self, instance: int, gated: bool = False) -> SimProcess:
         spec = self._spec()
         workdir = self._started().workdir
+        extra_args = [*self.extra_args, "--layout-gate", self._gate_file(instance)] if gated else self.extra_args
         return spawn_sim(
             spec,
             instance,
@@ -297,10 +309,21 @@ class Launcher:
             sim_address(workdir, instance, self.transport, self.bind_address),
             curve_client_keypair=self.curve_client_keypair,
             allow_remote=self.remote,
-            extra_args=self.extra_args,
+            extra_args=extra_args,
             local_pipe=self.local_pipe,
             use_zygote=self.zygote and spec.render_mode != "human",
         )
+
+    def _gate_file(self, instance: int) -> str:
+        return os.path.join(self._started().workdir, f"sim-{instance}.layout.json")
+
+    def _pass_gate(self, sim: SimProcess, gate: Callable[[GateFacts], bool]) -> None:
+        """Read what gated ``sim`` measured; let it go on if ``gate`` agrees, else raise LayoutRejected."""
+        spec = self._spec()
+        facts = wait_facts(sim, self._gate_file(sim.instance), spec.startup_timeout, os.path.basename(spec.scene))
+        if not gate(facts):
+            raise LayoutRejected(facts)
+        go(sim)
 
     def _wait_ready(self, sim: SimProcess) -> None:
         spec = self._spec()

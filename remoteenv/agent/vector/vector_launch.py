@@ -7,11 +7,14 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import signal
 import threading
 from collections.abc import Callable
 from typing import Any
 
 from remoteenv.agent.errors import BatchTooLargeError, LimitError
+from remoteenv.agent.launch.launcher import Launcher
+from remoteenv.agent.launch.layout_gate import GateFacts, LayoutRejected
 from remoteenv.agent.launch.sim_group import SimGroup
 from remoteenv.agent.session.scene_signature import declares_stacked_hooks
 from remoteenv.agent.session.sim_session import SimSession, open_session
@@ -47,9 +50,15 @@ def open_worlds(
     reply carries (:func:`~remoteenv.agent.vector.vector_layout.default_envs_per_process`).
     Where the scene script says it steps its worlds as one batch
     (:func:`~remoteenv.agent.session.scene_signature.declares_stacked_hooks`:
-    cheap ones then move into one process) a probe asks first, one sim of one
-    world from ``group``, and the worlds start once, in the layout it gives,
-    from ``regroup()``, while the probe exits. Otherwise the first launch (a
+    cheap ones then move into one process) the layout of cheap worlds is
+    started from ``group`` through the layout gate
+    (:mod:`~remoteenv.agent.launch.layout_gate`): its sim measures a scratch
+    world before building any, and goes on only if that measurement gives
+    this layout; else it ends unbuilt and the worlds start once, in the
+    layout it gives, from ``regroup()``. Where a scratch world would not show
+    how the served ones step (lock-step delays, a viewer window) a probe asks
+    first instead, one sim of one world, closed once it has answered.
+    Otherwise the first launch (a
     process per CPU: right for costly worlds and for a scene whose Python
     runs per world) is asked, and if its handshake gives another K, its sims
     are closed and relaunched once from ``regroup()``. K is also at most
@@ -76,16 +85,22 @@ def open_worlds(
     key = scene_key(scene, launch.get("env_kwargs") or {}, launch.get("render_mode")) if measure_cost else None
     known = recall(key) if regroup is not None else None
     probe_exit: threading.Thread | None = None
+    gated: SimSession | None = None
     if known is None and measure_cost and regroup is not None and declares_stacked_hooks(scene):
-        known, probe_exit = _probe(group, label, scene, launch)
-        group = regroup()
+        if isinstance(group, Launcher) and _gate_fits(group, launch):
+            known, gated = _through_gate(group, num_envs, start)
+            if gated is None:
+                group = regroup()
+        else:
+            known, probe_exit = _probe(group, label, scene, launch)
+            group = regroup()
         if known.cost_s is not None:
             remember(key, known)
-    if known is not None:  # learnt by the probe or an earlier vector env of this scene
+    if known is not None:  # learnt by the gate, the probe or an earlier vector env of this scene
         per_process = _placed(num_envs, known)
         measure_cost = False
     try:
-        session = start(group, per_process, measure_cost)
+        session = gated if gated is not None else start(group, per_process, measure_cost)
     except BatchTooLargeError as exc:
         # The default layout put more worlds in a process than one batch reply
         # carries the observations of: place them again so that each fits.
@@ -122,6 +137,42 @@ def _probe(group: SimGroup, label: str, scene: str, launch: dict[str, Any]) -> t
     (see :func:`_closing`)."""
     session = open_session(group, f"{label} (probe)", scene, 1, 1, measure_world_cost=True, probe=True, **launch)
     return _facts(session.handshake, session.handshake.world_cost_s), _closing(session, f"{label}: closing the probe")
+
+
+def _gate_fits(group: Launcher, launch: dict[str, Any]) -> bool:
+    """Whether ``group`` (this machine's launcher) can start its sims through
+    the layout gate: not started yet, for sims whose worlds may step as one
+    batch as a scratch world does (no lock-step delays, no viewer window), on
+    an OS where a sim can wait for the go."""
+    return (
+        group.layout is None
+        and launch.get("render_mode") != "human"
+        and not launch["run"].lock_step_delayed
+        and hasattr(signal, "sigtimedwait")  # the sim waits at the gate with it (Linux)
+    )
+
+
+def _through_gate(
+    group: Launcher, num_envs: int, start: Callable[[SimGroup, int], SimSession]
+) -> tuple[WorldFacts, SimSession | None]:
+    """Start the layout of cheap worlds stepped as one batch, its first sim
+    gated (:mod:`~remoteenv.agent.launch.layout_gate`): it measures a scratch
+    world first, and builds its own only if that measurement calls for this
+    layout. What it measured, and the open session (None: turned down, every
+    sim stopped before building a world)."""
+    guess = _placed(num_envs, WorldFacts(0.0, True, num_envs))
+    measured: list[WorldFacts] = []
+
+    def agrees(facts: GateFacts) -> bool:
+        measured.append(WorldFacts(facts.cost_s, facts.stacked_hooks, facts.fit))
+        return _placed(num_envs, measured[0]) == guess
+
+    group.layout_gate = agrees
+    try:
+        session = start(group, guess)
+    except LayoutRejected:
+        return measured[0], None
+    return measured[0], session
 
 
 def _facts(handshake: Handshake, cost_s: float | None) -> WorldFacts:

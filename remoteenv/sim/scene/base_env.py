@@ -63,8 +63,10 @@ class BaseEnv(BatchedHooks, SceneCameras):
             may then step in one ``mujoco.batch.Batch`` (see :attr:`data`).
             Set it in the scene class's body (``stacked_hooks = True``): the
             agent reads that from the script's source, without running it,
-            and starts a first vector env of the scene through a probe of
-            one world rather than a layout it may have to relaunch.
+            and starts a first vector env of the scene through the layout
+            gate (its first sim measures a scratch world before it builds
+            the rest: :mod:`remoteenv.sim.process.layout_gate`) rather than
+            a layout it may have to relaunch.
     """
 
     env_id: ClassVar[str] = "scene"
