@@ -108,8 +108,12 @@ def wait_facts(sim: StartingSim, path: str, timeout: float, what: str) -> GateFa
 
 
 def go(sim: StartingSim) -> None:
-    """Tell a gated ``sim`` to build its worlds and serve them."""
-    os.kill(sim.pid, GO_SIGNAL)
+    """Tell a gated ``sim`` to build its worlds and serve them (a sim gone
+    meanwhile is left to the wait for its ready file, which reports why)."""
+    try:
+        os.kill(sim.pid, GO_SIGNAL)
+    except ProcessLookupError:
+        pass
 
 
 __all__ = ["GATE_FILE_LIMIT", "GO_SIGNAL", "GateFacts", "LayoutRejected", "go", "parse_facts", "wait_facts"]
