@@ -8,6 +8,7 @@ import os
 import shutil
 import tempfile
 import time
+from typing import NamedTuple
 
 import pytest
 
@@ -137,3 +138,33 @@ def pid_alive_fixture():
 def wait_gone_fixture():
     """The function ``wait_gone(pid, timeout=5.0) -> bool``."""
     return wait_gone
+
+
+class Opened(NamedTuple):
+    """One session a vector env's launch opened (see :func:`opened_sessions`)."""
+
+    processes: int
+    worlds_each: int
+    measured: bool  # asked in its handshake what a world costs
+    probe: bool  # a probe, closed once it answered
+    gated: bool  # started through the layout gate
+
+
+@pytest.fixture
+def opened_sessions(monkeypatch):
+    """Every session a vector env's launch opens, as :class:`Opened`, in order;
+    the layouts learnt (layout_memory) are forgotten before and after."""
+    from remoteenv.agent.vector import layout_memory, vector_launch
+
+    layout_memory.forget_all()
+    opened: list[Opened] = []
+    real_open = vector_launch.open_session
+
+    def counted(source, label, scene, slices, k, **options):
+        gated = getattr(source, "layout_gate", None) is not None
+        opened.append(Opened(slices, k, options["measure_world_cost"], options.get("probe", False), gated))
+        return real_open(source, label, scene, slices, k, **options)
+
+    monkeypatch.setattr(vector_launch, "open_session", counted)
+    yield opened
+    layout_memory.forget_all()

@@ -85,64 +85,40 @@ def test_a_scene_whose_python_runs_per_world_keeps_a_process_per_cpu():
         env.close()
 
 
-def _count_opens(monkeypatch) -> list[tuple[int, int, bool, bool]]:
-    """``(processes, worlds each, measured, probe)`` of every session the default layout opens."""
-    from remoteenv.agent.vector import layout_memory, vector_launch
-
-    layout_memory.forget_all()
-    opened: list[tuple[int, int, bool, bool]] = []
-    real_open = vector_launch.open_session
-
-    def counted(source, label, scene, slices, k, **options):
-        opened.append((slices, k, options["measure_world_cost"], options.get("probe", False)))
-        return real_open(source, label, scene, slices, k, **options)
-
-    monkeypatch.setattr(vector_launch, "open_session", counted)
-    return opened
-
-
-def test_a_scene_that_cannot_pass_the_gate_is_probed_then_started_once(monkeypatch):
+def test_a_scene_that_cannot_pass_the_gate_is_probed_then_started_once(opened_sessions):
     """Worlds with lock-step delays step one by one, as a scratch world at the
     layout gate would not show (test_layout_gate.py has the gate): a probe of
     one world asks first, and they start once, in the layout it gives."""
-    from remoteenv.agent.vector import layout_memory
-
-    opened = _count_opens(monkeypatch)
+    env = gym.make_vec(
+        "remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point", action_delay=1
+    ).unwrapped
     try:
-        env = gym.make_vec(
-            "remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point", action_delay=1
-        ).unwrapped
-        try:
-            k = env.envs_per_process
-            assert all(hs.stacked_hooks is False for hs in env._session.handshakes)
-            assert k == default_envs_per_process(16, env.world_cost_s, stacked_hooks=False)
-            if cost_may_change_layout(16):
-                # one sim of one world measured, then the worlds in their layout, unmeasured: never a relaunch
-                assert opened == [(1, 1, True, True), (len(env.slices), k, False, False)]
-                assert env.world_cost_s is not None
-            else:  # one CPU: nothing to measure, no probe
-                assert opened == [(len(env.slices), k, False, False)]
-            assert len(env.pids) == len(env.slices)
-            env.reset(seed=0)
-            env.step(np.zeros((16, 2), np.float32))
-        finally:
-            env.close()
+        opened = [(o.processes, o.worlds_each, o.measured, o.probe) for o in opened_sessions]
+        k = env.envs_per_process
+        assert all(hs.stacked_hooks is False for hs in env._session.handshakes)
+        assert k == default_envs_per_process(16, env.world_cost_s, stacked_hooks=False)
+        if cost_may_change_layout(16):
+            # one sim of one world measured, then the worlds in their layout, unmeasured: never a relaunch
+            assert opened == [(1, 1, True, True), (len(env.slices), k, False, False)]
+            assert env.world_cost_s is not None
+        else:  # one CPU: nothing to measure, no probe
+            assert opened == [(len(env.slices), k, False, False)]
+        assert not any(o.gated for o in opened_sessions)
+        assert len(env.pids) == len(env.slices)
+        env.reset(seed=0)
+        env.step(np.zeros((16, 2), np.float32))
     finally:
-        layout_memory.forget_all()
-
-
-def test_a_scene_whose_python_runs_per_world_is_not_probed(monkeypatch):
-    from remoteenv.agent.vector import layout_memory
-
-    opened = _count_opens(monkeypatch)
-    scene = os.path.join(os.path.dirname(__file__), "scenes", "per_world_scene.py")
-    try:
-        env = RemoteVectorEnv(scene, num_envs=16)
         env.close()
-        measured = cost_may_change_layout(16)
-        assert opened == [(len(env.slices), env.envs_per_process, measured, False)]  # the first launch, kept
-    finally:
-        layout_memory.forget_all()
+
+
+def test_a_scene_whose_python_runs_per_world_is_not_probed(opened_sessions):
+    scene = os.path.join(os.path.dirname(__file__), "scenes", "per_world_scene.py")
+    env = RemoteVectorEnv(scene, num_envs=16)
+    env.close()
+    measured = cost_may_change_layout(16)
+    opened = [(o.processes, o.worlds_each, o.measured, o.probe) for o in opened_sessions]
+    assert opened == [(len(env.slices), env.envs_per_process, measured, False)]  # the first launch, kept
+    assert not any(o.gated for o in opened_sessions)
 
 
 def test_an_explicit_layout_is_kept_and_not_measured():
@@ -153,40 +129,29 @@ def test_an_explicit_layout_is_kept_and_not_measured():
         env.close()
 
 
-def test_a_later_vector_env_of_the_scene_starts_in_the_layout_learnt(monkeypatch):
-    from remoteenv.agent.vector import layout_memory, vector_launch
-
-    layout_memory.forget_all()
-    opened: list[tuple[int, bool]] = []
-    real_open = vector_launch.open_session
-
-    def counted(source, label, scene, slices, k, **options):
+def test_a_later_vector_env_of_the_scene_starts_in_the_layout_learnt(opened_sessions):
+    def opened() -> list[tuple[int, bool]]:
         # measured: in its handshake, or at the layout gate (test_layout_gate.py)
-        opened.append((k, options["measure_world_cost"] or getattr(source, "layout_gate", None) is not None))
-        return real_open(source, label, scene, slices, k, **options)
+        return [(o.worlds_each, o.measured or o.gated) for o in opened_sessions]
 
-    monkeypatch.setattr(vector_launch, "open_session", counted)
+    first = gym.make_vec("remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point").unwrapped
+    first.close()
+    learnt = first.envs_per_process
+    assert opened()[0][1] and all(not measured for _, measured in opened()[1:])  # measured once
+    assert opened()[-1][0] == learnt
+    opened_sessions.clear()
+    later = gym.make_vec("remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point").unwrapped
     try:
-        first = gym.make_vec("remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point").unwrapped
-        first.close()
-        learnt = first.envs_per_process
-        assert opened[0][1] and all(not measured for _, measured in opened[1:])  # measured once
-        assert opened[-1][0] == learnt
-        opened.clear()
-        later = gym.make_vec("remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point").unwrapped
-        try:
-            assert opened == [(learnt, False)]  # started where the first ended, measuring nothing
-            assert later.envs_per_process == learnt and later.world_cost_s == first.world_cost_s
-            assert len(later.pids) == len(later.slices)
-            later.reset(seed=0)
-            later.step(np.zeros((16, 2), np.float32))
-        finally:
-            later.close()
-        opened.clear()
-        other = gym.make_vec(
-            "remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point", reward_control_weight=0.5
-        ).unwrapped
-        other.close()
-        assert opened[0][1]  # other scene arguments: measured afresh
+        assert opened() == [(learnt, False)]  # started where the first ended, measuring nothing
+        assert later.envs_per_process == learnt and later.world_cost_s == first.world_cost_s
+        assert len(later.pids) == len(later.slices)
+        later.reset(seed=0)
+        later.step(np.zeros((16, 2), np.float32))
     finally:
-        layout_memory.forget_all()
+        later.close()
+    opened_sessions.clear()
+    other = gym.make_vec(
+        "remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point", reward_control_weight=0.5
+    ).unwrapped
+    other.close()
+    assert opened()[0][1]  # other scene arguments: measured afresh

@@ -83,67 +83,45 @@ def test_a_restart_is_not_gated(tmp_path):
         launcher.close()
 
 
-def _opens(monkeypatch) -> list[tuple[int, int, bool, bool]]:
-    """``(processes, worlds each, measured in the handshake, gated)`` of every session the default layout opens."""
-    from remoteenv.agent.vector import vector_launch
-
-    layout_memory.forget_all()
-    opened: list[tuple[int, int, bool, bool]] = []
-    real_open = vector_launch.open_session
-
-    def counted(source, label, scene, slices, k, **options):
-        gated = getattr(source, "layout_gate", None) is not None
-        opened.append((slices, k, options["measure_world_cost"], gated))
-        return real_open(source, label, scene, slices, k, **options)
-
-    monkeypatch.setattr(vector_launch, "open_session", counted)
-    return opened
-
-
 @pytest.mark.skipif(not cost_may_change_layout(16), reason="one CPU: the cost changes no layout, nothing measured")
-def test_cheap_worlds_start_once_through_the_gate(monkeypatch):
-    opened = _opens(monkeypatch)
+def test_cheap_worlds_start_once_through_the_gate(opened_sessions):
+    env = gym.make_vec("remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point").unwrapped
     try:
-        env = gym.make_vec("remoteenv/Reacher-v0", num_envs=16, vectorization_mode="vector_entry_point").unwrapped
-        try:
-            k = env.envs_per_process
-            assert k == default_envs_per_process(16, env.world_cost_s) == 16
-            assert opened == [(1, 16, False, True)]  # one launch, gated, never a probe or a relaunch
-            assert env.world_cost_s is not None and env.world_cost_s <= COSTLY_WORLD_S
-            assert len(env.pids) == 1
-            env.reset(seed=0)
-            env.step(np.zeros((16, 2), np.float32))
-        finally:
-            env.close()
+        opened = [(o.processes, o.worlds_each, o.measured, o.gated) for o in opened_sessions]
+        k = env.envs_per_process
+        assert k == default_envs_per_process(16, env.world_cost_s) == 16
+        assert opened == [(1, 16, False, True)]  # one launch, gated, never a probe or a relaunch
+        assert not any(o.probe for o in opened_sessions)
+        assert env.world_cost_s is not None and env.world_cost_s <= COSTLY_WORLD_S
+        assert len(env.pids) == 1
+        env.reset(seed=0)
+        env.step(np.zeros((16, 2), np.float32))
     finally:
-        layout_memory.forget_all()
+        env.close()
 
 
 @pytest.mark.skipif(not cost_may_change_layout(8), reason="one CPU: the cost changes no layout, nothing measured")
-def test_costly_worlds_are_turned_down_at_the_gate_and_placed_from_what_it_measured(monkeypatch):
-    opened = _opens(monkeypatch)
+def test_costly_worlds_are_turned_down_at_the_gate_and_placed_from_what_it_measured(opened_sessions):
+    env = gym.make_vec(
+        "remoteenv/CartPole-v0",
+        num_envs=8,
+        vectorization_mode="vector_entry_point",
+        obs_mode="pixels",
+        image_size=16,
+    ).unwrapped
     try:
-        env = gym.make_vec(
-            "remoteenv/CartPole-v0",
-            num_envs=8,
-            vectorization_mode="vector_entry_point",
-            obs_mode="pixels",
-            image_size=16,
-        ).unwrapped
-        try:
-            k = env.envs_per_process
-            assert env.world_cost_s is not None and env.world_cost_s > COSTLY_WORLD_S  # the cameras' rendering
-            assert k == default_envs_per_process(8, env.world_cost_s) < 8
-            assert opened == [(1, 8, False, True), (len(env.slices), k, False, False)]
-            obs, _ = env.reset(seed=0)
-            assert obs.shape == (8, 16, 16, 3)
-        finally:
-            env.close()
+        opened = [(o.processes, o.worlds_each, o.measured, o.gated) for o in opened_sessions]
+        k = env.envs_per_process
+        assert env.world_cost_s is not None and env.world_cost_s > COSTLY_WORLD_S  # the cameras' rendering
+        assert k == default_envs_per_process(8, env.world_cost_s) < 8
+        assert opened == [(1, 8, False, True), (len(env.slices), k, False, False)]
+        obs, _ = env.reset(seed=0)
+        assert obs.shape == (8, 16, 16, 3)
     finally:
-        layout_memory.forget_all()
+        env.close()
 
 
-def test_worlds_started_through_the_gate_draw_their_own_unseeded_starts(monkeypatch):
+def test_worlds_started_through_the_gate_draw_their_own_unseeded_starts():
     """The gate measures a scratch world, never a served one: an unseeded
     world 0 starts where chance puts it, in every vector env."""
     firsts = []

@@ -16,12 +16,11 @@ from __future__ import annotations
 import math
 import os
 import signal
-import time
 from dataclasses import dataclass
 from typing import Any
 
 from remoteenv.agent.errors import RemoteEnvError
-from remoteenv.agent.launch.sim_command import StartingSim, startup_failure
+from remoteenv.agent.launch.sim_command import StartingSim, wait_for
 from remoteenv.wire.codec.frame_limits import MAX_WORLDS
 from remoteenv.wire.files.file_reads import UnreadableFile, read_json
 
@@ -74,17 +73,16 @@ def parse_facts(doc: Any, pid: int) -> GateFacts:
 
 def wait_facts(sim: StartingSim, path: str, timeout: float, what: str) -> GateFacts:
     """Wait until ``sim`` has written its gate file ``path`` and read it. Polls
-    as :func:`~remoteenv.agent.launch.sim_command.wait_ready` does. Raises
+    (:func:`~remoteenv.agent.launch.sim_command.wait_for`), never a fixed sleep. Raises
     :class:`RemoteEnvError` (kind ``"launch"``) if the process exits first, if
     ``timeout`` seconds pass or if the file is malformed; ``what`` names the
     sim's scene in the message."""
-    deadline = time.monotonic() + timeout
-    delay = 0.001
-    while True:
+
+    def look() -> GateFacts | None:
         try:
             return parse_facts(read_json(path, GATE_FILE_LIMIT, what="layout gate file"), sim.pid)
         except FileNotFoundError:
-            pass  # not there yet (it is written whole, by a rename)
+            return None  # not there yet (it is written whole, by a rename)
         except (UnreadableFile, ValueError) as exc:
             raise RemoteEnvError(
                 f"sim instance {sim.instance} (pid {sim.pid}) of {what} wrote a malformed layout gate "
@@ -92,19 +90,8 @@ def wait_facts(sim: StartingSim, path: str, timeout: float, what: str) -> GateFa
                 kind="launch",
                 instance=sim.instance,
             ) from None
-        why = sim.death()
-        if why is not None:
-            raise startup_failure(sim, what, why)
-        if time.monotonic() > deadline:
-            raise RemoteEnvError(
-                f"sim instance {sim.instance} (pid {sim.pid}) of {what} did not measure a world within "
-                f"{timeout:g} s; raise startup_timeout= if the machine is busy. Its stderr so far:\n"
-                f"{sim.stderr_tail()}",
-                kind="launch",
-                instance=sim.instance,
-            )
-        time.sleep(delay)
-        delay = min(delay * 1.2, 0.01)
+
+    return wait_for(sim, look, timeout, what, "measure a world")
 
 
 def go(sim: StartingSim) -> None:

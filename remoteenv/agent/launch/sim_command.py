@@ -17,8 +17,8 @@ import json
 import os
 import sys
 import time
-from collections.abc import Sequence
-from typing import Any, Protocol
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol, TypeVar
 
 from remoteenv.agent.errors import LimitError, RemoteEnvError, SceneArgumentError
 from remoteenv.wire.delays.delay_file import write_delay_file
@@ -28,6 +28,7 @@ from remoteenv.wire.wire_errors import RESOURCES_MARKER, SCENE_ARGS_MARKER
 
 #: Largest ready file read (a sim writes its endpoint and pid: well under 1 KiB).
 READY_FILE_LIMIT = 64 << 10
+T = TypeVar("T")
 
 
 def scene_command(
@@ -185,26 +186,41 @@ def startup_failure(sim: StartingSim, what: str, why: str) -> RemoteEnvError:
 def wait_ready(sim: StartingSim, timeout: float, what: str) -> None:
     """Wait until ``sim`` has written its ready file and set ``sim.endpoint``.
 
-    Polls the file (1 ms, growing to 10 ms: a forked sim is ready within
-    tens of milliseconds, and each look costs microseconds), never a fixed sleep. Raises
+    Polls the file (see :func:`wait_for`), never a fixed sleep. Raises
     :class:`RemoteEnvError` (kind ``"launch"``) if the process exits first or
     ``timeout`` seconds pass; ``what`` names the sim in the message (e.g. the
     scene's file name)."""
-    deadline = time.monotonic() + timeout
-    delay = 0.001
-    while True:
+
+    def look() -> bool | None:
         try:
             info = read_json(sim.ready_file, READY_FILE_LIMIT, what="ready file")
             sim.endpoint = str(info["endpoint"]).replace("tcp://0.0.0.0:", "tcp://127.0.0.1:")
-            return
+            return True
         except (FileNotFoundError, UnreadableFile, KeyError, TypeError):
-            pass  # not there yet, or half written: look again
+            return None  # not there yet, or half written: look again
+
+    wait_for(sim, look, timeout, what, "report ready")
+
+
+def wait_for(sim: StartingSim, look: Callable[[], T | None], timeout: float, what: str, doing: str) -> T:
+    """What ``look()`` finds once it finds something (not None), looking every
+    1 ms, growing to 10 ms (a forked sim starts within tens of milliseconds,
+    and each look costs microseconds). Raises :class:`RemoteEnvError` (kind
+    ``"launch"``) if the process exits first or ``timeout`` seconds pass,
+    naming ``what`` (the scene's file name) and what the sim did not do in
+    time (``doing``, e.g. "report ready")."""
+    deadline = time.monotonic() + timeout
+    delay = 0.001
+    while True:
+        found = look()
+        if found is not None:
+            return found
         why = sim.death()
         if why is not None:
             raise startup_failure(sim, what, why)
         if time.monotonic() > deadline:
             raise RemoteEnvError(
-                f"sim instance {sim.instance} (pid {sim.pid}) of {what} did not report ready within "
+                f"sim instance {sim.instance} (pid {sim.pid}) of {what} did not {doing} within "
                 f"{timeout:g} s; raise startup_timeout= if the machine is busy. Its stderr so far:\n"
                 f"{sim.stderr_tail()}",
                 kind="launch",
