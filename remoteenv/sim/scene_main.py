@@ -9,7 +9,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from remoteenv.sim.process.layout_gate import hold_go, report_and_wait
+from remoteenv.sim.process.layout_gate import GoSignal, report_and_wait
 from remoteenv.sim.process.log import log_to_stderr
 from remoteenv.sim.process.pacing_levers import GC_MODES, apply_levers
 from remoteenv.sim.scene.base_env import BaseEnv
@@ -227,11 +227,10 @@ def run_scene(
     scratch_kwargs = dict(env_kwargs)
     if args.render_mode is not None:
         env_kwargs["render_mode"] = args.render_mode
-    if args.layout_gate:
-        hold_go()
+    go = GoSignal() if args.layout_gate else None
     try:
-        if args.layout_gate:
-            report_and_wait(args.layout_gate, lambda: env_factory(**scratch_kwargs), args.parent_pid)
+        if args.layout_gate and go is not None:
+            report_and_wait(args.layout_gate, lambda: env_factory(**scratch_kwargs), args.parent_pid, go)
         envs = build_worlds(lambda: env_factory(**env_kwargs), args.worlds, f"sim instance {args.instance}")
     except TypeError as exc:
         if "keyword argument" not in str(exc):

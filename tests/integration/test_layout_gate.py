@@ -24,6 +24,7 @@ from remoteenv.agent.launch.sim_group import LaunchSpec
 from remoteenv.agent.vector import layout_memory
 from remoteenv.agent.vector.vector_layout import COSTLY_WORLD_S, cost_may_change_layout, default_envs_per_process
 from remoteenv.sim.stepping.batch_worlds import available
+from remoteenv.wire.protocol import PROTOCOL_VERSION
 
 COUNTING = os.path.join(os.path.dirname(__file__), "scenes", "counting_scene.py")
 
@@ -49,6 +50,25 @@ def test_a_gated_sim_builds_its_worlds_only_after_the_go(tmp_path):
         assert at_gate == [["None"]]  # the scratch world alone, made without a render mode
         assert built(count) == ["None"] + ["rgb_array"] * 3  # the served worlds, after the go
         assert launcher.layout_gate is None  # asked once
+    finally:
+        launcher.close()
+
+
+def test_a_sim_started_the_plain_way_passes_the_gate(tmp_path):
+    """Without the zygote the sim has threads before it waits (its BLAS's):
+    the go must reach the wait whichever thread takes it."""
+    count = tmp_path / "worlds"
+    launcher = Launcher(transport="pipe", zygote=False)
+    launcher.layout_gate = lambda facts: True
+    try:
+        launcher.start(LaunchSpec(COUNTING, 1, 2, env_kwargs={"count_file": str(count)}, startup_timeout=60.0))
+        assert launcher.sims[0].zygote_pid is None
+        assert built(count) == ["None"] * 3
+        conn = launcher.connect(0, timeout=30.0)
+        try:
+            assert conn.request("handshake", protocol=PROTOCOL_VERSION)["num_worlds"] == 2
+        finally:
+            conn.close()
     finally:
         launcher.close()
 
@@ -140,9 +160,10 @@ def test_worlds_started_through_the_gate_draw_their_own_unseeded_starts():
 WAITER = r"""
 import sys
 from remoteenv.benchmarks.harness.step_profile import reacher_class
-from remoteenv.sim.process.layout_gate import hold_go, report_and_wait
-hold_go()
-report_and_wait(sys.argv[1], reacher_class(), int(sys.argv[2]))
+import numpy  # its BLAS threads exist before the go is caught, as in a sim started the plain way
+from remoteenv.sim.process.layout_gate import GoSignal, report_and_wait
+go = GoSignal()
+report_and_wait(sys.argv[1], reacher_class(), int(sys.argv[2]), go)
 print("went on", flush=True)
 """
 
@@ -189,3 +210,20 @@ def test_the_sim_at_the_gate_ends_when_its_agent_is_gone(tmp_path):
     finally:
         proc.kill()
         proc.wait()
+
+
+EARLY_GO = r"""
+import os, signal
+import numpy  # a BLAS thread that does not hold the signal, as in a sim started the plain way
+from remoteenv.sim.process.layout_gate import GoSignal
+go = GoSignal()
+os.kill(os.getpid(), signal.SIGUSR1)  # the go before the wait, taken by whichever thread
+go.wait(None)
+print("went on", signal.getsignal(signal.SIGUSR1) == signal.SIG_DFL, flush=True)
+"""
+
+
+def test_a_go_that_comes_before_the_wait_is_kept_by_any_thread():
+    out = subprocess.run([sys.executable, "-c", EARLY_GO], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr[-400:]
+    assert out.stdout.split() == ["went", "on", "True"]  # and the signal's default is back

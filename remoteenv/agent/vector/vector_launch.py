@@ -148,7 +148,7 @@ def _gate_fits(group: Launcher, launch: dict[str, Any]) -> bool:
         group.layout is None
         and launch.get("render_mode") != "human"
         and not launch["run"].lock_step_delayed
-        and hasattr(signal, "sigtimedwait")  # the sim waits at the gate with it (Linux)
+        and hasattr(signal, "SIGUSR1")  # the go (POSIX)
     )
 
 
