@@ -29,6 +29,10 @@ from remoteenv.wire.wire_errors import RESOURCES_MARKER, SCENE_ARGS_MARKER
 #: Largest ready file read (a sim writes its endpoint and pid: well under 1 KiB).
 READY_FILE_LIMIT = 64 << 10
 T = TypeVar("T")
+#: Longest pause (seconds) between two looks for a starting sim's file: what
+#: a sim that is ready waits, at most, to be noticed (~10 us of the agent's
+#: CPU a look, a few tenths of a per cent of one CPU while it waits).
+LONGEST_LOOK_S = 0.002
 
 
 def scene_command(
@@ -204,8 +208,8 @@ def wait_ready(sim: StartingSim, timeout: float, what: str) -> None:
 
 def wait_for(sim: StartingSim, look: Callable[[], T | None], timeout: float, what: str, doing: str) -> T:
     """What ``look()`` finds once it finds something (not None), looking every
-    1 ms, growing to 10 ms (a forked sim starts within tens of milliseconds,
-    and each look costs microseconds). Raises :class:`RemoteEnvError` (kind
+    1 ms, growing to :data:`LONGEST_LOOK_S` (a forked sim starts within tens
+    of milliseconds, and each look costs microseconds). Raises :class:`RemoteEnvError` (kind
     ``"launch"``) if the process exits first or ``timeout`` seconds pass,
     naming ``what`` (the scene's file name) and what the sim did not do in
     time (``doing``, e.g. "report ready")."""
@@ -227,4 +231,4 @@ def wait_for(sim: StartingSim, look: Callable[[], T | None], timeout: float, wha
                 instance=sim.instance,
             )
         time.sleep(delay)
-        delay = min(delay * 1.2, 0.01)
+        delay = min(delay * 1.2, LONGEST_LOOK_S)
