@@ -72,7 +72,8 @@ class GoSignal:
                 if parent_pid is not None and not parent_alive(parent_pid):
                     sys.exit(0)  # the agent is gone: nothing was built, its dir goes with it
         finally:
-            signal.signal(GO_SIGNAL, self._previous)
+            if signal.getsignal(GO_SIGNAL) is _caught:  # a scene that set its own meanwhile keeps it
+                signal.signal(GO_SIGNAL, self._previous)
             signal.set_wakeup_fd(self._previous_fd)
             os.close(self._read)
             os.close(self._write)
