@@ -229,7 +229,7 @@ def run_scene(
         env_kwargs["render_mode"] = args.render_mode
     go = GoSignal() if args.layout_gate else None
     try:
-        if args.layout_gate and go is not None:
+        if go is not None:
             report_and_wait(args.layout_gate, lambda: env_factory(**scratch_kwargs), args.parent_pid, go)
         envs = build_worlds(lambda: env_factory(**env_kwargs), args.worlds, f"sim instance {args.instance}")
     except TypeError as exc:

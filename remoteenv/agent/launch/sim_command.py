@@ -30,8 +30,8 @@ from remoteenv.wire.wire_errors import RESOURCES_MARKER, SCENE_ARGS_MARKER
 READY_FILE_LIMIT = 64 << 10
 T = TypeVar("T")
 #: Longest pause (seconds) between two looks for a starting sim's file: what
-#: a sim that is ready waits, at most, to be noticed (~10 us of the agent's
-#: CPU a look, a few tenths of a per cent of one CPU while it waits).
+#: a sim that is ready waits, at most, to be noticed (a look, a failed open
+#: and a poll of the process, costs the agent microseconds).
 LONGEST_LOOK_S = 0.002
 
 

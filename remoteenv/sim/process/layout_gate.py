@@ -30,8 +30,7 @@ from typing import Any
 from remoteenv.sim.process.orphan import parent_alive
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.scene.world_cost import step_cost
-from remoteenv.sim.stepping.batch_step import steps_together
-from remoteenv.sim.stepping.batch_worlds import available
+from remoteenv.sim.stepping.batch_step import steps_as_one_batch
 from remoteenv.wire.files.safe_writes import write_atomic
 from remoteenv.wire.messages.handshake import worlds_that_fit
 
@@ -86,7 +85,7 @@ def facts_of(world: BaseEnv, cost_s: float) -> dict[str, Any]:
     ``mujoco.batch``) and how many worlds' observations one batch reply carries."""
     return {
         "world_cost_s": cost_s if math.isfinite(cost_s) else None,
-        "stacked_hooks": bool(type(world).stacked_hooks and available() and steps_together([world])),
+        "stacked_hooks": steps_as_one_batch([world]),
         "worlds_that_fit": worlds_that_fit(world.observation_space),
         "pid": os.getpid(),
     }

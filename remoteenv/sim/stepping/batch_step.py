@@ -42,6 +42,13 @@ def steps_together(envs: Sequence[Any]) -> bool:
     )
 
 
+def steps_as_one_batch(envs: Sequence[Any]) -> bool:
+    """Whether ``envs`` step in one ``mujoco.batch`` call with their scene's
+    stacked hooks: they step together (:func:`steps_together`), their class
+    sets :attr:`~BaseEnv.stacked_hooks` and this MuJoCo has ``mujoco.batch``."""
+    return steps_together(envs) and bool(type(envs[0]).stacked_hooks) and available()
+
+
 class WorldsStepper:
     """Steps any subset of ``envs`` (one class, see :func:`steps_together`) by one tick.
 
@@ -66,7 +73,7 @@ class WorldsStepper:
         #: Threads the worlds' physics steps on, the caller's included.
         self.threads = max(1, int(nthreads))
         #: The worlds' physics in one ``mujoco.batch.Batch`` (scenes with stacked hooks), else None.
-        self.batched = BatchedWorlds(self.envs, nthreads) if self._cls.stacked_hooks and available() else None
+        self.batched = BatchedWorlds(self.envs, nthreads) if steps_as_one_batch(self.envs) else None
         self.physics = PhysicsThreads(1 if self.batched is not None else nthreads)
         #: Every world, with the batch's state (the common request: built once).
         self._every = StackedWorlds(self.envs, batch_state(self.batched, None)) if self.batched is not None else None
@@ -131,4 +138,4 @@ class WorldsStepper:
             self.batched = None
 
 
-__all__ = ["WorldsStepper", "steps_together"]
+__all__ = ["WorldsStepper", "steps_as_one_batch", "steps_together"]
