@@ -8,6 +8,7 @@ import os
 import shutil
 import tempfile
 import time
+from pathlib import Path
 from typing import NamedTuple
 
 import pytest
@@ -16,6 +17,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import remoteenv
 from remoteenv.agent.launch.launcher import pid_alive
+from remoteenv.agent.launch.private_dir import MAX_SOCKET_PATH, socket_path_length
 
 # SB3 makes an empty /tmp/SB3-<time> folder on every learn() that has no logger
 # set; the tests' (and their subprocesses') go into one folder removed at exit.
@@ -126,6 +128,19 @@ def closing():
 @pytest.fixture
 def scene_path():
     return remoteenv.scene_path
+
+
+@pytest.fixture
+def agent_tmpdir():
+    """A short empty directory for the ``TMPDIR`` of agents a test starts, removed after.
+
+    Short so that their launches' private dirs, ipc sockets included, are made
+    in it rather than moved to a shorter base (``private_dir.make_private_dir``):
+    a test that looks for what they leave then looks where they are."""
+    tmp = tempfile.mkdtemp(prefix="rs-", dir="/tmp")
+    assert socket_path_length(tmp, 1000) <= MAX_SOCKET_PATH, tmp
+    yield Path(tmp)
+    shutil.rmtree(tmp, ignore_errors=True)
 
 
 @pytest.fixture(name="pid_alive")

@@ -79,9 +79,8 @@ AGENT = textwrap.dedent(
 )
 
 
-def test_a_private_dir_replaced_by_a_symlink_leaves_the_targets_files_alone(tmp_path, pid_alive):
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+def test_a_private_dir_replaced_by_a_symlink_leaves_the_targets_files_alone(tmp_path, agent_tmpdir, pid_alive):
+    tmp = agent_tmpdir
     victim = _victim(tmp_path)
     before = sorted(os.listdir(victim))
     agent = _run(AGENT, tmp, stdout=subprocess.PIPE)
@@ -124,9 +123,8 @@ FIFO_AGENT = textwrap.dedent(
 )
 
 
-def test_a_fifo_at_a_registered_path_does_not_hang_the_dir_reaper(tmp_path, pid_alive):
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+def test_a_fifo_at_a_registered_path_does_not_hang_the_dir_reaper(tmp_path, agent_tmpdir, pid_alive):
+    tmp = agent_tmpdir
     done = subprocess.run(
         [sys.executable, "-c", FIFO_AGENT], cwd=tmp, capture_output=True, text=True, timeout=120, env=_env(tmp)
     )
@@ -157,9 +155,8 @@ FIFO_CLOSE_AGENT = textwrap.dedent(
 )
 
 
-def test_a_fifo_at_the_private_dirs_path_does_not_hang_env_close(tmp_path):
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+def test_a_fifo_at_the_private_dirs_path_does_not_hang_env_close(tmp_path, agent_tmpdir):
+    tmp = agent_tmpdir
     agent = _run(FIFO_CLOSE_AGENT, tmp, stdout=subprocess.PIPE)
     try:
         out, _ = agent.communicate(timeout=90)
@@ -207,9 +204,8 @@ STOPPED_REAPER_AGENT = textwrap.dedent(
 )
 
 
-def test_a_stopped_dir_reaper_never_blocks_its_agent(tmp_path, pid_alive):
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+def test_a_stopped_dir_reaper_never_blocks_its_agent(tmp_path, agent_tmpdir, pid_alive):
+    tmp = agent_tmpdir
     agent = _run(STOPPED_REAPER_AGENT, tmp, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
     reaper = None
     try:

@@ -8,12 +8,9 @@ import argparse
 import json
 import math
 import os
-import shutil
 import subprocess
 import sys
-import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -197,12 +194,12 @@ def _descendants(root: int) -> set[int]:
     return found
 
 
-def test_a_sigtermed_study_leaves_no_dir_and_no_process(tmp_path, pid_alive):
+def test_a_sigtermed_study_leaves_no_dir_and_no_process(tmp_path, agent_tmpdir, pid_alive):
     """Issue 28, item 6: SIGTERM while the workers train leaves no
     ``remoteenv-study-policies-*`` dir (nor any private dir) and no process."""
-    # A short TMPDIR of its own: multiprocessing's manager binds a Unix socket in it,
+    # A short TMPDIR: multiprocessing's manager binds a Unix socket in it,
     # and pytest's tmp_path (its run counter in it) can pass the 107-byte limit.
-    tmp = Path(tempfile.mkdtemp(prefix="rs-"))
+    tmp = agent_tmpdir
     log = tmp_path / "stderr"
     cmd = [sys.executable, "-m", "remoteenv", "latency-study", "--out", str(tmp_path / "study"), "--no-plot"]
     cmd += ["--random-delays", "", "--delays", "0", "--seeds", "0", "--steps", "100000", "--workers", "2"]
@@ -230,7 +227,6 @@ def test_a_sigtermed_study_leaves_no_dir_and_no_process(tmp_path, pid_alive):
         for pid in left:
             if pid_alive(pid):
                 os.kill(pid, 9)
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 @pytest.mark.parametrize("obs_mode", ["pixels", "state_pixels"])

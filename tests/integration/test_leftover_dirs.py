@@ -100,9 +100,8 @@ def _env(tmp: Path) -> dict[str, str]:
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
-def test_an_agent_stopped_while_it_closes_its_env_leaves_no_private_dir(tmp_path, sig):
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+def test_an_agent_stopped_while_it_closes_its_env_leaves_no_private_dir(tmp_path, agent_tmpdir, sig):
+    tmp = agent_tmpdir
     agent = subprocess.Popen([sys.executable, "-c", AGENT], stdout=subprocess.PIPE, text=True, env=_env(tmp))
     try:
         line = agent.stdout.readline()  # type: ignore[union-attr]
@@ -121,9 +120,8 @@ def test_an_agent_stopped_while_it_closes_its_env_leaves_no_private_dir(tmp_path
 
 
 @pytest.mark.parametrize("method", ["spawn", "fork"])
-def test_a_pool_terminated_while_its_worker_closes_a_pickled_env_leaves_no_private_dir(tmp_path, method):
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+def test_a_pool_terminated_while_its_worker_closes_a_pickled_env_leaves_no_private_dir(tmp_path, agent_tmpdir, method):
+    tmp = agent_tmpdir
     script = tmp_path / "pool_agent.py"
     script.write_text(POOL_AGENT)
     done = subprocess.run(
@@ -226,9 +224,8 @@ def _kill_all(pids: list[int], pid_alive) -> None:
             os.kill(pid, signal.SIGKILL)
 
 
-def test_an_agent_killed_as_its_zygote_starts_leaves_nothing_within_a_second(tmp_path, pid_alive):
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+def test_an_agent_killed_as_its_zygote_starts_leaves_nothing_within_a_second(tmp_path, agent_tmpdir, pid_alive):
+    tmp = agent_tmpdir
     agent = subprocess.Popen([sys.executable, "-c", EARLY_AGENT], env=_env(tmp))
     pids: list[int] = []
     try:
@@ -252,9 +249,10 @@ def test_an_agent_killed_as_its_zygote_starts_leaves_nothing_within_a_second(tmp
         _kill_all(pids, pid_alive)
 
 
-def test_a_fork_pool_terminated_as_its_workers_zygote_starts_leaves_nothing_within_a_second(tmp_path, pid_alive):
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+def test_a_fork_pool_terminated_as_its_workers_zygote_starts_leaves_nothing_within_a_second(
+    tmp_path, agent_tmpdir, pid_alive
+):
+    tmp = agent_tmpdir
     script = tmp_path / "early_pool_agent.py"
     script.write_text(EARLY_POOL_AGENT)
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, env=_env(tmp))
@@ -292,11 +290,10 @@ QUIET_AGENT = textwrap.dedent(
 )
 
 
-def test_the_dir_reaper_holds_none_of_its_agents_descriptors_and_ends_it_quietly(tmp_path, pid_alive):
+def test_the_dir_reaper_holds_none_of_its_agents_descriptors_and_ends_it_quietly(tmp_path, agent_tmpdir, pid_alive):
     # Before: the agent held the reaper as a Popen, which warned "subprocess N is
     # still running" (ResourceWarning) at every interpreter exit, e.g. pytest's.
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
+    tmp = agent_tmpdir
     agent = subprocess.Popen(
         [sys.executable, "-X", "dev", "-c", QUIET_AGENT],
         env=_env(tmp),

@@ -17,7 +17,6 @@ from __future__ import annotations
 import dataclasses
 import os
 import signal
-import tempfile
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -25,6 +24,7 @@ from typing import Any
 from remoteenv.agent.connection.connect import SimConnection, connect_sim
 from remoteenv.agent.launch.dir_reaper import watch_dir
 from remoteenv.agent.launch.layout_gate import GateFacts, LayoutRejected, go, wait_facts
+from remoteenv.agent.launch.private_dir import make_private_dir
 from remoteenv.agent.launch.processes import pid_alive
 from remoteenv.agent.launch.sim_command import wait_ready
 from remoteenv.agent.launch.sim_group import LaunchSpec, SimLayout
@@ -69,7 +69,8 @@ class Launcher:
             options (see :class:`~remoteenv.wire.run_options.options.RunOptions`,
             made here once); only with ``scene``.
         transport: ``"ipc"`` (default): each sim binds an ipc endpoint in the
-            private dir; ``"tcp"``: 127.0.0.1 with an OS-assigned port;
+            private dir (made where the sockets' paths fit the OS limit, see
+            :func:`~remoteenv.agent.launch.private_dir.make_private_dir`); ``"tcp"``: 127.0.0.1 with an OS-assigned port;
             ``"pipe"``: ipc, and each sim also gets one end of a Unix socketpair
             (the local pipe, :attr:`SimProcess.pipe`), the fastest way for this
             process to talk to it.
@@ -193,7 +194,8 @@ class Launcher:
         if not os.path.isfile(spec.scene):
             raise FileNotFoundError(f"scene script {spec.scene!r} does not exist")
         self.spec = spec
-        self._state = LaunchState(workdir=tempfile.mkdtemp(prefix="remoteenv-"))
+        ipc = self.bind_address is None and self.transport == "ipc"
+        self._state = LaunchState(workdir=make_private_dir(spec.num_instances, sockets=ipc))
         # Removed even if this process is killed before any sim exists; only this dir, never what replaces it.
         self._state.workdir_id = watch_dir(self._state.workdir)
         self._finalizer = weakref.finalize(self, stop_all, self._state)
