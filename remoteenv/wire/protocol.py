@@ -253,7 +253,17 @@ region reply uses the last announced layout. Any other outcome (a reset, an
 error, other infos) is answered on the pipe as usual. Replies keep request
 order. Before a side blocks it clears its ``*_WATCHING`` word, then a full
 fence, then it looks at the peer's sequence word once more (and does not
-block if it moved). Without total store order (off x86-64) a side sets no
+block if it moved). A heads-up: an agent that blocks for one sim's reply may
+also set ``AGENT_HEADS_UP`` (1) as it clears ``AGENT_WATCHING``; a sim that
+finds both so once the physics of a region request is done may send
+``{"seq": s, "soon": true}`` before it runs the rest of the tick (hooks,
+checks, answer), so that the agent's wake-up overlaps that work. The agent,
+woken by it, watches again (``AGENT_WATCHING`` 1, ``AGENT_HEADS_UP`` 0) and
+waits for the reply (in the region or as a frame) hot for a bounded time,
+then blocks as before. A heads-up is a hint: it answers nothing (a reader
+drops one it does not await), the reply and its wake-up frame follow the
+rules above unchanged, and a sim may send none (it sends none where its
+ticks take long after the physics). Without total store order (off x86-64) a side sets no
 ``*_WATCHING`` word and reads no sequence word without its frame, so every
 request and reply then goes as its frame. The agent takes a region reply
 only for the request it awaits, in the announced layout, and refuses
@@ -443,6 +453,13 @@ def region_ring(seq: int) -> bytes:
     region: ``{"seq": seq, "cmd": "step_batch", "region": true}`` (see "The
     fast lane" above)."""
     return pack({"seq": seq, "cmd": "step_batch", "region": True})
+
+
+def reply_soon(seq: int) -> bytes:
+    """The heads-up a sim may send once the physics of region request ``seq``
+    is done and the agent sleeps waiting for it: ``{"seq": seq, "soon": true}``
+    (see "The fast lane" above). It answers nothing."""
+    return pack({"seq": seq, "soon": True})
 
 
 def decode_request(frame: bytes) -> dict[str, Any]:

@@ -8,7 +8,15 @@ from __future__ import annotations
 import numpy as np
 
 from remoteenv.wire.shared_memory import doorbell
-from remoteenv.wire.shared_memory.doorbell import AGENT_WATCHING, REQ_N, REQ_NAMED, REQ_SEQ, SIM_WATCHING, Doorbell
+from remoteenv.wire.shared_memory.doorbell import (
+    AGENT_HEADS_UP,
+    AGENT_WATCHING,
+    REQ_N,
+    REQ_NAMED,
+    REQ_SEQ,
+    SIM_WATCHING,
+    Doorbell,
+)
 
 
 def _pair(agent_silent: bool = True, sim_silent: bool = True) -> tuple[Doorbell, Doorbell, np.ndarray]:
@@ -71,3 +79,50 @@ def test_a_sequence_word_that_goes_back_is_no_request() -> None:
     assert sim.posted(0) == 5
     header[REQ_SEQ] = 3  # an agent that rewinds its word would otherwise keep the sim from ever blocking
     assert sim.posted(5) == 0 and sim.sim_sleeps(5) == 0
+
+
+def test_a_heads_up_is_wanted_only_while_the_agent_sleeps_asking_for_one() -> None:
+    agent, sim, header = _pair()
+    agent.post(1, 1, False)
+    sim.posted(0)
+    assert not sim.agent_wants_heads_up()  # awake and watching
+    assert agent.agent_sleeps(1)  # blocks without asking
+    assert not sim.agent_wants_heads_up()
+    agent.agent_wakes()
+    assert agent.agent_sleeps(1, heads_up=True)
+    assert header[AGENT_HEADS_UP] == 1 and header[AGENT_WATCHING] == 0
+    assert sim.agent_wants_heads_up()
+    agent.agent_wakes()  # woken (by the heads-up): watching again, no longer asking
+    assert header[AGENT_HEADS_UP] == 0 and header[AGENT_WATCHING] == 1
+    assert not sim.agent_wants_heads_up()
+    assert not sim.reply(1, 0)  # the woken agent watches: the reply needs no frame
+    assert agent.agent_tampered() is None and sim.sim_tampered(1) is None
+
+
+def test_an_agent_whose_reply_is_there_does_not_block_or_ask() -> None:
+    agent, sim, header = _pair()
+    agent.post(1, 1, False)
+    sim.posted(0)
+    sim.reply(1, 0)
+    assert not agent.agent_sleeps(1, heads_up=True)
+    assert header[AGENT_HEADS_UP] == 0 and header[AGENT_WATCHING] == 1
+
+
+def test_a_loud_agent_never_asks_for_a_heads_up() -> None:
+    agent, sim, header = _pair(agent_silent=False)
+    agent.post(1, 1, False)
+    assert agent.agent_sleeps(1, heads_up=True)
+    assert header[AGENT_HEADS_UP] == 0 and not sim.agent_wants_heads_up()
+    agent, sim, header = _pair(sim_silent=False)  # a loud sim reads no word without its frame
+    agent.post(1, 1, False)
+    agent.agent_sleeps(1, heads_up=True)
+    assert not sim.agent_wants_heads_up()
+
+
+def test_a_heads_up_word_off_the_rules_is_tampering() -> None:
+    agent, sim, header = _pair()
+    agent.post(1, 1, False)
+    header[AGENT_HEADS_UP] = 2
+    assert "watching flags" in (sim.sim_tampered(0) or "")
+    header[AGENT_HEADS_UP] = 1  # the agent asks only while it blocks, never between requests
+    assert "heads-up word holds 1" in (agent.agent_tampered() or "")

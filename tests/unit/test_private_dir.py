@@ -81,5 +81,7 @@ def test_no_room_anywhere_is_refused_saying_what_to_set(monkeypatch, short_base)
 
 
 def test_the_longest_socket_is_the_last_instances(short_base):
-    assert socket_path_length(short_base, 10) == len(os.fsencode(os.path.join(short_base, "remoteenv-xxxxxxxx/sim-9.sock")))
+    assert socket_path_length(short_base, 10) == len(
+        os.fsencode(os.path.join(short_base, "remoteenv-xxxxxxxx/sim-9.sock"))
+    )
     assert socket_path_length(short_base, 11) == socket_path_length(short_base, 10) + 1

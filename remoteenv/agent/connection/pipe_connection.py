@@ -4,7 +4,10 @@ end is its :class:`~remoteenv.sim.transport.channels.PipeChannel`).
 Runs in the agent process. A Unix socketpair carrying length-prefixed frames
 (see :mod:`remoteenv.wire.protocol`): no I/O threads sit between the two
 processes, and the sim's death shows at once as end of file. Waits for a
-reply start hot while replies have been quick (:mod:`remoteenv.wire.shared_memory.hot_wait`).
+reply start hot while replies have been quick (:mod:`remoteenv.wire.shared_memory.hot_wait`);
+a wait that blocks for a reply in the shared region asks the sim for a
+heads-up once its physics is done, and waits hot from it (the fast lane's
+heads-up, :mod:`remoteenv.wire.shared_memory.doorbell`).
 """
 
 from __future__ import annotations
@@ -27,6 +30,10 @@ from remoteenv.wire.shared_memory.hot_wait import HotWait
 _EXIT_REPORT_S = 2.0
 #: Longest busy-wait (seconds) for a reply on the local pipe (see :mod:`remoteenv.wire.shared_memory.hot_wait`).
 AGENT_SPIN_S = 200e-6
+#: Longest busy-wait (seconds) for a reply after the sim's heads-up that it is
+#: due (its physics done; the sim sends none where the rest of its tick takes
+#: longer than :data:`~remoteenv.sim.transport.shared_lane_server.HEADS_UP_TAIL_S`).
+HEADS_UP_WAIT_S = 1e-3
 
 
 class PipeConnection(SimConnection):
@@ -69,6 +76,10 @@ class PipeConnection(SimConnection):
         self._held: dict[int, dict[str, Any]] = {}
         self._eof = False
         self._hot = HotWait(AGENT_SPIN_S)
+        #: The hot wait after a heads-up (asked for only where waiting hot is allowed).
+        self._soon = HotWait(HEADS_UP_WAIT_S)
+        #: Heads-ups this connection was woken by (see :meth:`_after_heads_up`).
+        self.heads_ups = 0
         pipe.setblocking(True)
         # A blocking read returns after at most LIVENESS_CHECK_S (one system
         # call per wait instead of a poll and a read).
@@ -160,6 +171,8 @@ class PipeConnection(SimConnection):
         return super().try_receive(seq, what, wait)
 
     def _answers(self, reply: dict[str, Any], seq: int) -> bool:
+        if reply.get("soon") is True:  # a heads-up read after its wait: it answers nothing
+            return False
         got = reply.get("seq")
         if type(got) is int and got > seq and got in self._unanswered:
             # A later request's reply read before the awaited one was seen in the region
@@ -208,7 +221,7 @@ class PipeConnection(SimConnection):
             self._hot.waited(float("inf"))
         if not self._frames:
             watch = self._watch if self._watch is not None and self._watch[0] == self._awaiting else None
-            if watch is not None and not watch[1].agent_sleeps(watch[0]):
+            if watch is not None and not watch[1].agent_sleeps(watch[0], heads_up=self._soon.allowed()):
                 region = self._region_reply()  # the reply came just now
                 if region is not None:
                     return region
@@ -220,7 +233,38 @@ class PipeConnection(SimConnection):
                 finally:
                     if watch is not None:
                         watch[1].agent_wakes()
+                if watch is not None:
+                    region = self._after_heads_up(watch[0])
+                    if region is not None:
+                        return region
         return self._frames.popleft() if self._frames else None
+
+    def _after_heads_up(self, seq: int) -> dict[str, Any] | None:
+        """If the frames just read hold the sim's heads-up for ``seq`` (its
+        physics is done, its reply due), drop it and wait hot for the reply, at
+        most :data:`HEADS_UP_WAIT_S`: the region's reply, else None (a frame
+        came, or the wait ran out: the caller goes on as after any wake-up)."""
+        soon = protocol.reply_soon(seq)
+        if soon not in self._frames:
+            return None
+        self._frames.remove(soon)
+        self.heads_ups += 1
+        if self._frames or not self._soon.worth_it():
+            return None
+        start = time.perf_counter()
+        while True:
+            region = self._region_reply()
+            if region is not None:
+                self._soon.waited(time.perf_counter() - start)
+                return region
+            # Yields the CPU between looks: the sim may share this one.
+            if not self._soon.spin():
+                self._soon.waited(float("inf"))
+                return None
+            self._read(False)
+            if self._frames:
+                self._soon.waited(time.perf_counter() - start)
+                return None
 
     def _recv_frame_nowait(self) -> Any:
         region = self._region_reply() or self._take_held()

@@ -174,7 +174,8 @@ class BatchCommands:
             # A plain step answered through the region renders camera images straight into it.
             lane = self.lane
             rows = lane.obs_rows(n) if all_step and lane is not None and (seq or shared) else None
-            batch = self.stepper.step(stepped_worlds, picked, rows)
+            heads_up = (lambda: lane.physics_done(seq)) if seq and lane is not None else None
+            batch = self.stepper.step(stepped_worlds, picked, rows, heads_up)
             resets = not all_step or OP_STEP_RESET in ops or (OP_STEP_AUTORESET in ops and batch.terminated.any())
             if not resets:
                 if seq and lane is not None:

@@ -15,7 +15,7 @@ batched hooks loop over them), so every scene's physics runs off the GIL.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -78,12 +78,20 @@ class WorldsStepper:
         #: Every world, with the batch's state (the common request: built once).
         self._every = StackedWorlds(self.envs, batch_state(self.batched, None)) if self.batched is not None else None
 
-    def step(self, worlds: Sequence[int], actions: Any, obs_out: np.ndarray | None = None) -> BatchResult:
+    def step(
+        self,
+        worlds: Sequence[int],
+        actions: Any,
+        obs_out: np.ndarray | None = None,
+        after_physics: Callable[[], None] | None = None,
+    ) -> BatchResult:
         """One tick of worlds ``worlds`` (indices, in order) with ``actions[j]``
         for ``worlds[j]`` (checked and stacked, see :meth:`BaseEnv.prepare_steps`).
         ``obs_out``: where camera images alone (one camera, no state) may be
         rendered in place, e.g. the shared region's rows (see
-        :func:`~remoteenv.sim.scene.camera_rig.observe_worlds`)."""
+        :func:`~remoteenv.sim.scene.camera_rig.observe_worlds`).
+        ``after_physics``: called once the physics is done, before the
+        scene's ``post_steps`` (the fast lane's heads-up)."""
         every = list(worlds) == self._all
         batched = self.batched
         if batched is not None:
@@ -105,6 +113,8 @@ class WorldsStepper:
                 datas = [self._datas[w] for w in worlds]
             self._cls.prepare_steps(envs, actions)
             self.physics.step(models, datas, self._frame_skip)
+        if after_physics is not None:
+            after_physics()
         env = self.envs[0]
         result = check_batch(
             self._cls.post_steps(envs, actions),

@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import sys
+import time
 from typing import Any
 
 import numpy as np
@@ -27,13 +28,16 @@ from remoteenv.sim.scene.batch_result import BatchResult
 from remoteenv.sim.transport.channels import Channel, PipeChannel
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.wire.codec.arrays import wire_dtype
-from remoteenv.wire.protocol import OPS
+from remoteenv.wire.protocol import OPS, reply_soon
 from remoteenv.wire.shared_memory.doorbell import Doorbell
 from remoteenv.wire.shared_memory.shared_batch import SharedArrays, SharedLayout, create_region
 from remoteenv.wire.wire_errors import PROTOCOL, STATE
 
 #: Info columns the region of a sim holds for the fast lane.
 INFO_COLUMNS = 16
+#: A sim whose last region answer came this long (seconds) or longer after its
+#: physics sends no heads-up: the agent would wait hot through the rest of the tick.
+HEADS_UP_TAIL_S = 0.5e-3
 #: The dtype an info column of python scalars travels in, by numpy kind.
 _WIDE = {"b": np.dtype(np.bool_), "i": np.dtype("<i8"), "u": np.dtype("<i8"), "f": np.dtype("<f8")}
 _LAST_OP = max(OPS)
@@ -84,6 +88,12 @@ class SharedLane:
         self._row_views: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
         #: Why the region is no longer used (its header was tampered with), or None.
         self.tampered: str | None = None
+        #: The pipe the last region request came on (heads-ups go there).
+        self._channel: PipeChannel | None = None
+        #: When the physics of the request being served was done (perf_counter s; 0: not yet).
+        self._physics_done = 0.0
+        #: Seconds from the physics to the region answer, last time (0: not known).
+        self._tail_s = 0.0
 
     @property
     def offered(self) -> bool:
@@ -166,6 +176,7 @@ class SharedLane:
         if posted != seq:
             raise RequestError(PROTOCOL, f"a region step_batch {seq}, but the region holds request {posted}")
         self.served = seq
+        self._channel = channel
         self.agent_think_s = doorbell.agent_think_s()
         k = arrays.layout.worlds
         if not 0 < n <= k:
@@ -179,6 +190,19 @@ class SharedLane:
         return ops, worlds, arrays.actions[:n].copy()
 
     # ------------------------------------------------------------ replies
+
+    def physics_done(self, seq: int) -> None:
+        """The physics of region request ``seq`` is done: send the agent the
+        heads-up ``{"seq": seq, "soon": true}`` if it sleeps waiting for the
+        reply and asked for one (:mod:`remoteenv.wire.shared_memory.doorbell`),
+        unless this sim's last region answer came :data:`HEADS_UP_TAIL_S` or
+        more after its physics (the agent would wait hot for long)."""
+        self._physics_done = time.perf_counter()
+        doorbell, channel = self.doorbell, self._channel
+        if doorbell is None or channel is None or self._tail_s >= HEADS_UP_TAIL_S:
+            return
+        if doorbell.agent_wants_heads_up():
+            channel.send(None, reply_soon(seq))
 
     def reply(self, batch: BatchResult, info: dict[str, Any]) -> dict[str, Any] | None:
         """Put a plain step's arrays in the region and return the reply's other
@@ -195,6 +219,13 @@ class SharedLane:
         the pipe: ``(False, fields)`` with the arrays in the region (add the
         ``info``; a new ``info_layout`` is announced when the infos are columns
         the region can hold next time), ``(False, None)`` the usual way."""
+        try:
+            return self._answer(seq, batch)
+        finally:
+            if self._physics_done:
+                self._tail_s, self._physics_done = time.perf_counter() - self._physics_done, 0.0
+
+    def _answer(self, seq: int, batch: BatchResult) -> tuple[bool, dict[str, Any] | None]:
         arrays, doorbell = self._arrays, self.doorbell
         if arrays is None or doorbell is None or self._found_tampered():
             return False, None

@@ -20,6 +20,9 @@ word  name                writer  meaning
                                   sims take every CPU it may use (0: not
                                   told); a hint for the sim's waits, never
                                   checked
+5     ``AGENT_HEADS_UP``  agent   1 (only while ``AGENT_WATCHING`` is 0): wake
+                                  the agent with ``{"seq": s, "soon": true}``
+                                  once the request's physics is done
 8     ``REP_SEQ``         sim     ``seq`` of the last request answered in the
                                   region
 9     ``REP_INFO``        sim     the info layout version of that answer
@@ -40,6 +43,16 @@ store, a full fence, then the load, on both sides (Dekker's pattern), so at
 least one of "the peer sees the flag cleared" and "we see its sequence word"
 holds and no request or reply is left unseen. A request's frame for a request
 already served is dropped, and so is a wake-up frame for a reply already read.
+
+Heads-up. An agent that blocks for the reply of one sim (not a gather over
+several) sets ``AGENT_HEADS_UP`` as it clears ``AGENT_WATCHING``; the sim,
+when the request's physics is done and it finds both so, sends
+``{"seq": s, "soon": true}`` and goes on with the tick. The agent's wake-up
+(tens of microseconds on a virtual machine, more after an idle CPU) then
+overlaps the tick's hooks, checks and answer instead of following them; the
+woken agent watches again and waits hot, for a bounded time, for the reply.
+The reply and its frame follow the rules above unchanged: a heads-up answers
+nothing.
 
 Ordering. The data are written before the sequence word and read after it,
 with a fence between (:func:`fence`: a lock taken and released, an atomic
@@ -69,7 +82,7 @@ import threading
 
 import numpy as np
 
-REQ_SEQ, REQ_N, REQ_NAMED, AGENT_WATCHING, AGENT_THINK_US = 0, 1, 2, 3, 4
+REQ_SEQ, REQ_N, REQ_NAMED, AGENT_WATCHING, AGENT_THINK_US, AGENT_HEADS_UP = 0, 1, 2, 3, 4, 5
 REP_SEQ, REP_INFO, SIM_WATCHING = 8, 9, 10
 #: ``REP_SEQ`` of a region the sim stopped using: it found the header tampered with.
 POISONED = -1
@@ -148,6 +161,8 @@ class Doorbell:
             return f"its reply sequence word holds {int(words[REP_SEQ])}, beyond the last request posted"
         if words[AGENT_WATCHING] not in (0, 1) or words[SIM_WATCHING] not in (0, 1):
             return "its watching flags hold values other than 0 and 1"
+        if words[AGENT_HEADS_UP] != 0:
+            return f"its heads-up word holds {int(words[AGENT_HEADS_UP])} between requests, not the 0 written last"
         if words[REP_INFO] < 0:
             return f"its info layout word holds {int(words[REP_INFO])}"
         return None
@@ -159,19 +174,25 @@ class Doorbell:
             return True
         return False
 
-    def agent_sleeps(self, seq: int) -> bool:
+    def agent_sleeps(self, seq: int, heads_up: bool = False) -> bool:
         """The agent is about to block waiting for ``seq``: False (and still
-        watching) if the reply is there after all."""
+        watching) if the reply is there after all. ``heads_up``: ask the sim
+        for ``{"seq": seq, "soon": true}`` once the request's physics is done
+        (silent doorbells only)."""
         words = self._words
+        if heads_up and self.silent:
+            words[AGENT_HEADS_UP] = 1
         words[AGENT_WATCHING] = 0
         fence()
         if self.answered(seq):
-            words[AGENT_WATCHING] = self._watching
+            self.agent_wakes()
             return False
         return True
 
     def agent_wakes(self) -> None:
-        self._words[AGENT_WATCHING] = self._watching
+        words = self._words
+        words[AGENT_WATCHING] = self._watching
+        words[AGENT_HEADS_UP] = 0
 
     # ------------------------------------------------------------ sim side
 
@@ -196,7 +217,11 @@ class Doorbell:
         seq = words[REQ_SEQ]
         if seq < 0 or seq > served + MAX_SEQ_GAP:
             return f"its request sequence word holds {int(seq)}, no request the agent can have posted"
-        if words[AGENT_WATCHING] not in (0, 1) or words[SIM_WATCHING] not in (0, 1):
+        if (
+            words[AGENT_WATCHING] not in (0, 1)
+            or words[SIM_WATCHING] not in (0, 1)
+            or words[AGENT_HEADS_UP] not in (0, 1)
+        ):
             return "its watching flags hold values other than 0 and 1"
         if not 0 <= words[REQ_N] <= 1 << 16 or words[REQ_NAMED] not in (0, 1):
             return "its request size words hold values no request has"
@@ -231,6 +256,12 @@ class Doorbell:
             words[SIM_WATCHING] = self._watching
         return seq
 
+    def agent_wants_heads_up(self) -> bool:
+        """Sim side: whether the agent sleeps and asked to be woken once the
+        physics of the request it waits for is done (``AGENT_HEADS_UP``)."""
+        words = self._words
+        return self.silent and words[AGENT_WATCHING] == 0 and words[AGENT_HEADS_UP] == 1
+
     def sim_watches(self) -> None:
         """The sim is awake and will look before it blocks."""
         self._words[SIM_WATCHING] = self._watching
@@ -251,6 +282,7 @@ class Doorbell:
 
 
 __all__ = [
+    "AGENT_HEADS_UP",
     "AGENT_THINK_US",
     "AGENT_WATCHING",
     "MAX_SEQ_GAP",

@@ -75,6 +75,11 @@ class HotWait:
         #: perf_counter() time the current wait started (set by the caller).
         self.since = time.perf_counter()
 
+    def allowed(self) -> bool:
+        """Whether this policy may wait hot at all now (a window, and no
+        cool-down after a stall); unlike :meth:`worth_it` it starts nothing."""
+        return bool(self.window_s) and time.perf_counter() >= _Neighbours.cool_until
+
     def worth_it(self) -> bool:
         """Whether the next wait should start hot; if so, the spin's window starts now."""
         if not self.window_s:

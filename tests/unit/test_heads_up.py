@@ -1,0 +1,178 @@
+"""The fast lane's heads-up, each end alone: the agent's pipe asks for one when
+it blocks for a region reply and waits hot from it (a stand-in sim on a
+socketpair, in a thread); the sim's lane sends one only to an agent that
+sleeps and asked, and not after a long tail."""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+from gymnasium import spaces
+
+from remoteenv.agent.connection.pipe_connection import PipeConnection
+from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.sim.transport.shared_lane_server import HEADS_UP_TAIL_S, SharedLane
+from remoteenv.wire import protocol
+from remoteenv.wire.shared_memory.doorbell import AGENT_HEADS_UP, AGENT_WATCHING, Doorbell
+from remoteenv.wire.shared_memory.hot_wait import usable_cpus
+
+needs_two_cpus = pytest.mark.skipif(usable_cpus() < 2, reason="no hot waits (nor heads-ups) on one CPU")
+
+
+@pytest.fixture
+def lane(monkeypatch):
+    """An agent's pipe and doorbell, the stand-in sim's socket and doorbell on the same header."""
+    monkeypatch.delenv("REMOTEENV_NO_SPIN", raising=False)
+    agent_end, sim_end = socket.socketpair()
+    header = np.zeros(16, dtype="<i8")
+    conn = PipeConnection(agent_end, timeout=10.0)
+    yield conn, Doorbell(header, silent=True), sim_end, Doorbell(header, silent=True)
+    conn.close()
+    sim_end.close()
+
+
+def _sim(work: Callable[[], None]) -> threading.Thread:
+    thread = threading.Thread(target=work, daemon=True)
+    thread.start()
+    return thread
+
+
+def _until(predicate: Callable[[], bool], timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "the agent never blocked asking for a heads-up"
+        time.sleep(0.0002)
+
+
+def _send(sock: socket.socket, message: dict) -> None:
+    sock.sendall(protocol.stream_frame(protocol.pack(message)))
+
+
+@needs_two_cpus
+def test_a_blocked_agent_asks_and_takes_the_region_reply_after_the_heads_up(lane):
+    conn, agent_bell, sim_end, sim_bell = lane
+    seq = conn.post(agent_bell, 1, False)
+
+    def sim() -> None:
+        _until(sim_bell.agent_wants_heads_up)
+        sim_end.sendall(protocol.stream_frame(protocol.reply_soon(seq)))
+        _until(lambda: not sim_bell.agent_wants_heads_up())  # woken: watching again
+        time.sleep(0.0003)  # the rest of the tick
+        assert not sim_bell.reply(seq, 0)  # the agent watches: no wake-up frame
+
+    thread = _sim(sim)
+    assert conn.receive(seq) == {"seq": seq, "ok": True, "region": True}
+    thread.join(5)
+    assert conn.heads_ups == 1 and agent_bell.word(AGENT_HEADS_UP) == 0
+
+
+@needs_two_cpus
+def test_an_error_after_the_heads_up_is_raised(lane):
+    conn, agent_bell, sim_end, sim_bell = lane
+    seq = conn.post(agent_bell, 1, False)
+
+    def sim() -> None:
+        _until(sim_bell.agent_wants_heads_up)
+        sim_end.sendall(protocol.stream_frame(protocol.reply_soon(seq)))
+        time.sleep(0.0003)
+        _send(sim_end, protocol.error_reply(seq, "scene", "the hook raised"))
+
+    thread = _sim(sim)
+    with pytest.raises(RemoteEnvError, match="the hook raised") as info:
+        conn.receive(seq)
+    thread.join(5)
+    assert info.value.kind == "scene" and conn.heads_ups == 1
+
+
+@needs_two_cpus
+def test_a_heads_up_for_another_request_answers_nothing(lane):
+    conn, agent_bell, sim_end, sim_bell = lane
+    seq = conn.post(agent_bell, 1, False)
+
+    def sim() -> None:
+        _until(sim_bell.agent_wants_heads_up)
+        sim_end.sendall(protocol.stream_frame(protocol.reply_soon(seq - 1)))  # not the awaited request's
+        time.sleep(0.002)
+        _until(sim_bell.agent_wants_heads_up)  # it dropped it and blocked again
+        if sim_bell.reply(seq, 0):
+            _send(sim_end, {"seq": seq, "ok": True, "region": True})
+
+    thread = _sim(sim)
+    assert conn.receive(seq) == {"seq": seq, "ok": True, "region": True}
+    thread.join(5)
+    assert conn.heads_ups == 0
+
+
+def test_an_agent_told_not_to_wait_hot_blocks_without_asking(lane, monkeypatch):
+    monkeypatch.setenv("REMOTEENV_NO_SPIN", "1")
+    _, agent_bell, _, sim_bell = lane
+    own_end = socket.socketpair()
+    conn = PipeConnection(own_end[0], timeout=10.0)  # made with the variable set
+    try:
+        seq = conn.post(agent_bell, 1, False)
+        seen: list[int] = []
+
+        def sim() -> None:
+            _until(lambda: agent_bell.word(AGENT_WATCHING) == 0)  # it blocks
+            seen.append(agent_bell.word(AGENT_HEADS_UP))
+            if sim_bell.reply(seq, 0):
+                own_end[1].sendall(protocol.stream_frame(protocol.pack({"seq": seq, "ok": True, "region": True})))
+
+        thread = _sim(sim)
+        assert conn.receive(seq)["region"] is True
+        thread.join(5)
+        assert seen == [0] and conn.heads_ups == 0
+    finally:
+        conn.close()
+        own_end[1].close()
+
+
+class _Pipe:
+    """Stands in for the sim's pipe channel: keeps what is sent."""
+
+    def __init__(self) -> None:
+        self.sent: list[bytes] = []
+
+    def send(self, reply_to, payload: bytes) -> None:
+        self.sent.append(payload)
+
+
+def _sim_lane() -> tuple[SharedLane, Doorbell, _Pipe]:
+    lane = SharedLane(spaces.Box(-1, 1, (2,), np.float32), spaces.Box(-1, 1, (3,), np.float64), 2)
+    header = np.zeros(16, dtype="<i8")
+    lane.doorbell = Doorbell(header, silent=True)
+    pipe = _Pipe()
+    lane._channel = pipe  # type: ignore[assignment]  # set by take() for a request from the pipe
+    return lane, Doorbell(header, silent=True), pipe
+
+
+def test_the_sim_sends_a_heads_up_only_to_an_agent_that_sleeps_and_asked():
+    lane, agent, pipe = _sim_lane()
+    agent.post(1, 1, False)
+    lane.physics_done(1)  # awake
+    agent.agent_sleeps(1)
+    lane.physics_done(1)  # asleep, did not ask
+    assert pipe.sent == []
+    agent.agent_wakes()
+    agent.agent_sleeps(1, heads_up=True)
+    lane.physics_done(1)
+    assert pipe.sent == [protocol.reply_soon(1)]
+
+
+def test_a_sim_whose_tick_runs_long_after_its_physics_stops_and_resumes_its_heads_ups():
+    lane, agent, pipe = _sim_lane()
+    agent.post(1, 1, False)
+    agent.agent_sleeps(1, heads_up=True)
+    lane.physics_done(1)
+    time.sleep(HEADS_UP_TAIL_S * 1.5)
+    lane.answer(1, None)  # type: ignore[arg-type]  # no region yet: answered elsewhere, its tail measured
+    lane.physics_done(2)
+    assert pipe.sent == [protocol.reply_soon(1)]  # not for 2: the last tick ran long after its physics
+    lane.answer(2, None)  # type: ignore[arg-type]  # a short one
+    lane.physics_done(3)
+    assert pipe.sent == [protocol.reply_soon(1), protocol.reply_soon(3)]
