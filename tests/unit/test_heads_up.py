@@ -53,21 +53,29 @@ def _send(sock: socket.socket, message: dict) -> None:
     sock.sendall(protocol.stream_frame(protocol.pack(message)))
 
 
+def _heads_up_once_asked(sim_bell: Doorbell, sock: socket.socket, seq: int) -> None:
+    """The stand-in sim's physics is done: once the agent sleeps asking, send it a heads-up for ``seq``."""
+    _until(sim_bell.agent_wants_heads_up)
+    sock.sendall(protocol.stream_frame(protocol.reply_soon(seq)))
+
+
 @needs_two_cpus
 def test_a_blocked_agent_asks_and_takes_the_region_reply_after_the_heads_up(lane):
     conn, agent_bell, sim_end, sim_bell = lane
     seq = conn.post(agent_bell, 1, False)
 
+    wake_frames: list[bool] = []
+
     def sim() -> None:
-        _until(sim_bell.agent_wants_heads_up)
-        sim_end.sendall(protocol.stream_frame(protocol.reply_soon(seq)))
+        _heads_up_once_asked(sim_bell, sim_end, seq)
         _until(lambda: not sim_bell.agent_wants_heads_up())  # woken: watching again
         time.sleep(0.0003)  # the rest of the tick
-        assert not sim_bell.reply(seq, 0)  # the agent watches: no wake-up frame
+        wake_frames.append(sim_bell.reply(seq, 0))
 
     thread = _sim(sim)
     assert conn.receive(seq) == {"seq": seq, "ok": True, "region": True}
     thread.join(5)
+    assert wake_frames == [False]  # the woken agent watched: the reply needed no frame
     assert conn.heads_ups == 1 and agent_bell.word(AGENT_HEADS_UP) == 0
 
 
@@ -77,8 +85,7 @@ def test_an_error_after_the_heads_up_is_raised(lane):
     seq = conn.post(agent_bell, 1, False)
 
     def sim() -> None:
-        _until(sim_bell.agent_wants_heads_up)
-        sim_end.sendall(protocol.stream_frame(protocol.reply_soon(seq)))
+        _heads_up_once_asked(sim_bell, sim_end, seq)
         time.sleep(0.0003)
         _send(sim_end, protocol.error_reply(seq, "scene", "the hook raised"))
 
@@ -95,8 +102,7 @@ def test_a_heads_up_for_another_request_answers_nothing(lane):
     seq = conn.post(agent_bell, 1, False)
 
     def sim() -> None:
-        _until(sim_bell.agent_wants_heads_up)
-        sim_end.sendall(protocol.stream_frame(protocol.reply_soon(seq - 1)))  # not the awaited request's
+        _heads_up_once_asked(sim_bell, sim_end, seq - 1)  # not the awaited request's
         time.sleep(0.002)
         _until(sim_bell.agent_wants_heads_up)  # it dropped it and blocked again
         if sim_bell.reply(seq, 0):
