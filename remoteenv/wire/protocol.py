@@ -253,7 +253,7 @@ region reply uses the last announced layout. Any other outcome (a reset, an
 error, other infos) is answered on the pipe as usual. Replies keep request
 order. Before a side blocks it clears its ``*_WATCHING`` word, then a full
 fence, then it looks at the peer's sequence word once more (and does not
-block if it moved). A heads-up: an agent that blocks for one sim's reply may
+block if it moved). A heads-up: an agent about to block on one sim's pipe may
 also set ``AGENT_HEADS_UP`` (1) as it clears ``AGENT_WATCHING``; a sim that
 finds both so once the physics of a region request is done may send
 ``{"seq": s, "soon": true}`` before it runs the rest of the tick (hooks,

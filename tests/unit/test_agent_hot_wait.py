@@ -78,3 +78,20 @@ def test_a_stalled_spin_stops_and_every_hot_wait_of_the_process_sleeps_for_a_whi
     assert not hot.worth_it() and not other.worth_it()
     clock.now += hot_wait.COOL_DOWN_S * 1.01
     assert hot.worth_it() and other.worth_it()  # then they try again
+
+
+def test_begin_starts_a_window_whatever_the_last_waits_took_unless_spinning_is_off(clock, monkeypatch):
+    hot = HotWait(1e-3)
+    hot.waited(5e-3)  # slow waits make worth_it() say no...
+    assert not hot.worth_it()
+    assert hot.allowed() and hot.begin()  # ...but a wait the peer said is due may still go hot
+    clock.now += 0.5e-3
+    assert hot.spin()
+    clock.now += 0.6e-3
+    assert not hot.spin()  # its window, from begin()
+    assert hot.begin()
+    clock.now += hot_wait.STALL_S * 1.5  # kept off the CPU while it spun
+    assert not hot.spin()  # a stall: the process cools down...
+    assert not hot.allowed() and not hot.begin()  # ...begin() included
+    monkeypatch.setenv("REMOTEENV_NO_SPIN", "1")
+    assert not HotWait(1e-3).begin()

@@ -249,21 +249,17 @@ class PipeConnection(SimConnection):
             return None
         self._frames.remove(soon)
         self.heads_ups += 1
-        if self._frames or not self._soon.worth_it():
+        if self._frames or not self._soon.begin():
             return None
-        start = time.perf_counter()
         while True:
             region = self._region_reply()
             if region is not None:
-                self._soon.waited(time.perf_counter() - start)
                 return region
             # Yields the CPU between looks: the sim may share this one.
             if not self._soon.spin():
-                self._soon.waited(float("inf"))
                 return None
             self._read(False)
             if self._frames:
-                self._soon.waited(time.perf_counter() - start)
                 return None
 
     def _recv_frame_nowait(self) -> Any:

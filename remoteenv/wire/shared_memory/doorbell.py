@@ -44,8 +44,8 @@ least one of "the peer sees the flag cleared" and "we see its sequence word"
 holds and no request or reply is left unseen. A request's frame for a request
 already served is dropped, and so is a wake-up frame for a reply already read.
 
-Heads-up. An agent that blocks for the reply of one sim (not a gather over
-several) sets ``AGENT_HEADS_UP`` as it clears ``AGENT_WATCHING``; the sim,
+Heads-up. An agent about to block on one sim's pipe for a region reply (not
+in a poll over several pipes) sets ``AGENT_HEADS_UP`` as it clears ``AGENT_WATCHING``; the sim,
 when the request's physics is done and it finds both so, sends
 ``{"seq": s, "soon": true}`` and goes on with the tick. The agent's wake-up
 (tens of microseconds on a virtual machine, more after an idle CPU) then

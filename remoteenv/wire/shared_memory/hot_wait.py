@@ -80,6 +80,16 @@ class HotWait:
         cool-down after a stall); unlike :meth:`worth_it` it starts nothing."""
         return bool(self.window_s) and time.perf_counter() >= _Neighbours.cool_until
 
+    def begin(self) -> bool:
+        """Start a hot wait now if :meth:`allowed`, whatever the last waits
+        took (for a wait the peer has said will be short); then :meth:`spin`."""
+        if not self.allowed():
+            return False
+        now = time.perf_counter()
+        self._until = now + self.window_s
+        self._last_spin = now
+        return True
+
     def worth_it(self) -> bool:
         """Whether the next wait should start hot; if so, the spin's window starts now."""
         if not self.window_s:
