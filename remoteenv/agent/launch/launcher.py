@@ -29,7 +29,7 @@ from remoteenv.agent.launch.processes import pid_alive
 from remoteenv.agent.launch.sim_command import wait_ready
 from remoteenv.agent.launch.sim_group import LaunchSpec, SimLayout
 from remoteenv.agent.launch.sim_process import LaunchState, SimProcess, kill_group, stop_all
-from remoteenv.agent.launch.sim_spawn import sim_address, spawn_sim
+from remoteenv.agent.launch.sim_spawn import binds_in_private_dir, sim_address, spawn_sim
 from remoteenv.wire.addresses import is_loopback, zmq_transport
 from remoteenv.wire.files.keys import KeyPair, generate_keypair
 from remoteenv.wire.run_options.options import RunOptions
@@ -194,8 +194,8 @@ class Launcher:
         if not os.path.isfile(spec.scene):
             raise FileNotFoundError(f"scene script {spec.scene!r} does not exist")
         self.spec = spec
-        ipc = self.bind_address is None and self.transport == "ipc"
-        self._state = LaunchState(workdir=make_private_dir(spec.num_instances, sockets=ipc))
+        sockets = binds_in_private_dir(self.transport, self.bind_address)
+        self._state = LaunchState(workdir=make_private_dir(spec.num_instances, sockets=sockets))
         # Removed even if this process is killed before any sim exists; only this dir, never what replaces it.
         self._state.workdir_id = watch_dir(self._state.workdir)
         self._finalizer = weakref.finalize(self, stop_all, self._state)

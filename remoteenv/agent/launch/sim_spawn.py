@@ -24,14 +24,18 @@ from remoteenv.wire.addresses import ipc_address, ipc_path, tcp_loopback_address
 from remoteenv.wire.files.keys import KeyPair, generate_keypair, write_public_keys, write_secret_key
 
 
+def binds_in_private_dir(transport: str, bind_address: str | None) -> bool:
+    """Whether the sims bind an ipc socket in the launch's private dir (no
+    ``bind_address`` given, ``transport`` ``"ipc"``): see :func:`sim_address`."""
+    return bind_address is None and transport == "ipc"
+
+
 def sim_address(workdir: str, instance: int, transport: str, bind_address: str | None) -> str:
     """Where instance ``instance`` binds: ``bind_address`` if given, else an ipc
     socket in ``workdir`` (``transport`` ``"ipc"``) or tcp on loopback with a port the OS assigns."""
-    if bind_address is not None:
-        return bind_address
-    if transport == "ipc":
+    if binds_in_private_dir(transport, bind_address):
         return ipc_address(workdir, instance)
-    return tcp_loopback_address()
+    return bind_address if bind_address is not None else tcp_loopback_address()
 
 
 def spawn_sim(
@@ -108,4 +112,4 @@ def spawn_sim(
     )
 
 
-__all__ = ["sim_address", "spawn_sim"]
+__all__ = ["binds_in_private_dir", "sim_address", "spawn_sim"]
