@@ -13,6 +13,8 @@ def two_cpus(monkeypatch):
     monkeypatch.delenv("REMOTEENV_NO_SPIN", raising=False)
     monkeypatch.setattr(hot_wait, "usable_cpus", lambda: 2)
     monkeypatch.setattr(hot_wait._Neighbours, "cool_until", 0.0)
+    monkeypatch.setattr(hot_wait._Neighbours, "last_stall", float("-inf"))
+    monkeypatch.setattr(hot_wait._Neighbours, "cool_s", 0.0)
 
 
 def test_waits_hot_while_the_peer_answers_within_the_window():
@@ -78,6 +80,38 @@ def test_a_stalled_spin_stops_and_every_hot_wait_of_the_process_sleeps_for_a_whi
     assert not hot.worth_it() and not other.worth_it()
     clock.now += hot_wait.COOL_DOWN_S * 1.01
     assert hot.worth_it() and other.worth_it()  # then they try again
+
+
+def _stall(hot: HotWait, clock: FakeClock) -> None:
+    """Start a hot wait on ``hot`` and keep it off the CPU past the stall limit."""
+    assert hot.worth_it()
+    clock.now += hot_wait.STALL_S * 1.5
+    assert not hot.spin()
+
+
+def _cool_down(hot: HotWait, clock: FakeClock) -> float:
+    """How long (seconds, to 1 ms) hot waits stay off after the stall just seen."""
+    start, waited = clock.now, 0.0
+    while not hot.worth_it():
+        clock.now += 1e-3
+        waited = clock.now - start
+    return round(waited, 3)
+
+
+def test_a_lone_stall_cools_down_briefly_and_stalls_in_a_row_ever_longer_up_to_the_limit(clock):
+    hot = HotWait(1.0)
+    _stall(hot, clock)
+    assert _cool_down(hot, clock) == pytest.approx(hot_wait.COOL_DOWN_MIN_S, abs=2e-3)  # e.g. one garbage collection
+    lengths = []
+    for _ in range(8):  # a busy neighbour: the first spin after each cool-down stalls again
+        _stall(hot, clock)
+        lengths.append(_cool_down(hot, clock))
+    assert lengths[0] == pytest.approx(2 * hot_wait.COOL_DOWN_MIN_S, abs=2e-3)
+    assert lengths == sorted(lengths) and lengths[-1] == pytest.approx(hot_wait.COOL_DOWN_S, abs=2e-3)
+    assert lengths[-2] == pytest.approx(hot_wait.COOL_DOWN_S, abs=2e-3)  # stays at the limit while the stalls go on
+    clock.now += hot_wait.STALL_MEMORY_S  # then a quiet spell: the next lone stall is brief again
+    _stall(hot, clock)
+    assert _cool_down(hot, clock) == pytest.approx(hot_wait.COOL_DOWN_MIN_S, abs=2e-3)
 
 
 def test_begin_starts_a_window_whatever_the_last_waits_took_unless_spinning_is_off(clock, monkeypatch):

@@ -90,3 +90,21 @@ def test_torch_threads_takes_auto_none_or_a_positive_int(bad):
     assert check_torch_threads(2) == 2
     with pytest.raises(ValueError, match="torch_threads must be 'auto', None or an int >= 1"):
         check_torch_threads(bad)
+
+
+def test_the_notice_names_the_users_line_not_remoteenvs_or_gymnasiums(fake_torch):
+    import gymnasium.vector.utils as gym_utils  # any module of each package
+
+    import remoteenv.agent.session.pickling as re_module
+
+    def constructor() -> None:  # stands for the vector env's (wrapped) constructor
+        TorchThreads("auto", local_sims=4).apply()
+
+    def make_vec() -> None:  # stands for gym.make_vec
+        constructor()
+
+    constructor.__code__ = constructor.__code__.replace(co_filename=re_module.__file__)
+    make_vec.__code__ = make_vec.__code__.replace(co_filename=gym_utils.__file__)
+    with pytest.warns(TorchThreadsNotice) as caught:
+        make_vec()
+    assert caught[0].filename == __file__

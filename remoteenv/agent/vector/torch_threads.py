@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import sys
+import types
 import warnings
 
 from remoteenv.wire.shared_memory.hot_wait import usable_cpus
@@ -83,8 +84,28 @@ class TorchThreads:
             "(docs/performance.md, 'The learner beside the sims'). To keep torch's setting, pass "
             "torch_threads=None to the vector env or set OMP_NUM_THREADS.",
             TorchThreadsNotice,
-            stacklevel=3,
+            stacklevel=_user_stacklevel(),
         )
+
+
+#: Packages whose frames stand between the user's call and :meth:`TorchThreads.apply`
+#: (``gym.make_vec`` / ``gym.make``, the vector env's constructor or ``reset``).
+_LIBRARY_DIRS = tuple(
+    os.path.dirname(os.path.abspath(module.__file__)) + os.sep
+    for module in (sys.modules["remoteenv"], sys.modules.get("gymnasium"))
+    if module is not None and module.__file__
+)
+
+
+def _user_stacklevel() -> int:
+    """The ``stacklevel`` that names the user's line (the first frame outside
+    remoteenv and Gymnasium) for a warning raised in the caller of this."""
+    frame: types.FrameType | None = sys._getframe(2)  # the caller's caller
+    level = 2
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_LIBRARY_DIRS):
+        frame = frame.f_back
+        level += 1
+    return level
 
 
 __all__ = ["AUTO", "TorchThreads", "TorchThreadsNotice", "check_torch_threads"]

@@ -15,9 +15,18 @@ task that spins is never woken early the way a sleeping one is: when the
 scheduler lets the other program run, the spinner waits out its whole time
 slice (milliseconds), reply or not. The agent and its sims also take turns on
 shared CPUs, but in short bursts (one request's work). So a spin that finds
-itself kept off the CPU for longer than :data:`STALL_S` at once has met a
+itself kept off the CPU for longer than :data:`STALL_S` at once may have met a
 busy neighbour: it stops, and every hot wait of the process sleeps instead
-for the next :data:`COOL_DOWN_S`, then tries again.
+for a while, then tries again.
+
+How long depends on how the stalls come. One stall alone is as often a
+passing event: a garbage collection between two polls, the agent woken onto
+the spinning sim's CPU until the scheduler moves one of them, the host taking
+the virtual CPU away. After it the process cools down for
+:data:`COOL_DOWN_MIN_S`. A busy neighbour stalls the next spin again, so each
+stall within :data:`STALL_MEMORY_S` of the last doubles the cool-down, up to
+:data:`COOL_DOWN_S`: beside a CPU hog the process reaches the long cool-down
+after a handful of stalls and stays there while the hog runs.
 """
 
 from __future__ import annotations
@@ -29,17 +38,39 @@ import time
 _PROBE_EVERY = 32
 #: A spin kept off the CPU this long (seconds) at once met a busy neighbour.
 STALL_S = 2.5e-3
-#: Seconds every hot wait of the process sleeps after a stall.
+#: Seconds every hot wait of the process sleeps after a stall that follows no
+#: other within :data:`STALL_MEMORY_S`.
+COOL_DOWN_MIN_S = 0.02
+#: Longest cool-down (seconds): where stalls keep coming (a busy neighbour).
 COOL_DOWN_S = 0.5
+#: A stall this soon (seconds) after the last doubles the cool-down: more
+#: than twice :data:`COOL_DOWN_S`, so that a neighbour that stalls the first
+#: spin after every cool-down keeps the longest one.
+STALL_MEMORY_S = 1.5
 
 #: Give the CPU to another runnable process, if any, while busy-waiting.
 yield_cpu = getattr(os, "sched_yield", lambda: None)
 
 
 class _Neighbours:
-    """Process-wide: until when hot waits sleep because a spin stalled."""
+    """Process-wide: until when hot waits sleep because a spin stalled, and
+    how the last stalls came (see the module's docstring)."""
 
     cool_until = 0.0
+    #: perf_counter() time of the last stall.
+    last_stall = float("-inf")
+    #: The last cool-down's length (seconds).
+    cool_s = 0.0
+
+    @classmethod
+    def stalled(cls, now: float) -> None:
+        """A spin stalled at ``now``: cool every hot wait of the process down."""
+        if now - cls.last_stall < STALL_MEMORY_S:
+            cls.cool_s = min(COOL_DOWN_S, max(COOL_DOWN_MIN_S, 2 * cls.cool_s))
+        else:
+            cls.cool_s = COOL_DOWN_MIN_S
+        cls.last_stall = now
+        cls.cool_until = now + cls.cool_s
 
 
 def usable_cpus() -> int:
@@ -115,7 +146,7 @@ class HotWait:
         stalled = now - self._last_spin > STALL_S
         self._last_spin = now
         if stalled:
-            _Neighbours.cool_until = now + COOL_DOWN_S
+            _Neighbours.stalled(now)
             return False
         return now < self._until
 
