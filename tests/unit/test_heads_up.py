@@ -182,3 +182,19 @@ def test_a_sim_whose_tick_runs_long_after_its_physics_stops_and_resumes_its_head
     lane.answer(2, None)  # type: ignore[arg-type]  # a short one
     lane.physics_done(3)
     assert pipe.sent == [protocol.reply_soon(1), protocol.reply_soon(3)]
+
+
+def test_a_late_heads_up_read_while_watching_leaves_the_region_reply_to_be_found(lane):
+    """A heads-up the sim sent just as the agent's blocking read timed out
+    arrives while the agent watches the region again, and is read by a
+    non-blocking look. It answers nothing and must not end the watch: the
+    sim, finding the agent watching, answers in the region with no frame."""
+    conn, agent_bell, sim_end, sim_bell = lane
+    seq = conn.post(agent_bell, 1, False)
+    sim_end.sendall(protocol.stream_frame(protocol.reply_soon(seq)))
+    deadline = time.monotonic() + 5
+    while conn.pipe.recv(64, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b"" and time.monotonic() < deadline:
+        time.sleep(0.001)
+    assert conn.try_receive(seq) is None  # the heads-up was read and dropped
+    assert sim_bell.reply(seq, 0) is False  # the agent watches: no wake-up frame
+    assert conn.try_receive(seq) == {"seq": seq, "ok": True, "region": True}

@@ -196,7 +196,9 @@ class PipeConnection(SimConnection):
         if isinstance(frame, dict):  # a reply found in the region, or held
             return frame
         reply = super()._decode(frame, what)
-        if self._watch is not None and reply.get("seq") == self._watch[0]:
+        # A heads-up read here (it came late, after the wait it was for) answers
+        # nothing: the reply may still come in the region, so the watch goes on.
+        if self._watch is not None and reply.get("seq") == self._watch[0] and reply.get("soon") is not True:
             self._watch = None
         return reply
 

@@ -52,7 +52,10 @@ when the request's physics is done and it finds both so, sends
 overlaps the tick's hooks, checks and answer instead of following them; the
 woken agent watches again and waits hot, for a bounded time, for the reply.
 The reply and its frame follow the rules above unchanged: a heads-up answers
-nothing.
+nothing. It may come late (sent just as the agent's blocked read timed out,
+read by a later look): the agent drops it wherever it reads it and keeps
+watching ``REP_SEQ``, since the sim, finding the agent awake, answers with
+no frame.
 
 Ordering. The data are written before the sequence word and read after it,
 with a fence between (:func:`fence`: a lock taken and released, an atomic
