@@ -261,10 +261,10 @@ checks, answer), so that the agent's wake-up overlaps that work. The agent,
 woken by it, watches again (``AGENT_WATCHING`` 1, ``AGENT_HEADS_UP`` 0) and
 waits for the reply (in the region or as a frame) hot for a bounded time,
 then blocks as before. A heads-up is a hint: it answers nothing (a reader
-drops one it does not await, and one that comes late, read after the wait it
-was for ended, leaves the agent watching the region for the reply), the reply and its wake-up frame follow the
-rules above unchanged, and a sim may send none (it sends none where its
-ticks take long after the physics). Without total store order (off x86-64) a side sets no
+drops one it does not await, and one that comes late, read after the wait
+it was for ended, leaves the agent watching the region for the reply), the
+reply and its wake-up frame follow the rules above unchanged, and a sim may
+send none (it sends none where its ticks take long after the physics). Without total store order (off x86-64) a side sets no
 ``*_WATCHING`` word and reads no sequence word without its frame, so every
 request and reply then goes as its frame. The agent takes a region reply
 only for the request it awaits, in the announced layout, and refuses

@@ -36,7 +36,7 @@ import time
 
 #: Re-try waiting hot once every this many cold waits.
 _PROBE_EVERY = 32
-#: A spin kept off the CPU this long (seconds) at once met a busy neighbour.
+#: A spin kept off the CPU this long (seconds) at once stalled: it may have met a busy neighbour.
 STALL_S = 2.5e-3
 #: Seconds every hot wait of the process sleeps after a stall that follows no
 #: other within :data:`STALL_MEMORY_S`.
