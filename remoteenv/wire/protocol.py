@@ -463,6 +463,11 @@ def reply_soon(seq: int) -> bytes:
     return pack({"seq": seq, "soon": True})
 
 
+def is_reply_soon(reply: dict[str, Any]) -> bool:
+    """Whether a decoded frame is a heads-up (:func:`reply_soon`), which answers nothing."""
+    return reply.get("soon") is True
+
+
 def decode_request(frame: bytes) -> dict[str, Any]:
     """Decode and shape-check a request frame (arrays and maps of at most
     :data:`MAX_REQUEST_ITEMS` entries; an int ``seq``, a str ``cmd``)."""
@@ -604,9 +609,11 @@ __all__ = [
     "StreamDecoder",
     "decode_request",
     "error_reply",
+    "is_reply_soon",
     "pack",
     "peek_seq",
     "region_ring",
+    "reply_soon",
     "stream_frame",
     "unpack",
     "wire_dtype",

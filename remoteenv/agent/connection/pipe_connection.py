@@ -171,7 +171,7 @@ class PipeConnection(SimConnection):
         return super().try_receive(seq, what, wait)
 
     def _answers(self, reply: dict[str, Any], seq: int) -> bool:
-        if reply.get("soon") is True:  # a heads-up read after its wait: it answers nothing
+        if protocol.is_reply_soon(reply):  # read after its wait: it answers nothing
             return False
         got = reply.get("seq")
         if type(got) is int and got > seq and got in self._unanswered:
@@ -198,7 +198,7 @@ class PipeConnection(SimConnection):
         reply = super()._decode(frame, what)
         # A heads-up read here (it came late, after the wait it was for) answers
         # nothing: the reply may still come in the region, so the watch goes on.
-        if self._watch is not None and reply.get("seq") == self._watch[0] and reply.get("soon") is not True:
+        if self._watch is not None and reply.get("seq") == self._watch[0] and not protocol.is_reply_soon(reply):
             self._watch = None
         return reply
 
