@@ -105,12 +105,33 @@ class CartPoleEnv(BaseEnv):
         self.model.body_inertia[self._pole] *= scale
 
     def reset_model(self, options: dict[str, Any] | None) -> tuple[np.ndarray, dict[str, Any]]:
+        qpos, qvel = self._draw_start(options)
+        self.set_state(qpos, qvel)
+        self._terminated = False
+        return self._obs(), {}
+
+    def _draw_start(self, options: dict[str, Any] | None) -> tuple[np.ndarray, np.ndarray]:
+        """A start state ``(qpos, qvel)`` drawn from this world's RNG (``options``:
+        ``low`` and ``high`` of the uniform draw)."""
         options = options or {}
         low, high = float(options.get("low", -0.05)), float(options.get("high", 0.05))
         x, x_dot, theta, theta_dot = self.np_random.uniform(low=low, high=high, size=(4,))
-        self.set_state(np.array([x, theta]), np.array([x_dot, theta_dot]))
-        self._terminated = False
-        return self._obs(), {}
+        return np.array([x, theta]), np.array([x_dot, theta_dot])
+
+    @classmethod
+    def reset_models(cls, envs: Sequence[BaseEnv], options: dict[str, Any] | None) -> tuple[np.ndarray, list]:
+        """:meth:`reset_model` for all worlds at once: each world's draws, one stacked write and ``forward``."""
+        carts: Sequence[CartPoleEnv] = envs  # type: ignore[assignment]
+        n = len(carts)
+        qpos, qvel = np.empty((n, 2)), np.empty((n, 2))
+        for j, env in enumerate(carts):
+            qpos[j], qvel[j] = env._draw_start(options)
+            env._terminated = False
+        worlds = stacked(envs)
+        worlds.set("qpos", qpos)
+        worlds.set("qvel", qvel)
+        worlds.forward()
+        return _stacked_obs(worlds.get("qpos"), worlds.get("qvel")), [{} for _ in range(n)]
 
     def force_fraction(self, action: Any) -> float:
         """Cart force as a fraction of 10 N for ``action`` (None: no force)."""
@@ -145,8 +166,7 @@ class CartPoleEnv(BaseEnv):
         """:meth:`post_step` for all worlds at once, with numpy over their stacked state."""
         carts: Sequence[CartPoleEnv] = envs  # type: ignore[assignment]
         worlds = stacked(envs)
-        qpos, qvel = worlds.get("qpos"), worlds.get("qvel")
-        obs = np.stack((qpos[:, 0], qvel[:, 0], qpos[:, 1], qvel[:, 1]), axis=1).astype(np.float32)
+        obs = _stacked_obs(worlds.get("qpos"), worlds.get("qvel"))
         wide = obs.astype(np.float64)  # post_step compares float(obs[i]) with the thresholds
         already = np.fromiter((env._terminated for env in carts), np.bool_, len(carts))
         terminated = already | (np.abs(wide[:, 0]) > X_THRESHOLD) | (np.abs(wide[:, 2]) > THETA_THRESHOLD)
@@ -158,6 +178,11 @@ class CartPoleEnv(BaseEnv):
     def _obs(self) -> np.ndarray:
         d = self.data
         return np.array([d.qpos[0], d.qvel[0], d.qpos[1], d.qvel[1]], dtype=np.float32)
+
+
+def _stacked_obs(qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
+    """The observations ``(n, 4)`` of worlds with stacked ``qpos`` and ``qvel``, as :meth:`CartPoleEnv._obs` per world."""
+    return np.stack((qpos[:, 0], qvel[:, 0], qpos[:, 1], qvel[:, 1]), axis=1).astype(np.float32)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -17,6 +17,7 @@ Run by the launcher as ``python reacher_scene.py --address ... --seed ...``.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Sequence
 from typing import Any
@@ -73,17 +74,40 @@ class ReacherEnv(BaseEnv):
         self._target = self.model.body("target").id
 
     def reset_model(self, options: dict[str, Any] | None) -> tuple[np.ndarray, dict[str, Any]]:
+        self.set_state(*self._draw_start())
+        return self._obs(), {}
+
+    def _draw_start(self) -> tuple[np.ndarray, np.ndarray]:
+        """A start state ``(qpos, qvel)`` drawn from this world's RNG: the arm near
+        its rest pose, barely moving, the target anywhere within 0.2 m."""
         rng = self.np_random
-        qpos = self.model.qpos0 + rng.uniform(low=-0.1, high=0.1, size=self.model.nq)
+        model = self.model
+        qpos = model.qpos0 + rng.uniform(low=-0.1, high=0.1, size=model.nq)
         while True:
             goal = rng.uniform(low=-0.2, high=0.2, size=2)
-            if np.linalg.norm(goal) < 0.2:
+            if math.sqrt(goal.dot(goal)) < 0.2:  # np.linalg.norm's own sum for a vector, without its overhead
                 break
         qpos[-2:] = goal
-        qvel = rng.uniform(low=-0.005, high=0.005, size=self.model.nv)
+        qvel = rng.uniform(low=-0.005, high=0.005, size=model.nv)
         qvel[-2:] = 0.0
-        self.set_state(qpos, qvel)
-        return self._obs(), {}
+        return qpos, qvel
+
+    @classmethod
+    def reset_models(cls, envs: Sequence[BaseEnv], options: dict[str, Any] | None) -> tuple[np.ndarray, list]:
+        """:meth:`reset_model` for all worlds at once: each world's draws, one stacked write and ``forward``."""
+        reachers: Sequence[ReacherEnv] = envs  # type: ignore[assignment]
+        n = len(reachers)
+        first = reachers[0]
+        qpos, qvel = np.empty((n, first.model.nq)), np.empty((n, first.model.nv))
+        for j, env in enumerate(reachers):
+            qpos[j], qvel[j] = env._draw_start()
+        state = stacked(envs)
+        state.set("qpos", qpos)
+        state.set("qvel", qvel)
+        state.forward()
+        xpos = state.get("xpos")
+        vec = xpos[:, first._fingertip] - xpos[:, first._target]
+        return _stacked_obs(state.get("qpos"), state.get("qvel"), vec), [{} for _ in range(n)]
 
     def prepare_step(self, action: np.ndarray | None) -> None:
         self.data.ctrl[:] = 0.0 if action is None else action
@@ -118,14 +142,8 @@ class ReacherEnv(BaseEnv):
         # exactly: a stacked matmul is the dot product np.linalg.norm takes.
         reward_dist = -np.sqrt(np.matmul(vec[:, None, :], vec[:, :, None])[:, 0, 0]) * dist_w
         reward_ctrl = -np.square(actions, dtype=np.float32).sum(axis=1) * ctrl_w
-        obs = np.empty((len(reachers), 10))
-        obs[:, 0:2] = np.cos(qpos[:, :2])
-        obs[:, 2:4] = np.sin(qpos[:, :2])
-        obs[:, 4:6] = qpos[:, 2:]
-        obs[:, 6:8] = qvel[:, :2]
-        obs[:, 8:10] = vec[:, :2]
         return BatchResult(
-            obs,
+            _stacked_obs(qpos, qvel, vec),
             reward_dist + reward_ctrl,
             np.zeros(len(reachers), dtype=np.bool_),
             {"reward_dist": reward_dist, "reward_ctrl": reward_ctrl},
@@ -142,6 +160,17 @@ class ReacherEnv(BaseEnv):
         obs[6:8] = qvel[:2]
         obs[8:10] = tip_minus_target[:2]
         return obs
+
+
+def _stacked_obs(qpos: np.ndarray, qvel: np.ndarray, tip_minus_target: np.ndarray) -> np.ndarray:
+    """The observations ``(n, 10)`` of worlds with stacked state, as :meth:`ReacherEnv._obs` per world."""
+    obs = np.empty((len(qpos), 10))
+    obs[:, 0:2] = np.cos(qpos[:, :2])
+    obs[:, 2:4] = np.sin(qpos[:, :2])
+    obs[:, 4:6] = qpos[:, 2:]
+    obs[:, 6:8] = qvel[:, :2]
+    obs[:, 8:10] = tip_minus_target[:, :2]
+    return obs
 
 
 def main(argv: list[str] | None = None) -> None:

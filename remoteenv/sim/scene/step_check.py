@@ -2,7 +2,8 @@
 
 Runs in the sim process. :class:`BaseEnv` checks ``post_step``'s result
 (every step of a single world, lock-step or real time) and the batched path
-checks ``post_steps``'s :class:`~remoteenv.sim.scene.batch_result.BatchResult`,
+checks ``post_steps``'s :class:`~remoteenv.sim.scene.batch_result.BatchResult`
+and ``reset_models``'s ``(obs, infos)``,
 so a scene mistake fails at once with a :class:`StepResultError` naming the
 scene, the hook and the value, instead of a numpy error deep in the server or
 a silently wrong value (``terminated=None`` read as False):
@@ -148,11 +149,7 @@ def check_batch(result: Any, n: int, *, scene: str, hook: str, finite: bool = Fa
             f"return a bool array of shape ({n},) (e.g. np.abs(x) > limit)",
         )
     obs = result.obs
-    rows = obs.shape[0] if isinstance(obs, np.ndarray) and obs.ndim >= 1 else len(obs) if isinstance(obs, list) else -1
-    if rows != n:
-        raise _fail(
-            scene, hook, f"obs {_describe(obs)} for {n} worlds", f"return an array of {n} rows or a list of {n} obs"
-        )
+    _check_rows(obs, n, scene=scene, hook=hook)
     infos = result.infos
     if isinstance(infos, list):
         if len(infos) != n or not all(isinstance(info, Mapping) for info in infos):
@@ -164,14 +161,45 @@ def check_batch(result: Any, n: int, *, scene: str, hook: str, finite: bool = Fa
             raise _fail(
                 scene, hook, f"rewards {short_repr(reward, 120)}", "rewards must be finite (check_finite = True)"
             )
-        if isinstance(obs, np.ndarray):
-            if obs.dtype.kind in "fc" and not np.isfinite(obs).all():
-                world = int(np.flatnonzero(~np.isfinite(obs.reshape(n, -1)).all(axis=1))[0])
-                check_finite_obs(obs[world], scene=scene, hook=hook, what=f"world {world}'s observation")
-        else:
-            for world, one in enumerate(obs):
-                check_finite_obs(one, scene=scene, hook=hook, what=f"world {world}'s observation")
+        _check_finite_rows(obs, n, scene=scene, hook=hook)
     return result
 
 
-__all__ = ["StepResultError", "check_batch", "check_finite_obs", "unpack_reset", "unpack_step"]
+def check_reset_batch(
+    result: Any, n: int, *, scene: str, hook: str = "reset_models", finite: bool = False
+) -> tuple[Any, list[dict[str, Any]]]:
+    """``reset_models``'s result for ``n`` worlds, checked: ``(obs, infos)``,
+    ``obs`` an array of ``n`` rows or a list of ``n`` obs, ``infos`` a list of
+    ``n`` dicts (with ``finite``: no NaN or infinity in obs)."""
+    if not isinstance(result, tuple) or len(result) != 2:
+        raise _fail(scene, hook, _describe(result), f"return the tuple (obs, infos) for the {n} worlds")
+    obs, infos = result
+    _check_rows(obs, n, scene=scene, hook=hook)
+    if not isinstance(infos, list) or len(infos) != n or not all(isinstance(info, dict) for info in infos):
+        raise _fail(scene, hook, f"infos {short_repr(infos, 80)}", f"return a list of {n} dicts")
+    if finite:
+        _check_finite_rows(obs, n, scene=scene, hook=hook)
+    return obs, infos
+
+
+def _check_rows(obs: Any, n: int, *, scene: str, hook: str) -> None:
+    """Raise unless ``obs`` is an array of ``n`` rows or a list of ``n`` obs."""
+    rows = obs.shape[0] if isinstance(obs, np.ndarray) and obs.ndim >= 1 else len(obs) if isinstance(obs, list) else -1
+    if rows != n:
+        raise _fail(
+            scene, hook, f"obs {_describe(obs)} for {n} worlds", f"return an array of {n} rows or a list of {n} obs"
+        )
+
+
+def _check_finite_rows(obs: Any, n: int, *, scene: str, hook: str) -> None:
+    """Raise naming the first world whose observation holds a NaN or infinity."""
+    if isinstance(obs, np.ndarray):
+        if obs.dtype.kind in "fc" and not np.isfinite(obs).all():
+            world = int(np.flatnonzero(~np.isfinite(obs.reshape(n, -1)).all(axis=1))[0])
+            check_finite_obs(obs[world], scene=scene, hook=hook, what=f"world {world}'s observation")
+    else:
+        for world, one in enumerate(obs):
+            check_finite_obs(one, scene=scene, hook=hook, what=f"world {world}'s observation")
+
+
+__all__ = ["StepResultError", "check_batch", "check_finite_obs", "check_reset_batch", "unpack_reset", "unpack_step"]

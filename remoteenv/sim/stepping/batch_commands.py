@@ -94,12 +94,27 @@ class BatchCommands:
         worlds = world_list(msg.get("worlds"), len(self.worlds))
         seeds = seed_list(msg.get("seeds"), len(worlds))
         options = options_value(msg.get("options"))
-        obs, infos = [], []
+        obs, infos = self._start(worlds, seeds, options)
+        return {"obs": _stacked(obs), "info": columnar_infos(infos)}
+
+    def _start(
+        self, worlds: list[int], seeds: list[int | None], options: dict[str, Any] | None
+    ) -> tuple[Any, list[dict[str, Any]]]:
+        """Start an episode in each of ``worlds`` (``seeds[j]`` for ``worlds[j]``;
+        None continues its RNG's stream): their obs (a list, or an array of
+        rows) and infos, in order. Together in one call when the scene has its
+        own ``reset_models`` (:meth:`WorldsStepper.reset`), else world by world."""
+        stepper = self.stepper
+        if stepper is None or not stepper.resets_together:
+            started = [self.worlds[w].reset(seed=seed, options=options) for w, seed in zip(worlds, seeds)]
+            return [o for o, _ in started], [info for _, info in started]
         for w, seed in zip(worlds, seeds):
-            o, info = self.worlds[w].reset(seed=seed, options=options)
-            obs.append(o)
-            infos.append(info)
-        return {"obs": stack(obs), "info": columnar_infos(infos)}
+            if seed is not None:
+                self.worlds[w].env.seed_rng(seed)
+        obs, infos, times = stepper.reset(worlds, options)
+        for j, w in enumerate(worlds):
+            self.worlds[w].started(obs[j], seeds[j], float(times[j]))
+        return obs, infos
 
     def step_batch(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
         """A ``step_batch``: its ops, worlds and actions in the message, or with
@@ -218,11 +233,11 @@ class BatchCommands:
         truncated = np.zeros(n, dtype=np.bool_)
         final: list[Any] = []
         final_types: list[Any] = []
+        starts: list[int] = []  # the positions whose world starts an episode
         for j, r in enumerate(results):
-            world = self.worlds[worlds[j]]
             op = ops[j]
             if r is None:
-                obs[j], infos[j] = world.reset(seed=None, options=None)
+                starts.append(j)
                 continue
             reward[j] = r["reward"]
             terminated[j] = r["terminated"]
@@ -230,12 +245,21 @@ class BatchCommands:
             if op == OP_STEP_RESET or (op == OP_STEP_AUTORESET and (r["terminated"] or r["truncated"])):
                 final.append([j, r["obs"], r["info"]])
                 final_types.append(r.get("types", {}).get("info"))
-                obs[j], infos[j] = world.reset(seed=None, options=None)
+                starts.append(j)
             else:
                 obs[j], infos[j] = r["obs"], r["info"]
+        if starts:
+            started, started_infos = self._start([worlds[j] for j in starts], [None] * len(starts), None)
+            if len(starts) == n and isinstance(started, np.ndarray):
+                obs = started  # type: ignore[assignment]
+            else:
+                for i, j in enumerate(starts):
+                    obs[j] = started[i]
+            for i, j in enumerate(starts):
+                infos[j] = started_infos[i]
         # Short vectors go as msgpack lists: cheaper than arrays to encode and decode.
         reply: dict[str, Any] = {
-            "obs": stack(obs),
+            "obs": _stacked(obs),
             "reward": reward.tolist(),
             "terminated": terminated.tolist(),
             "truncated": truncated.tolist(),
@@ -253,6 +277,11 @@ def batch_infos(batch: BatchResult) -> dict[str, Any]:
     if info is None:
         info = columnar_infos([batch.world_info(j) for j in range(len(batch.reward))])
     return info
+
+
+def _stacked(obs: Any) -> Any:
+    """Observations for the wire: an array of rows as it is, a list stacked where it can be."""
+    return obs if isinstance(obs, np.ndarray) else stack(obs)
 
 
 def plain_step_reply(batch: BatchResult) -> dict[str, Any]:

@@ -23,9 +23,9 @@ import numpy as np
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.scene.batch_result import BatchResult
 from remoteenv.sim.scene.camera_rig import observe_worlds
-from remoteenv.sim.scene.step_check import check_batch
+from remoteenv.sim.scene.step_check import check_batch, check_reset_batch
 from remoteenv.sim.stepping.batch_physics import PhysicsThreads, default_threads
-from remoteenv.sim.stepping.batch_worlds import BatchedWorlds, StackedWorlds, available, batch_state
+from remoteenv.sim.stepping.batch_worlds import BatchedWorlds, StackedWorlds, available, batch_state, data_state
 
 
 def steps_together(envs: Sequence[Any]) -> bool:
@@ -49,6 +49,11 @@ def steps_as_one_batch(envs: Sequence[Any]) -> bool:
     return steps_together(envs) and bool(type(envs[0]).stacked_hooks) and available()
 
 
+def _overrides(cls: type[BaseEnv], hook: str) -> bool:
+    """Whether scene class ``cls`` has its own batched ``hook`` (not BaseEnv's per-world default)."""
+    return getattr(getattr(cls, hook), "__func__", None) is not getattr(getattr(BaseEnv, hook), "__func__", None)
+
+
 class WorldsStepper:
     """Steps any subset of ``envs`` (one class, see :func:`steps_together`) by one tick.
 
@@ -65,9 +70,10 @@ class WorldsStepper:
         self._models = [env.model for env in self.envs]
         self._datas = [env.data for env in self.envs]
         self._frame_skip = self.envs[0].frame_skip
-        own = getattr(self._cls.post_steps, "__func__", None) is not getattr(BaseEnv.post_steps, "__func__", None)
         #: The hook that produced a batch's results, as its errors name it.
-        self._hook = "post_steps" if own else "post_step"
+        self._hook = "post_steps" if _overrides(self._cls, "post_steps") else "post_step"
+        #: The scene resets worlds together (its own ``reset_models``).
+        self.resets_together = _overrides(self._cls, "reset_models")
         self._all = list(range(len(self.envs)))
         nthreads = threads if threads is not None else default_threads(len(self.envs))
         #: Threads the worlds' physics steps on, the caller's included.
@@ -123,12 +129,37 @@ class WorldsStepper:
             hook=self._hook,
             finite=env.check_finite,
         )
-        self._check_obs(result.obs)
+        self._check_obs(result.obs, self._hook)
         if env.camera_rig is not None:
             result.obs = observe_worlds(envs, result.obs, obs_out)
         return result
 
-    def _check_obs(self, obs: Any) -> None:
+    def reset(self, worlds: Sequence[int], options: dict[str, Any] | None) -> tuple[Any, list[dict[str, Any]], Any]:
+        """Start an episode in worlds ``worlds`` (indices, in order; their RNGs
+        seeded already if the request seeds them) through the scene's
+        :meth:`~BaseEnv.reset_models` (only when :attr:`resets_together`):
+        ``(obs, infos, times)``, one per world in request order, ``times`` the
+        worlds' ``data.time`` after the reset (seconds). The same as each
+        world's :meth:`BaseEnv.reset`, in one batched call."""
+        every = list(worlds) == self._all
+        if self.batched is not None:
+            ids = None if every else np.asarray(worlds, dtype=np.intp)
+            envs = StackedWorlds([self.envs[w] for w in worlds], batch_state(self.batched, ids))
+        else:
+            chosen = [self.envs[w] for w in worlds]
+            envs = StackedWorlds(chosen, data_state(chosen))
+        envs.state.reset()
+        env = self.envs[0]
+        obs, infos = check_reset_batch(
+            self._cls.reset_models(envs, options), len(envs), scene=self._cls.__name__, finite=env.check_finite
+        )
+        self._check_obs(obs, "reset_models")
+        times = envs.state.get("time")
+        if env.camera_rig is not None:
+            obs = [world.observe(obs[j], fresh=True) for j, world in enumerate(envs)]
+        return obs, infos, times
+
+    def _check_obs(self, obs: Any, hook: str) -> None:
         """What :meth:`BaseEnv.finish_tick` checks per world: a stacked batch's
         dtype and row shape once (every row shares them), each row's bounds
         when the scene asks for bounds; other batches world by world."""
@@ -138,7 +169,7 @@ class WorldsStepper:
         else:
             rows = obs
         for row in rows:
-            env._check_obs(row, self._hook)
+            env._check_obs(row, hook)
 
     def close(self) -> None:
         """Stop the physics threads; give every world its state back (its ``MjData``)."""

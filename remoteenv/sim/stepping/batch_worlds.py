@@ -114,19 +114,38 @@ class BatchedWorlds:
         array = self.field(name)
         if ids is None:
             array[...] = values
-            self._batch_newer[:] = True
         else:
             array[ids] = values
+        self._mark(ids)
+
+    def reset(self, ids: np.ndarray | None) -> None:
+        """Reset worlds ``ids`` (sorted; None: all) in the batch to the model's
+        defaults, as ``mj_resetData`` does, derived fields not computed (see :meth:`forward`)."""
+        if ids is None:
+            self._data_newer[:] = False
+        else:
+            self._data_newer[ids] = False  # their MjData's state is void, not to be taken back
+        self.batch.reset(ids, stage=mujoco.mjtStage.mjSTAGE_NONE)
+        self._mark(ids)
+
+    def forward(self, ids: np.ndarray | None) -> None:
+        """``mj_forward`` on worlds ``ids`` (sorted; None: all) in one call."""
+        self.take_back()
+        self.batch.forward(ids)
+        self._mark(ids)
+
+    def _mark(self, ids: np.ndarray | None) -> None:
+        """The batch's copy of worlds ``ids`` (None: all) is now newer than their ``MjData``."""
+        if ids is None:
+            self._batch_newer[:] = True
+        else:
             self._batch_newer[ids] = True
 
     def step(self, ids: np.ndarray | None, nstep: int) -> None:
         """``nstep`` substeps of worlds ``ids`` (sorted; None: all) in one call."""
         self.take_back()  # state changed through a world's MjData during the hooks
         self.batch.step(ids, nstep=nstep)
-        if ids is None:
-            self._batch_newer[:] = True
-        else:
-            self._batch_newer[ids] = True
+        self._mark(ids)
 
     def close(self) -> None:
         """Give every world its latest state and unlink it (its ``MjData`` is the state again)."""
@@ -150,6 +169,15 @@ class WorldsState:
     def set(self, name: str, values: Any) -> None:
         raise NotImplementedError
 
+    def forward(self) -> None:
+        """``mj_forward`` on every world: the derived fields (positions,
+        velocities, forces) of the state written, as :meth:`BaseEnv.set_state` computes them."""
+        raise NotImplementedError
+
+    def reset(self) -> None:
+        """Every world to the model's defaults, as ``mj_resetData`` (no derived fields)."""
+        raise NotImplementedError
+
 
 class _BatchState(WorldsState):
     """Worlds ``ids`` (request order; None: all, in world order) of a :class:`BatchedWorlds`."""
@@ -165,6 +193,15 @@ class _BatchState(WorldsState):
     def set(self, name: str, values: Any) -> None:
         self._worlds.write(name, self._ids, values)
 
+    def forward(self) -> None:
+        self._worlds.forward(self._sorted())
+
+    def reset(self) -> None:
+        self._worlds.reset(self._sorted())
+
+    def _sorted(self) -> np.ndarray | None:
+        return None if self._ids is None else np.sort(self._ids).astype(np.int32)
+
 
 class _DataState(WorldsState):
     """The same arrays gathered from (and written into) each world's own ``MjData``."""
@@ -179,6 +216,14 @@ class _DataState(WorldsState):
         values = np.asarray(values)
         for env, value in zip(self._envs, values if values.ndim else [values] * len(self._envs)):
             getattr(env.data, name)[...] = value
+
+    def forward(self) -> None:
+        for env in self._envs:
+            mujoco.mj_forward(env.model, env.data)
+
+    def reset(self) -> None:
+        for env in self._envs:
+            mujoco.mj_resetData(env.model, env.data)
 
 
 class StackedWorlds(list):

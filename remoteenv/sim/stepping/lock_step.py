@@ -91,13 +91,20 @@ class LockStepper:
 
     def reset(self, *, seed: int | None, options: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
+        self.started(obs, seed, float(self.env.data.time))
+        return obs, info
+
+    def started(self, obs: Any, seed: int | None, sim_time: float) -> None:
+        """The bookkeeping of a reset: the world reset with ``seed`` (None: the
+        stream continued) now observes ``obs`` at ``sim_time`` (seconds).
+        :meth:`reset` calls it; so does the worlds' batched reset, which
+        resets the scene's worlds together (:meth:`WorldsStepper.reset`)."""
         self.has_reset = True
         if seed is None and not self._seeded:
             seed = self._launch_seed
         self._seeded = self._seeded or seed is not None
-        self._sim_time = float(self.env.data.time)
+        self._sim_time = sim_time
         self.delays.reset(obs, self._sim_time, self.env.default_action(), seed=seed)
-        return obs, info
 
     def _tick_later(self, sim_time: float) -> float:
         """``sim_time`` one control tick later, added substep by substep as
