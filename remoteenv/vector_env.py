@@ -126,7 +126,9 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         torch_threads: ``"auto"`` (default): when torch is loaded in this
             process, lower its CPU threads once to the CPUs this env's sims
             leave free (at least one), with a warning that says so, unless
-            ``OMP_NUM_THREADS`` is set (:mod:`~remoteenv.agent.vector.torch_threads`);
+            ``OMP_NUM_THREADS`` is set (:mod:`~remoteenv.agent.vector.torch_threads`),
+            and in lock step give them back for the learner's update when
+            that measures faster (:mod:`~remoteenv.agent.vector.update_threads`);
             None: leave torch alone; an int: set that many threads.
         place_sims: ``"auto"`` (default): the sims this env starts on this
             machine run as batch work, pinned one to a CPU when they fit, in
@@ -266,7 +268,9 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         self.latency_stats = LatencyStats()
         self._pauser = Pauser(self._session)
         self._reach = SceneReach(self._session)
-        self._torch_threads = TorchThreads(torch_threads, self._session.local_sims * self.physics_threads)
+        # In real time the sims run on through the caller's update: it gets no CPUs back then.
+        away = None if self.real_time else self._requests.lanes.away
+        self._torch_threads = TorchThreads(torch_threads, self._session.local_sims * self.physics_threads, away=away)
         self._torch_threads.apply()
         own = launcher is None and attach is None and self._session.local_sims == len(self._session.pids)
         self._placement = SimPlacement(place_sims, own_sims=own, real_time=self.real_time)
@@ -319,6 +323,7 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
         int seeds world ``i`` with ``seed + i``; a list gives one seed (or None)
         per world. Other options go to every reset world's scene."""
         self._episodes.check_idle()
+        self._torch_threads.interrupted()
         self._torch_threads.apply()
         self._placement.apply(self._session.pids)
         if is_int_seed(seed):
@@ -339,12 +344,14 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
     def step_async(self, actions: Any) -> None:
         """Send the actions of every world and return at once; :meth:`step_wait`
         gathers the results (together the same as :meth:`step`)."""
+        self._torch_threads.step_starts()
         self._episodes.start_step(actions)
 
     def step_wait(self) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """The results of the step :meth:`step_async` sent, as :meth:`step` returns them."""
         result, round_trip = self._episodes.finish_step(self._add_info)
         self.latency_stats.record_vector(result[4], round_trip)
+        self._torch_threads.step_returns()
         return result
 
     @property
@@ -355,6 +362,9 @@ class RemoteVectorEnv(SessionAttributes, VectorAttributes, Pausable, PoolAPI, Re
     def close_extras(self, **kwargs: Any) -> None:
         """Ask every sim to exit, then make sure they have (no process or socket
         file remains). Attached sims are left running."""
+        torch_threads = getattr(self, "_torch_threads", None)
+        if torch_threads is not None:
+            torch_threads.interrupted()
         requests = getattr(self, "_requests", None)
         if requests is not None:
             requests.lanes.close()

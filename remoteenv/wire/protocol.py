@@ -264,7 +264,13 @@ then blocks as before. A heads-up is a hint: it answers nothing (a reader
 drops one it does not await, and one that comes late, read after the wait
 it was for ended, leaves the agent watching the region for the reply), the
 reply and its wake-up frame follow the rules above unchanged, and a sim may
-send none (it sends none where its ticks take long after the physics). Without total store order (off x86-64) a side sets no
+send none (it sends none where its ticks take long after the physics).
+Between requests the agent may set ``AGENT_AWAY`` (1) when its caller begins
+a long think (its learner's update), and clears it with its next request;
+a sim waiting hot for that request stops and blocks (a hint, like
+``AGENT_THINK_US``; either side refuses a header whose ``AGENT_AWAY`` is
+neither 0 nor 1, and the agent one that holds other than it wrote last).
+Without total store order (off x86-64) a side sets no
 ``*_WATCHING`` word and reads no sequence word without its frame, so every
 request and reply then goes as its frame. The agent takes a region reply
 only for the request it awaits, in the announced layout, and refuses

@@ -9,6 +9,7 @@ import numpy as np
 
 from remoteenv.wire.shared_memory import doorbell
 from remoteenv.wire.shared_memory.doorbell import (
+    AGENT_AWAY,
     AGENT_HEADS_UP,
     AGENT_WATCHING,
     REQ_N,
@@ -126,3 +127,24 @@ def test_a_heads_up_word_off_the_rules_is_tampering() -> None:
     assert "watching flags" in (sim.sim_tampered(0) or "")
     header[AGENT_HEADS_UP] = 1  # the agent asks only while it blocks, never between requests
     assert "heads-up word holds 1" in (agent.agent_tampered() or "")
+
+
+def test_away_is_said_between_requests_and_cleared_by_the_next() -> None:
+    agent, sim, header = _pair()
+    agent.post(1, 1, False)
+    sim.reply(1, 0)
+    assert not sim.agent_away()
+    agent.away()
+    assert sim.agent_away() and header[AGENT_AWAY] == 1
+    assert agent.agent_tampered() is None and sim.sim_tampered(1) is None  # a word the agent may write
+    agent.post(2, 1, False)
+    assert not sim.agent_away() and header[AGENT_AWAY] == 0
+
+
+def test_an_away_word_off_the_rules_is_tampering() -> None:
+    agent, sim, header = _pair()
+    agent.post(1, 1, False)
+    header[AGENT_AWAY] = 7
+    assert "watching flags" in (sim.sim_tampered(0) or "")
+    header[AGENT_AWAY] = 1  # not what the agent wrote last
+    assert "away word holds 1" in (agent.agent_tampered() or "")

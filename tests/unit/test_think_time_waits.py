@@ -33,16 +33,23 @@ def test_the_agent_writes_its_think_time_in_microseconds_and_the_sim_reads_it_cl
 
 
 class Lane:
-    """A pipe's fast lane with nothing posted, whose last request told ``agent_think_s``."""
+    """A pipe's fast lane with nothing posted, whose last request told
+    ``agent_think_s``; the agent says it is away from its ``away_from``-th look on."""
 
-    def __init__(self, agent_think_s: float) -> None:
+    def __init__(self, agent_think_s: float, away_from: int | None = None) -> None:
         self.agent_think_s = agent_think_s
+        self.away_from = away_from
+        self.looks = 0
 
     def posted(self) -> int:
         return 0
 
     def settle(self) -> int:
         return 0
+
+    def agent_away(self) -> bool:
+        self.looks += 1
+        return self.away_from is not None and self.looks >= self.away_from
 
 
 class IdleRouter:
@@ -56,7 +63,7 @@ class IdleRouter:
         return []
 
 
-def _one_pass(agent_think_s: float) -> tuple[list[Any], int]:
+def _one_pass(agent_think_s: float, away_from: int | None = None) -> tuple[list[Any], int]:
     """One lock-step pass over a pipe holding one request: what was answered, and
     how many times the pass waited hot on the pipe."""
     agent, sim = socket.socketpair()
@@ -64,7 +71,7 @@ def _one_pass(agent_think_s: float) -> tuple[list[Any], int]:
     pipe = PipeChannel(sim.detach())
     answered: list[Any] = []
     try:
-        pipe.lane = Lane(agent_think_s)
+        pipe.lane = Lane(agent_think_s, away_from)
         spins = []
         receive_spinning = pipe.receive_spinning
 
@@ -105,3 +112,28 @@ def test_after_a_short_or_untold_think_the_sim_waits_hot_as_before() -> None:
         answered, spins = _one_pass(agent_think_s=think)
         assert spins == 1
         assert [protocol.peek_seq(frame) for _, frame in answered] == [1]
+
+
+def test_an_agent_away_before_the_wait_means_no_hot_wait() -> None:
+    answered, spins = _one_pass(agent_think_s=50e-6, away_from=1)
+    assert spins == 0
+    assert [protocol.peek_seq(frame) for _, frame in answered] == [1]
+
+
+def test_an_agent_gone_away_during_a_hot_wait_ends_it_at_the_next_look() -> None:
+    """The spin on a quiet pipe stops at the look that finds ``AGENT_AWAY``, long
+    before its window (10 s) would end it."""
+    sim_end, agent_end = socket.socketpair()
+    pipe = PipeChannel(sim_end.detach())
+    try:
+        lane = Lane(0.0, away_from=3)
+        pipe.lane = lane
+        hot = hot_wait.HotWait(10.0)
+        hot.window_s = 10.0
+        hot_wait._Neighbours.cool_until = 0.0
+        assert hot.worth_it()
+        assert pipe.receive_spinning(hot) == []
+        assert lane.looks == 3
+    finally:
+        pipe.close()
+        agent_end.close()

@@ -196,6 +196,13 @@ class SharedLanes:
         self._pending[p] = seq
         return seq
 
+    def away(self) -> None:
+        """Tell every sim whose region has no request in flight that the caller
+        began a long think (the doorbell's ``AGENT_AWAY``): its hot wait stops."""
+        for p, bell in self._bells.items():
+            if p not in self._pending:
+                bell.away()
+
     def put_actions(self, p: int, conn: SimConnection, offered: bool, actions: Any) -> bool:
         """Write ``actions`` (one array for positions ``0 .. n-1``) into process
         ``p``'s region for a ``"shared": true`` request; False (nothing written)

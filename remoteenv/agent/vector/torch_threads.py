@@ -10,9 +10,11 @@ third longer. With ``torch_threads="auto"`` (the default) the vector env
 lowers torch's thread count, once, to the CPUs its local sims leave free
 (at least one), and says so in a :class:`TorchThreadsNotice` warning; it
 never raises the count, and leaves torch alone when the user set
-``OMP_NUM_THREADS`` or asked for ``torch_threads=None``. An int sets that
-many threads (the user's explicit choice, applied without a warning).
-Measured gain: docs/performance.md ("The learner beside the sims").
+``OMP_NUM_THREADS`` or asked for ``torch_threads=None``. Where it lowered
+them it gives them back for the learner's update, when that measures faster
+(:mod:`remoteenv.agent.vector.update_threads`), and the warning says so too.
+An int sets that many threads (the user's explicit choice, applied without
+a warning). Measured gain: docs/performance.md ("The learner beside the sims").
 """
 
 from __future__ import annotations
@@ -21,7 +23,9 @@ import os
 import sys
 import types
 import warnings
+from collections.abc import Callable
 
+from remoteenv.agent.vector.update_threads import UpdateThreads, openmp_pause
 from remoteenv.wire.shared_memory.hot_wait import usable_cpus
 
 #: ``torch_threads`` values besides an int.
@@ -53,10 +57,14 @@ class TorchThreads:
     a process that steps its physics on several); :meth:`apply` acts on it
     when torch is loaded (at the env's construction and at each ``reset``)."""
 
-    def __init__(self, choice: int | str | None, local_sims: int) -> None:
+    def __init__(self, choice: int | str | None, local_sims: int, away: Callable[[], None] | None = None) -> None:
         self.choice = check_torch_threads(choice)
         self.local_sims = local_sims
         self._pending = choice is not None and not (choice == AUTO and local_sims == 0)
+        #: Tells the local sims the caller's update has begun (the doorbell's ``AGENT_AWAY``).
+        self._away = away
+        #: The update's threads, once "auto" lowered torch's (None: not managed).
+        self.update: UpdateThreads | None = None
 
     def apply(self) -> None:
         """Set torch's threads as chosen, if torch is loaded and it was not done yet."""
@@ -78,14 +86,37 @@ class TorchThreads:
         if now <= target:
             return
         torch.set_num_threads(target)
+        pause = openmp_pause() if self._away is not None else None
+        back = ""
+        if pause is not None and self._away is not None:
+            self.update = UpdateThreads(torch, target, now, pause, self._away)
+            back = (
+                f"; it gives them back ({now}) for your learner's update (the long pause after as many "
+                "steps as the last two rollouts) when that runs faster"
+            )
         warnings.warn(
             f"remoteenv set torch's CPU threads to {target} (was {now}): this vector env's sims step on "
-            f"{self.local_sims} of this machine's {cpus} CPUs, where torch's idle threads would spin "
+            f"{self.local_sims} of this machine's {cpus} CPUs, where torch's idle threads would spin{back} "
             "(docs/performance.md, 'The learner beside the sims'). To keep torch's setting, pass "
             "torch_threads=None to the vector env or set OMP_NUM_THREADS.",
             TorchThreadsNotice,
             stacklevel=_user_stacklevel(),
         )
+
+    def step_starts(self) -> None:
+        """A vector step starts (see :meth:`UpdateThreads.step_starts`)."""
+        if self.update is not None:
+            self.update.step_starts()
+
+    def step_returns(self) -> None:
+        """A vector step returns to the caller (see :meth:`UpdateThreads.step_returns`)."""
+        if self.update is not None:
+            self.update.step_returns()
+
+    def interrupted(self) -> None:
+        """A reset or close (see :meth:`UpdateThreads.interrupted`)."""
+        if self.update is not None:
+            self.update.interrupted()
 
 
 #: Packages whose frames stand between the user's call and :meth:`TorchThreads.apply`

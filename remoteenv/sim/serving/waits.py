@@ -104,9 +104,10 @@ class ServingWaits:
         return not events
 
     def _agent_thinks(self, pipe: PipeChannel) -> bool:
-        """Whether the agent said it thinks longer than :attr:`think_limit_s` between steps."""
+        """Whether the agent said it thinks longer than :attr:`think_limit_s` between
+        steps, or that its caller has begun a long think now (``AGENT_AWAY``)."""
         lane = pipe.lane
-        return lane is not None and lane.agent_think_s > self.think_limit_s
+        return lane is not None and (lane.agent_think_s > self.think_limit_s or lane.agent_away())
 
     def until(self, deadline: float, now: float, stepping: Stepping, channels: list[Channel]) -> None:
         """One real-time pass: run what is due at ``now`` (sending the replies it

@@ -196,6 +196,10 @@ class LaneWatch(Protocol):
         """About to block: stop watching; a request posted meanwhile (0: none)."""
         ...
 
+    def agent_away(self) -> bool:
+        """Whether the agent said its caller began a long think after the last reply."""
+        ...
+
 
 def region_request(seq: int) -> dict[str, Any]:
     """Request ``seq`` posted in the region, found by the watch: the map its
@@ -272,11 +276,13 @@ class PipeChannel:
         :meth:`~remoteenv.wire.shared_memory.hot_wait.HotWait.worth_it` said yes) allows.
 
         Waiting hot avoids the sleep/wake-up of a blocking wait, which on a
-        virtual machine costs tens of microseconds per message.
+        virtual machine costs tens of microseconds per message. It stops when
+        the agent says in the region that its caller began a long think.
         """
+        lane = self.lane
         while True:
             frames = self.receive_nowait()
-            if frames or self.closed or not hot.spin():
+            if frames or self.closed or (lane is not None and lane.agent_away()) or not hot.spin():
                 return frames
 
     def send(self, reply_to: Any, payload: bytes) -> None:

@@ -117,6 +117,12 @@ class SharedLane:
         """``seq`` of a request posted in the region and not yet served (0: none)."""
         return 0 if self.doorbell is None else self.doorbell.posted(self.served)
 
+    def agent_away(self) -> bool:
+        """Whether the agent said its caller began a long think after the last
+        reply (the doorbell's ``AGENT_AWAY``): a hot wait for its next request stops."""
+        doorbell = self.doorbell
+        return doorbell is not None and doorbell.agent_away()
+
     def settle(self) -> int:
         """The sim is about to block: stop watching the region (a request posted
         from now on comes with its frame); a request that came meanwhile (0: none)."""

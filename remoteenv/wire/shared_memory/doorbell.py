@@ -23,6 +23,11 @@ word  name                writer  meaning
 5     ``AGENT_HEADS_UP``  agent   1 (only while ``AGENT_WATCHING`` is 0): wake
                                   the agent with ``{"seq": s, "soon": true}``
                                   once the request's physics is done
+6     ``AGENT_AWAY``      agent   1: the agent's caller has begun a long
+                                  think (its learner's update) after the
+                                  last reply; cleared with the next request.
+                                  A hint: a sim waiting hot for that request
+                                  stops and blocks
 8     ``REP_SEQ``         sim     ``seq`` of the last request answered in the
                                   region
 9     ``REP_INFO``        sim     the info layout version of that answer
@@ -85,7 +90,7 @@ import threading
 
 import numpy as np
 
-REQ_SEQ, REQ_N, REQ_NAMED, AGENT_WATCHING, AGENT_THINK_US, AGENT_HEADS_UP = 0, 1, 2, 3, 4, 5
+REQ_SEQ, REQ_N, REQ_NAMED, AGENT_WATCHING, AGENT_THINK_US, AGENT_HEADS_UP, AGENT_AWAY = 0, 1, 2, 3, 4, 5, 6
 REP_SEQ, REP_INFO, SIM_WATCHING = 8, 9, 10
 #: ``REP_SEQ`` of a region the sim stopped using: it found the header tampered with.
 POISONED = -1
@@ -128,6 +133,7 @@ class Doorbell:
         # What each side last wrote into its sequence words (as found when this view was made).
         self._posted = int(self._words[REQ_SEQ])
         self._replied = (int(self._words[REP_SEQ]), int(self._words[REP_INFO]))
+        self._away = int(self._words[AGENT_AWAY])
 
     def word(self, index: int) -> int:
         return int(self._words[index])
@@ -144,6 +150,7 @@ class Doorbell:
         words[REQ_NAMED] = 1 if named else 0
         words[AGENT_THINK_US] = min(max(int(think_s * 1e6), 0), MAX_THINK_US)
         words[AGENT_WATCHING] = self._watching
+        words[AGENT_AWAY] = self._away = 0
         fence()
         words[REQ_SEQ] = seq
         self._posted = seq
@@ -166,6 +173,8 @@ class Doorbell:
             return "its watching flags hold values other than 0 and 1"
         if words[AGENT_HEADS_UP] != 0:
             return f"its heads-up word holds {int(words[AGENT_HEADS_UP])} between requests, not the 0 written last"
+        if words[AGENT_AWAY] != self._away:
+            return f"its away word holds {int(words[AGENT_AWAY])}, not the {self._away} written last"
         if words[REP_INFO] < 0:
             return f"its info layout word holds {int(words[REP_INFO])}"
         return None
@@ -191,6 +200,10 @@ class Doorbell:
             self.agent_wakes()
             return False
         return True
+
+    def away(self) -> None:
+        """Agent side, between requests: its caller has begun a long think (``AGENT_AWAY``)."""
+        self._words[AGENT_AWAY] = self._away = 1
 
     def agent_wakes(self) -> None:
         words = self._words
@@ -224,6 +237,7 @@ class Doorbell:
             words[AGENT_WATCHING] not in (0, 1)
             or words[SIM_WATCHING] not in (0, 1)
             or words[AGENT_HEADS_UP] not in (0, 1)
+            or words[AGENT_AWAY] not in (0, 1)
         ):
             return "its watching flags hold values other than 0 and 1"
         if not 0 <= words[REQ_N] <= 1 << 16 or words[REQ_NAMED] not in (0, 1):
@@ -240,6 +254,11 @@ class Doorbell:
         """Sim side: ``AGENT_THINK_US`` of the request just taken, in seconds
         (0: not told; a hint, read as found: clamped to ``0 .. MAX_THINK_US``)."""
         return min(max(int(self._words[AGENT_THINK_US]), 0), MAX_THINK_US) * 1e-6
+
+    def agent_away(self) -> bool:
+        """Sim side: whether the agent said its caller began a long think after
+        the last reply (``AGENT_AWAY``; a hint, read as found)."""
+        return self._words[AGENT_AWAY] == 1
 
     def request(self) -> tuple[int, int, int]:
         """``(REQ_SEQ, REQ_N, REQ_NAMED)`` as they are now (after the request's frame)."""
@@ -285,6 +304,7 @@ class Doorbell:
 
 
 __all__ = [
+    "AGENT_AWAY",
     "AGENT_HEADS_UP",
     "AGENT_THINK_US",
     "AGENT_WATCHING",
