@@ -45,7 +45,7 @@ KEPT = 4
 #: Two threads are chosen only if their updates take at most this share of one thread's.
 MARGIN = 0.97
 #: Every this many predicted updates the way not chosen is timed once more.
-RETRY_EVERY = 16
+RETRY_EVERY = 32
 #: Shared objects whose ``omp_pause_resource_all`` ends an OpenMP pool's spin.
 _OPENMP_LIBRARIES = ("libgomp", "libiomp5", "libomp")
 
