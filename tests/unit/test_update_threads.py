@@ -6,6 +6,7 @@ threads' spin. A user's own thread count ends it; so does nothing else."""
 
 from __future__ import annotations
 
+import os
 import sys
 import types
 import warnings
@@ -43,7 +44,10 @@ class Loop:
         self.pauses = 0
         self.aways = 0
         self.length, self.update_s, self.speedup = length, update_s, speedup
-        self.threads = UpdateThreads(self.torch, 1, 2, self._pause, self._away, clock=lambda: self.now)
+        self.busy = False
+        self.threads = UpdateThreads(
+            self.torch, 1, 2, self._pause, self._away, clock=lambda: self.now, busy=lambda: self.busy
+        )
         self.update_threads: list[int] = []  # torch's threads during each update
 
     def _pause(self) -> None:
@@ -123,6 +127,18 @@ def test_a_user_who_sets_torchs_threads_ends_it() -> None:
     assert loop.torch.threads == 3 and loop.aways == 1
 
 
+def test_nothing_is_raised_or_timed_beside_a_busy_neighbour() -> None:
+    loop = Loop()
+    loop.busy = True
+    for _ in range(8):
+        loop.rollout()
+    assert loop.torch.calls == [] and loop.aways == 0 and loop.threads.timings.predicted == 0
+    loop.busy = False  # the neighbour has gone: the trials start
+    for _ in range(2):
+        loop.rollout()
+    assert loop.update_threads[-2:] == [1, 2]
+
+
 def test_a_reset_or_close_lowers_the_threads_and_drops_the_timing() -> None:
     loop = Loop()
     for _ in range(4):
@@ -144,7 +160,7 @@ def fake_torch(monkeypatch):
 
 
 def test_auto_manages_the_update_where_it_lowered_and_says_so(fake_torch, monkeypatch):
-    monkeypatch.setattr(torch_threads, "openmp_pause", lambda: lambda: 0)
+    monkeypatch.setattr(torch_threads, "openmp_pause", lambda torch_dir: lambda: 0)
     threads = TorchThreads("auto", local_sims=2, away=lambda: None)
     with pytest.warns(TorchThreadsNotice, match=r"to 1 \(was 2\).*gives them back \(2\) for your learner's update"):
         threads.apply()
@@ -152,13 +168,13 @@ def test_auto_manages_the_update_where_it_lowered_and_says_so(fake_torch, monkey
 
 
 def test_no_update_threads_without_an_openmp_pause_or_a_way_to_tell_the_sims(fake_torch, monkeypatch):
-    monkeypatch.setattr(torch_threads, "openmp_pause", lambda: None)
+    monkeypatch.setattr(torch_threads, "openmp_pause", lambda torch_dir: None)
     threads = TorchThreads("auto", local_sims=2, away=lambda: None)
     with pytest.warns(TorchThreadsNotice) as caught:
         threads.apply()
     assert threads.update is None and "gives them back" not in str(caught[0].message)
     torch_threads._Applied.done = False
-    monkeypatch.setattr(torch_threads, "openmp_pause", lambda: lambda: 0)
+    monkeypatch.setattr(torch_threads, "openmp_pause", lambda torch_dir: lambda: 0)
     quiet = TorchThreads("auto", local_sims=2)  # no away: e.g. the process floor
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -172,7 +188,7 @@ def test_the_openmp_pause_is_found_in_this_process_when_torch_is_loaded() -> Non
     import torch
 
     torch.ones(4).add_(1)  # torch's OpenMP runtime is loaded by now
-    pause = update_threads.openmp_pause()
+    pause = update_threads.openmp_pause(os.path.dirname(torch.__file__))
     if pause is None:
         pytest.skip("this torch's OpenMP runtime offers no omp_pause_resource_all")
     assert pause() == 0

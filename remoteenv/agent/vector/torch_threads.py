@@ -86,7 +86,8 @@ class TorchThreads:
         if now <= target:
             return
         torch.set_num_threads(target)
-        pause = openmp_pause() if self._away is not None else None
+        torch_file = getattr(torch, "__file__", None)
+        pause = openmp_pause(os.path.dirname(torch_file) if torch_file else None) if self._away is not None else None
         back = ""
         if pause is not None and self._away is not None:
             self.update = UpdateThreads(torch, target, now, pause, self._away)

@@ -22,8 +22,9 @@ Whether this pays depends on the learner (a small network's update may run
 no faster on two threads), so the updates are timed both ways: two of each
 first, then the faster way (two threads must be at least
 :data:`MARGIN` faster), trying the other way again every
-:data:`RETRY_EVERY` updates. A user who changes torch's thread count
-meanwhile ends it for good. Measured gain: docs/performance.md ("Torch's
+:data:`RETRY_EVERY` updates. Nothing is raised while the process's hot waits cool down
+after a stall (a busy neighbour holds the CPUs). A user who changes torch's
+thread count meanwhile ends it for good. Measured gain: docs/performance.md ("Torch's
 threads for the update").
 """
 
@@ -36,6 +37,8 @@ import time
 from collections import deque
 from collections.abc import Callable
 from typing import Any
+
+from remoteenv.wire.shared_memory.hot_wait import neighbours_busy
 
 #: A think at least this long (seconds) between two vector steps ends a rollout.
 LONG_THINK_S = 2e-3
@@ -50,16 +53,18 @@ RETRY_EVERY = 32
 _OPENMP_LIBRARIES = ("libgomp", "libiomp5", "libomp")
 
 
-def openmp_pause() -> Callable[[], Any] | None:
+def openmp_pause(torch_dir: str | None = None) -> Callable[[], Any] | None:
     """``omp_pause_resource_all(omp_pause_soft)`` of the OpenMP runtime loaded in
-    this process (the one torch's threads use), or None if none is loaded or
-    it lacks the call (then :class:`UpdateThreads` is not used)."""
+    this process (the one torch's threads use: under ``torch_dir``, torch's
+    package directory, if one is there), or None if none is loaded or it
+    lacks the call (then :class:`UpdateThreads` is not used)."""
     try:
         with open("/proc/self/maps", encoding="utf-8", errors="replace") as maps:
             paths = {line.split()[-1] for line in maps if "/lib" in line and ".so" in line}
     except OSError:
         return None
-    for path in sorted(paths):
+    inside = (torch_dir.rstrip(os.sep) + os.sep) if torch_dir else None
+    for path in sorted(paths, key=lambda p: (not (inside and p.startswith(inside)), p)):
         if os.path.basename(path).startswith(_OPENMP_LIBRARIES):
             try:
                 pause = ctypes.CDLL(path).omp_pause_resource_all
@@ -103,6 +108,8 @@ class UpdateThreads:
         pause: ends the idle threads' spin (:func:`openmp_pause`).
         away: tells the local sims that the caller's update has begun.
         clock: seconds, monotonic (tests pass their own).
+        busy: whether something else holds this process's CPUs now (the hot
+            waits cool down after a stall); then nothing is raised.
     """
 
     def __init__(
@@ -113,9 +120,10 @@ class UpdateThreads:
         pause: Callable[[], Any],
         away: Callable[[], None],
         clock: Callable[[], float] = time.perf_counter,
+        busy: Callable[[], bool] = neighbours_busy,
     ) -> None:
         self._torch, self.low, self.high = torch, low, high
-        self._pause, self._away, self._clock = pause, away, clock
+        self._pause, self._away, self._clock, self._busy = pause, away, clock, busy
         self.timings = _Timings()
         #: Vector steps since the last long think; the last two rollouts' lengths.
         self._steps = 0
@@ -139,6 +147,8 @@ class UpdateThreads:
         if self._torch.get_num_threads() != self.low:
             self.active = False  # the user set another count: theirs from now on
             return
+        if self._busy():
+            return  # a busy neighbour would take the second thread's CPU: neither raised nor timed
         high = self.timings.choose()
         self._predicted = high
         if high:

@@ -73,6 +73,12 @@ class _Neighbours:
         cls.cool_until = now + cls.cool_s
 
 
+def neighbours_busy() -> bool:
+    """Whether this process's hot waits are cooling down now, after a spin
+    stalled: something else (a CPU hog, another training run) holds its CPUs."""
+    return time.perf_counter() < _Neighbours.cool_until
+
+
 def usable_cpus() -> int:
     """CPUs this process may run on (its affinity mask where the OS has one)."""
     try:
