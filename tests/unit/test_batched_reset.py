@@ -5,14 +5,13 @@ without the hook keeps the per-world reset; a wrong result names the hook."""
 
 from __future__ import annotations
 
-import importlib.util
 from typing import Any
 
 import mujoco
 import numpy as np
 import pytest
+from fakes import scene_class
 
-import remoteenv
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.scene.step_check import StepResultError
 from remoteenv.sim.stepping import batch_step
@@ -24,11 +23,7 @@ from remoteenv.wire.protocol import OP_RESET, OP_STEP
 
 
 def _scene_class(name: str, cls: str) -> type[BaseEnv]:
-    spec = importlib.util.spec_from_file_location(f"{name}_scene_reset", remoteenv.scene_path(name))
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return getattr(module, cls)
+    return scene_class(name, cls, f"{name}_scene_reset")
 
 
 Reacher = _scene_class("reacher", "ReacherEnv")

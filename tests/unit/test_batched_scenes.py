@@ -4,12 +4,10 @@ autoresets included, for every shipped scene that implements the hooks."""
 
 from __future__ import annotations
 
-import importlib.util
-
 import numpy as np
 import pytest
+from fakes import scene_class
 
-import remoteenv
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.stepping.batch_commands import BatchCommands
 from remoteenv.sim.stepping.lock_step import LockStepping
@@ -19,11 +17,7 @@ from remoteenv.wire.run_options.options import RunOptions
 
 
 def _scene_class(name: str, cls: str) -> type[BaseEnv]:
-    spec = importlib.util.spec_from_file_location(f"{name}_scene_batched", remoteenv.scene_path(name))
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return getattr(module, cls)
+    return scene_class(name, cls, f"{name}_scene_batched")
 
 
 Reacher = _scene_class("reacher", "ReacherEnv")

@@ -6,27 +6,13 @@ None, an int)."""
 from __future__ import annotations
 
 import sys
-import types
 import warnings
 
 import pytest
+from fakes import FakeTorch
 
 from remoteenv.agent.vector import torch_threads
 from remoteenv.agent.vector.torch_threads import TorchThreads, TorchThreadsNotice, check_torch_threads
-
-
-class FakeTorch(types.ModuleType):
-    def __init__(self, threads: int) -> None:
-        super().__init__("torch")
-        self.threads = threads
-        self.calls: list[int] = []
-
-    def get_num_threads(self) -> int:
-        return self.threads
-
-    def set_num_threads(self, n: int) -> None:
-        self.calls.append(n)
-        self.threads = n
 
 
 @pytest.fixture

@@ -8,29 +8,15 @@ from __future__ import annotations
 
 import os
 import sys
-import types
 import warnings
 
 import numpy as np
 import pytest
+from fakes import FakeTorch
 
 from remoteenv.agent.vector import torch_threads, update_threads
 from remoteenv.agent.vector.torch_threads import TorchThreads, TorchThreadsNotice
 from remoteenv.agent.vector.update_threads import LONG_THINK_S, MARGIN, RETRY_EVERY, UpdateThreads
-
-
-class FakeTorch(types.ModuleType):
-    def __init__(self, threads: int) -> None:
-        super().__init__("torch")
-        self.threads = threads
-        self.calls: list[int] = []
-
-    def get_num_threads(self) -> int:
-        return self.threads
-
-    def set_num_threads(self, n: int) -> None:
-        self.calls.append(n)
-        self.threads = n
 
 
 class Loop:

@@ -9,7 +9,7 @@ sims need: with as many sim processes as CPUs the vector step takes about a
 third longer. With ``torch_threads="auto"`` (the default) the vector env
 lowers torch's thread count, once, to the CPUs its local sims leave free
 (at least one), and says so in a :class:`TorchThreadsNotice` warning; it
-never raises the count, and leaves torch alone when the user set
+never sets more threads than torch had, and leaves torch alone when the user set
 ``OMP_NUM_THREADS`` or asked for ``torch_threads=None``. Where it lowered
 them it gives them back for the learner's update, when that measures faster
 (:mod:`remoteenv.agent.vector.update_threads`), and the warning says so too.
