@@ -4,10 +4,14 @@ a shipped scene's env class loaded from its script."""
 from __future__ import annotations
 
 import importlib.util
+import sys
 import types
 from typing import Any
 
+import pytest
+
 import remoteenv
+from remoteenv.agent.vector import torch_threads
 
 
 class FakeTorch(types.ModuleType):
@@ -24,6 +28,17 @@ class FakeTorch(types.ModuleType):
     def set_num_threads(self, n: int) -> None:
         self.calls.append(n)
         self.threads = n
+
+
+def fake_torch_on(monkeypatch: pytest.MonkeyPatch, cpus: int) -> FakeTorch:
+    """A :class:`FakeTorch` loaded as ``torch`` at ``cpus`` threads, on a machine of
+    ``cpus`` usable CPUs, with neither ``OMP_NUM_THREADS`` nor an earlier "auto" in force."""
+    torch = FakeTorch(cpus)
+    monkeypatch.setitem(sys.modules, "torch", torch)
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    monkeypatch.setattr(torch_threads._Applied, "done", False)
+    monkeypatch.setattr(torch_threads, "usable_cpus", lambda: cpus)
+    return torch
 
 
 def scene_class(name: str, cls: str, module_name: str) -> Any:

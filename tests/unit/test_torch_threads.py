@@ -9,7 +9,7 @@ import sys
 import warnings
 
 import pytest
-from fakes import FakeTorch
+from fakes import FakeTorch, fake_torch_on
 
 from remoteenv.agent.vector import torch_threads
 from remoteenv.agent.vector.torch_threads import TorchThreads, TorchThreadsNotice, check_torch_threads
@@ -17,12 +17,7 @@ from remoteenv.agent.vector.torch_threads import TorchThreads, TorchThreadsNotic
 
 @pytest.fixture
 def fake_torch(monkeypatch):
-    torch = FakeTorch(4)
-    monkeypatch.setitem(sys.modules, "torch", torch)
-    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
-    monkeypatch.setattr(torch_threads._Applied, "done", False)
-    monkeypatch.setattr(torch_threads, "usable_cpus", lambda: 4)
-    return torch
+    return fake_torch_on(monkeypatch, cpus=4)
 
 
 def test_auto_leaves_the_sims_their_cpus_once_and_says_so(fake_torch):

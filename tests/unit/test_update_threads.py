@@ -7,12 +7,11 @@ threads' spin. A user's own thread count ends it; so does nothing else."""
 from __future__ import annotations
 
 import os
-import sys
 import warnings
 
 import numpy as np
 import pytest
-from fakes import FakeTorch
+from fakes import FakeTorch, fake_torch_on
 
 from remoteenv.agent.vector import torch_threads, update_threads
 from remoteenv.agent.vector.torch_threads import TorchThreads, TorchThreadsNotice
@@ -137,12 +136,7 @@ def test_a_reset_or_close_lowers_the_threads_and_drops_the_timing() -> None:
 
 @pytest.fixture
 def fake_torch(monkeypatch):
-    torch = FakeTorch(2)
-    monkeypatch.setitem(sys.modules, "torch", torch)
-    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
-    monkeypatch.setattr(torch_threads._Applied, "done", False)
-    monkeypatch.setattr(torch_threads, "usable_cpus", lambda: 2)
-    return torch
+    return fake_torch_on(monkeypatch, cpus=2)
 
 
 def test_auto_manages_the_update_where_it_lowered_and_says_so(fake_torch, monkeypatch):

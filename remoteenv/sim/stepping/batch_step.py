@@ -25,7 +25,14 @@ from remoteenv.sim.scene.batch_result import BatchResult
 from remoteenv.sim.scene.camera_rig import observe_worlds
 from remoteenv.sim.scene.step_check import check_batch, check_reset_batch
 from remoteenv.sim.stepping.batch_physics import PhysicsThreads, default_threads
-from remoteenv.sim.stepping.batch_worlds import BatchedWorlds, StackedWorlds, available, batch_state, data_state
+from remoteenv.sim.stepping.batch_worlds import (
+    BatchedWorlds,
+    StackedWorlds,
+    available,
+    batch_state,
+    data_state,
+    sorted_ids,
+)
 
 
 def steps_together(envs: Sequence[Any]) -> bool:
@@ -109,7 +116,7 @@ class WorldsStepper:
                 ids = np.asarray(worlds, dtype=np.intp)
                 envs = StackedWorlds([self.envs[w] for w in worlds], batch_state(batched, ids))
                 self._cls.prepare_steps(envs, actions)
-                batched.step(np.sort(ids).astype(np.int32), self._frame_skip)
+                batched.step(sorted_ids(ids), self._frame_skip)
         else:
             if every:
                 envs, models, datas = self.envs, self._models, self._datas
@@ -141,10 +148,12 @@ class WorldsStepper:
         ``(obs, infos, times)``, one per world in request order, ``times`` the
         worlds' ``data.time`` after the reset (seconds). The same as each
         world's :meth:`BaseEnv.reset`, in one batched call."""
-        every = list(worlds) == self._all
         if self.batched is not None:
-            ids = None if every else np.asarray(worlds, dtype=np.intp)
-            envs = StackedWorlds([self.envs[w] for w in worlds], batch_state(self.batched, ids))
+            if list(worlds) == self._all and self._every is not None:
+                envs = self._every
+            else:
+                ids = np.asarray(worlds, dtype=np.intp)
+                envs = StackedWorlds([self.envs[w] for w in worlds], batch_state(self.batched, ids))
         else:
             chosen = [self.envs[w] for w in worlds]
             envs = StackedWorlds(chosen, data_state(chosen))

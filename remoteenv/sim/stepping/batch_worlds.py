@@ -155,6 +155,11 @@ class BatchedWorlds:
                 env._batch_link = None
 
 
+def sorted_ids(ids: np.ndarray) -> np.ndarray:
+    """World indices as the batch's calls take them: sorted, ``int32``."""
+    return np.sort(ids).astype(np.int32)
+
+
 class WorldsState:
     """The stacked ``MjData`` fields of the worlds of one batched step, in request order.
 
@@ -200,7 +205,7 @@ class _BatchState(WorldsState):
         self._worlds.reset(self._sorted())
 
     def _sorted(self) -> np.ndarray | None:
-        return None if self._ids is None else np.sort(self._ids).astype(np.int32)
+        return None if self._ids is None else sorted_ids(self._ids)
 
 
 class _DataState(WorldsState):
@@ -252,4 +257,13 @@ def data_state(envs: Sequence[BaseEnv]) -> WorldsState:
     return _DataState(envs)
 
 
-__all__ = ["BatchedWorlds", "StackedWorlds", "WorldsState", "available", "batch_state", "data_state", "stacked"]
+__all__ = [
+    "BatchedWorlds",
+    "StackedWorlds",
+    "WorldsState",
+    "available",
+    "batch_state",
+    "data_state",
+    "sorted_ids",
+    "stacked",
+]
