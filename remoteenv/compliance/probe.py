@@ -4,7 +4,10 @@ The checker speaks the wire itself (a ZeroMQ DEALER socket, CURVE when the
 launch-info file gives keys) rather than through the agent's connection
 classes: it must send malformed frames, choose its own ``seq`` values and see
 every reply, stale or not. Each check gets a fresh :class:`Probe`, so no
-reply of one check can reach another.
+reply of one check can reach another. A handshake the server refused (it may
+serve a bounded number of connections at once, and the previous check's may
+not have ended there yet) is tried again after a short pause, as the agent's
+connection does (:class:`~remoteenv.agent.connection.handshake_watch.HandshakeWatch`).
 
 Runs in the checking process, an agent of the server under test (it speaks the wire itself: no sim code, no env classes).
 """
@@ -19,6 +22,7 @@ from typing import Any
 
 import zmq
 
+from remoteenv.agent.connection.handshake_watch import HandshakeWatch
 from remoteenv.compliance.failures import CheckFailed
 from remoteenv.compliance.handshake_check import Handshake, parse_handshake
 from remoteenv.compliance.values import envelope_problem
@@ -30,6 +34,8 @@ from remoteenv.wire.wire_errors import refused_for_another_driver, short_repr
 PROBE_RCVHWM = 4
 #: Seconds between the resends of a reset refused because another connection drives the world.
 RELEASE_RETRY_S = 0.02
+#: Longest slice of a wait for a frame (seconds) before the probe looks at its handshakes.
+LOOK_EVERY_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -113,6 +119,7 @@ class Probe:
             sock.curve_serverkey = target.curve_server_key
             sock.curve_publickey = public
             sock.curve_secretkey = secret
+        self.watch = HandshakeWatch(sock, target.endpoint)
         sock.connect(target.endpoint)
         self.socket = sock
 
@@ -123,6 +130,7 @@ class Probe:
         self.close()
 
     def close(self) -> None:
+        self.watch.close()
         self.socket.close(linger=0)
 
     # ------------------------------------------------------------ sending
@@ -135,6 +143,7 @@ class Probe:
     def send_frame(self, frame: bytes) -> None:
         """Send one raw frame (may be malformed on purpose)."""
         self.socket.send(frame, copy=True)
+        self.watch.sent(frame)
 
     def send(self, cmd: str, *, min_seq: int = 0, **args: Any) -> int:
         """Send request ``cmd`` with ``args``; returns its fresh ``seq`` (at least ``min_seq``)."""
@@ -147,8 +156,9 @@ class Probe:
     def receive(self, what: str) -> dict[str, Any]:
         """The next reply, waiting up to the target's timeout; ``what`` names
         the awaited reply in failure messages."""
-        if not self.socket.poll(round(self.timeout * 1000)):
-            raise CheckFailed(f"no reply to {what} within {self.timeout:g} s")
+        if not self.frame_within(self.timeout):
+            why = self.watch.why_failed()
+            raise CheckFailed(f"no reply to {what} within {self.timeout:g} s" + (f"; {why}" if why else ""))
         frame = self.socket.recv(copy=True)
         try:
             reply = protocol.unpack(frame, max_values=protocol.MAX_REPLY_VALUES)
@@ -159,9 +169,21 @@ class Probe:
             raise CheckFailed(f"the reply to {what}: {problem}")
         return reply
 
+    def frame_within(self, seconds: float) -> bool:
+        """Whether a frame arrives within ``seconds`` (left unread); a refused
+        handshake is tried again meanwhile."""
+        deadline = time.monotonic() + seconds
+        while True:
+            left = deadline - time.monotonic()
+            if self.socket.poll(max(0, round(min(left, LOOK_EVERY_S) * 1000))):
+                return True
+            if left <= 0:
+                return False
+            self.watch.look()
+
     def silent(self, seconds: float, after: str) -> None:
         """Fail if any frame arrives within ``seconds`` (no reply is owed ``after`` something)."""
-        if self.socket.poll(round(seconds * 1000)):
+        if self.frame_within(seconds):
             frame = self.socket.recv(copy=True)
             raise CheckFailed(f"an unexpected frame arrived {after}: {short_repr(frame)}")
 

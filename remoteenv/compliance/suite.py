@@ -55,7 +55,7 @@ def unreachable(target: Target) -> str | None:
     """Why ``target`` does not answer a handshake at all, or None if it answers."""
     with Probe(target) as probe:
         probe.send("handshake", protocol=protocol.PROTOCOL_VERSION)
-        if probe.socket.poll(round(target.timeout * 1000)):
+        if probe.frame_within(target.timeout):
             return None
     curve = " (with CURVE: are the keys right?)" if target.curve_server_key is not None else ""
     return f"no reply to a handshake from {target.endpoint} within {target.timeout:g} s{curve}; is the server running?"

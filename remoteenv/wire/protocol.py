@@ -50,7 +50,9 @@ connection). In a request, no msgpack array or map holds more than
 :data:`MAX_REQUEST_ITEMS` entries (lists of numbers travel as arrays).
 A server bounds what it holds for its peers in total: it may refuse a
 connection's handshake when it serves enough connections already (the
-reference sims admit 8 at once), and it may drop a request unread when too
+reference sims admit 8 at once; libzmq ends a refused connection and drops
+what was queued on it, so a client that wants in connects again after a
+pause and sends those requests again: none of them reached the server), and it may drop a request unread when too
 many requests from connections that drive no world (see Drivers) are
 waiting, answering it with a ``state`` error whose ``seq`` is read from the
 frame's first bytes (-1 if it is not there: :func:`peek_seq`).

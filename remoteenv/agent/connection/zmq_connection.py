@@ -5,14 +5,17 @@ Runs in the agent process. A DEALER socket to the sim's ROUTER. After a
 timeout the socket is thrown away and a new one connected, so the next call
 starts clean (the zguide's "Lazy Pirate" pattern). The new socket keeps the
 connection's random routing id, so a real-time sim still knows it as the
-connection that drives its world.
+connection that drives its world. A handshake the sim's gate refused (it
+serves a bounded number of connections at once) is tried again after a
+short pause, with the frames sent meanwhile
+(:class:`~remoteenv.agent.connection.handshake_watch.HandshakeWatch`).
 
 Memory: the socket queues at most :data:`RECEIVE_HWM` frames from the sim
 (libzmq stops reading a peer whose queue is full; the sim's own send queue
 takes the rest) and drops a frame above the wire's frame limit
 (``ZMQ_MAXMSGSIZE``, which closes that connection), so whatever the sim
 sends, the socket holds at most ``(RECEIVE_HWM + 1) x MAX_MESSAGE_BYTES``.
-A monitor on the socket records such dropped connections and failed
+The watch's monitor records such dropped connections and failed
 ZeroMQ/CURVE handshakes, so a timeout that follows names them.
 """
 
@@ -23,8 +26,8 @@ from collections.abc import Callable
 from typing import Any
 
 import zmq
-from zmq.utils.monitor import recv_monitor_message
 
+from remoteenv.agent.connection.handshake_watch import HandshakeWatch
 from remoteenv.agent.connection.sim_connection import LIVENESS_CHECK_S, SimConnection
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.wire import protocol
@@ -34,8 +37,6 @@ from remoteenv.wire.wire_errors import short_repr
 #: Frames from the sim the socket queues before libzmq stops reading it (a
 #: vector env has one request in flight per sim, ``send()``/``recv()`` a few).
 RECEIVE_HWM = 4
-#: What the monitor of an agent's socket records.
-_WATCHED = zmq.EVENT_DISCONNECTED | zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL | zmq.EVENT_HANDSHAKE_FAILED_AUTH
 
 
 class ZmqConnection(SimConnection):
@@ -63,7 +64,7 @@ class ZmqConnection(SimConnection):
         self.curve_server_key = curve_server_key
         self.curve_client_keypair = curve_client_keypair
         self.socket: Any = None
-        self._monitor: Any = None
+        self._watch: HandshakeWatch | None = None
         # Routing ids starting with a zero byte are reserved by ZeroMQ.
         self.routing_id = b"\x01" + os.urandom(15)
         self._open()
@@ -82,7 +83,7 @@ class ZmqConnection(SimConnection):
                 sock.curve_serverkey = self._key(self.curve_server_key, "server public key")
                 sock.curve_publickey = self._key(public, "client public key")
                 sock.curve_secretkey = self._key(secret, "client secret key")
-            self._monitor = sock.get_monitor_socket(_WATCHED)
+            self._watch = HandshakeWatch(sock, self.endpoint)
             sock.connect(self.endpoint)
         except BaseException as exc:
             self._close_socket(sock)
@@ -115,6 +116,16 @@ class ZmqConnection(SimConnection):
 
     def _send_frame(self, payload: bytes) -> None:
         self.socket.send(payload, copy=True)
+        watch = self._watch
+        if watch is not None:
+            watch.sent(payload)
+
+    def _check_alive(self, what: str) -> None:
+        # Called while a reply is awaited and none came for a while: a refused handshake is tried again.
+        watch = self._watch
+        if watch is not None:
+            watch.look()
+        super()._check_alive(what)
 
     def _recv_frame(self) -> bytes | None:
         try:
@@ -132,30 +143,19 @@ class ZmqConnection(SimConnection):
         self.reconnect()
 
     def why_silent(self) -> str | None:
-        """What the monitor saw since the last look: a failed handshake (CURVE
-        keys?) or a dropped connection while the sim lives (e.g. its reply was
-        above the frame limit: libzmq closes such a connection)."""
-        seen = 0
-        monitor = self._monitor
-        while monitor is not None:
-            try:
-                event = recv_monitor_message(monitor, zmq.NOBLOCK)
-            except (zmq.Again, zmq.ZMQError):
-                break
-            seen |= int(event["event"])
-        if seen & (zmq.EVENT_HANDSHAKE_FAILED_AUTH | zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL):
-            return (
-                "its ZeroMQ handshake failed (with CURVE: the sim refused this client's key or the "
-                "server key is not the sim's; check the keys of the launch-info file)"
-            )
-        if seen & zmq.EVENT_DISCONNECTED:
-            return (
+        """What the monitor saw since the last look: a refused or failed handshake
+        (too many clients? CURVE keys?) or a dropped connection while the sim
+        lives (e.g. its reply was above the frame limit: libzmq closes such a connection)."""
+        if self._watch is None:
+            return None
+        return self._watch.why_failed(
+            disconnected=(
                 "the connection to it was closed during the wait: if the server still runs, most likely "
                 f"because its reply was above the wire's frame limit of {protocol.MAX_MESSAGE_BYTES >> 20} MiB "
                 "(remoteenv.wire.protocol.MAX_MESSAGE_BYTES), which the agent refuses by closing the "
                 "connection (the reply is lost); else the server stopped"
             )
-        return None
+        )
 
     def reconnect(self) -> None:
         """Drop the socket (and anything queued on it) and connect afresh."""
@@ -171,14 +171,9 @@ class ZmqConnection(SimConnection):
             self.socket = None
 
     def _close_socket(self, sock: Any) -> None:
-        monitor = self._monitor
-        if monitor is not None:
-            try:
-                sock.disable_monitor()
-            except zmq.ZMQError:
-                pass
-            monitor.close(linger=0)
-            self._monitor = None
+        if self._watch is not None:
+            self._watch.close()
+            self._watch = None
         sock.close(linger=0)
 
 

@@ -7,8 +7,10 @@ memory a flood can pin grows with the number of peers. The gate is the
 socket's ZAP handler (RFC 27, asked for every new connection's handshake,
 NULL mechanism included once the socket has a ZAP domain): it refuses a
 handshake while ``MAX_PEERS`` admitted connections are open, which makes the
-memory bound total instead of per peer. A refused peer gets no connection
-(a DEALER retries on its own every reconnect interval).
+memory bound total instead of per peer. A refused peer gets no connection:
+libzmq ends it for good (no reconnect) and drops what was queued on it, so a
+client that wants in connects again itself (remoteenv's agent connection
+and the checker's probe do, see ``remoteenv/agent/connection/handshake_watch.py``).
 
 libzmq does not tell the ZAP handler which connection asks, nor when an
 admitted one ends; the socket monitor does, in counts:
