@@ -142,8 +142,7 @@ class Probe:
 
     def send_frame(self, frame: bytes) -> None:
         """Send one raw frame (may be malformed on purpose)."""
-        self.socket.send(frame, copy=True)
-        self.watch.sent(frame)
+        self.watch.send(frame)
 
     def send(self, cmd: str, *, min_seq: int = 0, **args: Any) -> int:
         """Send request ``cmd`` with ``args``; returns its fresh ``seq`` (at least ``min_seq``)."""

@@ -111,6 +111,32 @@ def test_a_refusal_names_the_full_sim_when_no_place_frees(full_server):
     assert full_server.answered == []
 
 
+def test_a_request_sent_after_the_refusal_does_not_block_and_both_are_answered(full_server):
+    # libzmq has no connection to queue a frame on once it ended the refused one:
+    # a plain send would block for good. The second request goes with the next try.
+    conn = ZmqConnection(full_server.endpoint, timeout=10.0)
+    try:
+        first = conn.send("handshake", protocol=protocol.PROTOCOL_VERSION)
+        deadline = time.monotonic() + 10
+        while conn.socket.getsockopt(zmq.EVENTS) & zmq.POLLOUT and time.monotonic() < deadline:
+            time.sleep(0.01)  # until libzmq has ended the refused connection: nothing to queue on
+        assert full_server.gate.refused >= 1 and not conn.socket.getsockopt(zmq.EVENTS) & zmq.POLLOUT
+        sent: list[int] = []
+        sender = threading.Thread(target=lambda: sent.append(conn.send("ping")), daemon=True)
+        sender.start()
+        sender.join(5)
+        assert sent, "a send after the refusal blocked"
+        timer = full_server.free_a_place_later()
+        try:
+            assert conn.receive(first)["ok"] is True
+            assert conn.receive(sent[0])["ok"] is True
+        finally:
+            timer.join()
+    finally:
+        conn.close()
+    assert [r["cmd"] for r in full_server.answered] == ["handshake", "ping"]
+
+
 def test_the_checkers_probe_refused_by_a_full_server_gets_in_when_a_place_frees(full_server):
     timer = full_server.free_a_place_later()
     try:

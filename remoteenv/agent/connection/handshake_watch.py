@@ -9,9 +9,9 @@ whose handshake was refused for good and drops the frames queued on it, so a
 client waiting for a reply would wait out its whole timeout, even if a place
 came free a moment later.
 
-The watch reads the socket's monitor. Until a handshake succeeds it keeps the
-frames sent (none of them reached the sim: the gate refuses before the sim
-reads a frame). After a refusal it connects the same socket again once a pause
+The watch reads the socket's monitor and sends the client's frames
+(:meth:`HandshakeWatch.send`). Until a handshake succeeds it keeps them (none
+of them reached the sim: the gate refuses before the sim reads a frame). After a refusal it connects the same socket again once a pause
 has passed (doubling from :data:`REFUSED_PAUSE_S` up to
 :data:`MAX_REFUSED_PAUSE_S`) and sends them again, in order. The socket stays
 the same object, so pollers holding it keep working. Once a handshake has
@@ -47,8 +47,8 @@ WATCHED = (
 class HandshakeWatch:
     """The monitor of one connecting DEALER ``socket`` to ``endpoint``.
 
-    Create it before the socket connects. Call :meth:`sent` with every frame
-    sent and :meth:`look` while waiting for a reply (it never blocks);
+    Create it before the socket connects. Send every frame through :meth:`send`,
+    call :meth:`look` while waiting for a reply (it never blocks) and
     :meth:`close` before the socket closes.
     """
 
@@ -66,14 +66,31 @@ class HandshakeWatch:
         self._retry_at: float | None = None
         self._seen = 0  # events since why_failed() last looked
 
-    def sent(self, frame: bytes) -> None:
-        """Note ``frame``, just sent: kept for a resend until a handshake succeeds."""
+    def send(self, frame: bytes) -> None:
+        """Send ``frame``, kept for a resend until a handshake succeeds. Blocks as
+        the socket's send does (a full queue), never on a refused connection:
+        libzmq has no connection to queue on then, and the frame goes with
+        the next try."""
+        self.look()
         kept = self._kept
         if kept is not None:
             if len(kept) < MAX_KEPT_FRAMES:
                 kept.append(frame)
             else:
-                self._kept = None
+                self._kept = kept = None
+        try:
+            self.socket.send(frame, zmq.NOBLOCK, copy=True)
+            return
+        except zmq.Again:
+            pass
+        # Nothing to queue on: a refusal the monitor is about to report, or a full queue.
+        deadline = self._clock() + REFUSED_PAUSE_S
+        while kept is not None and self._monitor is not None and self._retry_at is None and self._clock() < deadline:
+            self._monitor.poll(5)
+            self._drain()
+        if kept is not None and self._retry_at is not None:
+            return  # sent with the next try
+        self.socket.send(frame, copy=True)
 
     def look(self) -> None:
         """Read the monitor; after a refused handshake, once the pause has passed,

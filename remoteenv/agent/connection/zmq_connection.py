@@ -115,10 +115,10 @@ class ZmqConnection(SimConnection):
         return self.socket
 
     def _send_frame(self, payload: bytes) -> None:
-        self.socket.send(payload, copy=True)
-        watch = self._watch
-        if watch is not None:
-            watch.sent(payload)
+        if self._watch is not None:
+            self._watch.send(payload)
+        else:
+            self.socket.send(payload, copy=True)
 
     def _check_alive(self, what: str) -> None:
         # Called while a reply is awaited and none came for a while: a refused handshake is tried again.
