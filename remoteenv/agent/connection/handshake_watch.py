@@ -11,9 +11,10 @@ came free a moment later.
 
 The watch reads the socket's monitor and sends the client's frames
 (:meth:`HandshakeWatch.send`). Until a handshake succeeds it keeps them (none
-of them reached the sim: the gate refuses before the sim reads a frame). After a refusal it connects the same socket again once a pause
-has passed (doubling from :data:`REFUSED_PAUSE_S` up to
-:data:`MAX_REFUSED_PAUSE_S`) and sends them again, in order. The socket stays
+of them reached the sim: the gate refuses before the sim reads a frame).
+After a refusal it connects the same socket again once a pause has passed
+(doubling from :data:`REFUSED_PAUSE_S` up to :data:`MAX_REFUSED_PAUSE_S`) and
+sends them again, in order. The socket stays
 the same object, so pollers holding it keep working. Once a handshake has
 succeeded the watch keeps nothing and only records events, for
 :meth:`HandshakeWatch.why_failed`.
@@ -108,9 +109,9 @@ class HandshakeWatch:
         seen, self._seen = self._seen, 0
         if seen & zmq.EVENT_HANDSHAKE_FAILED_AUTH:
             return (
-                f"the sim refused this connection's ZeroMQ handshake ({self.refusals} time(s) so far): it serves a bounded number of connections at once, so other clients may hold "
-                "them all; with CURVE it also refuses a client key it does not list (check the keys of the "
-                "launch-info file)"
+                f"the sim refused this connection's ZeroMQ handshake ({self.refusals} time(s) so far): it "
+                "serves a bounded number of connections at once, so other clients may hold them all; with "
+                "CURVE it also refuses a client key it does not list (check the keys of the launch-info file)"
             )
         if seen & zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL:
             return (
