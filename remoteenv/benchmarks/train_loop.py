@@ -16,7 +16,9 @@ floor under remoteenv's lock-step lane, its layout and scene stepping with a
 bare hand-off (:mod:`remoteenv.benchmarks.harness.process_floor`), and, when asked for,
 ``agent-floor``: remoteenv's sims under a bare agent end
 (:mod:`remoteenv.benchmarks.harness.agent_floor`), which splits the lane's cost
-between its two ends. All are built first (one at a time),
+between its two ends, and ``waits-floor``: bare ends that wait as remoteenv's
+lane does (:mod:`remoteenv.benchmarks.harness.waits_floor`), the floor under
+the lane's own work. All are built first (one at a time),
 then timed in alternating rounds of whole rollout-and-update iterations, so
 load that comes and goes hits them alike. Each row gives steps per wall
 second (env steps, learning included), CPU microseconds per step of the
@@ -59,6 +61,13 @@ TARGETS = [
     ("remoteenv", "agent-floor", 64, None),
     ("agent-floor", "process-floor", 16, None),
     ("agent-floor", "process-floor", 64, None),
+    ("remoteenv", "waits-floor", 16, None),
+    ("remoteenv", "waits-floor", 64, None),
+    ("waits-floor", "process-floor", 16, None),
+    ("waits-floor", "process-floor", 64, None),
+    ("waits-floor", "EnvPool", 16, None),
+    ("waits-floor", "EnvPool", 64, None),
+    ("waits-floor", "SyncVectorEnv", 16, None),
 ]
 #: Longest a contender may take to build and warm up, or to answer a round beyond its length (seconds).
 _PATIENCE_S = 300.0
@@ -80,7 +89,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"comma-separated contenders, of {', '.join(CONTENDERS)} (default {','.join(DEFAULT_CONTENDERS)}); "
         "remoteenv-torch-kept is remoteenv with torch_threads=None, remoteenv-os-placed with place_sims=None, remoteenv-neither with both; process-floor is remoteenv's layout "
         "and scene stepping with a bare hand-off (the floor under its lane), agent-floor remoteenv's sims under a bare "
-        "agent end; NAME:KEY=VALUE runs one with "
+        "agent end, waits-floor bare ends that wait as remoteenv's lane does (layout, hot waits, heads-up); NAME:KEY=VALUE runs one with "
         "environment variables of its own (e.g. EnvPool:OMP_NUM_THREADS=1 beside EnvPool)",
     )
     g.add_argument(

@@ -33,7 +33,8 @@ GYM_ID = "Reacher-v5"
 #: ``process-floor``: the same layout and scene stepping with a bare hand-off
 #: (:mod:`remoteenv.benchmarks.harness.process_floor`); ``agent-floor``:
 #: remoteenv's vector env and sims under a bare agent end
-#: (:mod:`remoteenv.benchmarks.harness.agent_floor`).
+#: (:mod:`remoteenv.benchmarks.harness.agent_floor`); ``waits-floor``: bare
+#: ends that wait as remoteenv's lane does (:mod:`remoteenv.benchmarks.harness.waits_floor`).
 CONTENDERS = (
     "remoteenv",
     "EnvPool",
@@ -44,6 +45,7 @@ CONTENDERS = (
     "remoteenv-neither",
     "process-floor",
     "agent-floor",
+    "waits-floor",
 )
 #: Contenders a run has unless asked for others: the anchors and the floor under remoteenv's lane.
 DEFAULT_CONTENDERS = (*CONTENDERS[:4], "process-floor")
@@ -73,6 +75,10 @@ def make_env(contender: str, num_envs: int) -> Any:
         from remoteenv.benchmarks.harness.agent_floor import AgentFloorVectorEnv
 
         return AgentFloorVectorEnv(num_envs)
+    if contender == "waits-floor":
+        from remoteenv.benchmarks.harness.waits_floor import WaitsFloorVectorEnv
+
+        return WaitsFloorVectorEnv(num_envs)
     mode = {"SyncVectorEnv": "sync", "AsyncVectorEnv": "async"}[contender]
     return gym.make_vec(GYM_ID, num_envs, vectorization_mode=mode)
 
