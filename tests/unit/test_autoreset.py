@@ -51,6 +51,24 @@ def test_after_step_counts_steps_and_applies_the_time_limit():
     assert elapsed.tolist() == [1, 7, 0, 2] and not truncated.any()  # inputs untouched
 
 
+def test_the_plan_where_every_world_steps_is_shared_read_only_and_booked_alike():
+    plan = plan_ops(NEXT, flags(False, False, False), counts(3, 5, 0), max_episode_steps=6)
+    assert plan.tolist() == [OP_STEP] * 3 and plan.dtype == np.int64
+    assert plan_ops(NEXT, flags(False, False, False), counts(0, 0, 0), 6) is plan  # made once per size
+    with pytest.raises(ValueError, match="read-only"):
+        plan[0] = OP_RESET
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        terminated, truncated = rng.random(3) < 0.2, rng.random(3) < 0.2
+        elapsed = rng.integers(0, 8, 3)
+        for limit in (6, None):
+            shared = after_step(NEXT, plan, terminated, truncated, elapsed, limit)
+            fresh = after_step(NEXT, plan.copy(), terminated, truncated, elapsed, limit)
+            for a, b in zip(shared, fresh):
+                np.testing.assert_array_equal(a, b)
+                assert a.dtype == b.dtype
+
+
 def test_after_step_in_same_step_mode_restarts_the_count_of_ended_worlds():
     ops = np.array([OP_STEP_AUTORESET, OP_STEP_RESET, OP_STEP_AUTORESET])
     trunc, elapsed, needs_reset = after_step(

@@ -48,6 +48,8 @@ def plan_ops(
     """
     n = len(needs_reset)
     if mode == AutoresetMode.NEXT_STEP:
+        if not needs_reset.any():
+            return _every_world_steps(n)
         return np.where(needs_reset, OP_RESET, OP_STEP)
     if mode == AutoresetMode.SAME_STEP:
         ops = np.full(n, OP_STEP_AUTORESET)
@@ -63,6 +65,19 @@ def plan_ops(
     return np.full(n, OP_STEP)
 
 
+#: Read-only ops of ``n`` worlds that all step, by ``n`` (the common plan, made once).
+_EVERY_WORLD_STEPS: dict[int, np.ndarray] = {}
+
+
+def _every_world_steps(n: int) -> np.ndarray:
+    ops = _EVERY_WORLD_STEPS.get(n)
+    if ops is None:
+        ops = np.full(n, OP_STEP, dtype=np.int64)
+        ops.setflags(write=False)
+        _EVERY_WORLD_STEPS[n] = ops
+    return ops
+
+
 def after_step(
     mode: AutoresetMode,
     ops: np.ndarray,
@@ -75,10 +90,15 @@ def after_step(
     and ``truncated``. Returns ``(truncated, elapsed, needs_reset)``: the flags
     with the time limit applied, the new step counts, and which worlds the
     next step must reset. The inputs are not modified."""
-    stepped = ops != OP_RESET
-    elapsed = np.where(stepped, elapsed + 1, 0)
-    if max_episode_steps is not None:
-        truncated = truncated | (stepped & (elapsed >= max_episode_steps))
+    if ops is _EVERY_WORLD_STEPS.get(len(ops)):  # plan_ops's plan where every world steps
+        elapsed = elapsed + 1
+        if max_episode_steps is not None:
+            truncated = truncated | (elapsed >= max_episode_steps)
+    else:
+        stepped = ops != OP_RESET
+        elapsed = np.where(stepped, elapsed + 1, 0)
+        if max_episode_steps is not None:
+            truncated = truncated | (stepped & (elapsed >= max_episode_steps))
     ended = terminated | truncated
     if mode == AutoresetMode.SAME_STEP:
         elapsed[ended] = 0

@@ -195,6 +195,8 @@ def _from_regions(
     :func:`~remoteenv.wire.messages.batch_encoding.merge_infos` merges columns every world has."""
     n = obs_batch.num_envs
     space = obs_batch.space
+    if len(slices) == 1:
+        return _from_one_region(results[0], n, space.dtype)
     obs = np.empty((n, *space.shape), dtype=space.dtype)  # type: ignore[misc]
     rewards = np.empty(n, dtype=np.float64)
     terminated = np.empty(n, dtype=np.bool_)
@@ -214,6 +216,39 @@ def _from_regions(
             column[lo:hi] = values
             infos[mask_key][lo:hi] = True
     return obs, rewards, terminated, truncated, infos
+
+
+def _from_one_region(
+    r: RegionReply, n: int, obs_dtype: Any
+) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+    """:func:`_from_regions` for one process's region, which holds every world:
+    the same arrays, each made in one call."""
+    infos: dict[str, Any] = {}
+    if r.columns:
+        every = _every_world(n)
+        for key, mask_key, dtype, values in r.columns:
+            infos[key] = np.array(values, dtype=dtype)
+            infos[mask_key] = every.copy()
+    return (
+        np.array(r.obs, dtype=obs_dtype),
+        np.array(r.reward, dtype=np.float64),
+        r.terminated != 0,  # any nonzero byte is true
+        r.truncated != 0,
+        infos,
+    )
+
+
+#: A read-only mask of ``n`` worlds, all present, by ``n`` (copied for each reply, never handed out).
+_EVERY_WORLD: dict[int, np.ndarray] = {}
+
+
+def _every_world(n: int) -> np.ndarray:
+    mask = _EVERY_WORLD.get(n)
+    if mask is None:
+        mask = np.ones(n, dtype=np.bool_)
+        mask.setflags(write=False)
+        _EVERY_WORLD[n] = mask
+    return mask
 
 
 __all__ = ["ObsBatch", "assemble", "reset_reply_as_batch", "step_reply_as_batch"]

@@ -285,7 +285,8 @@ class SharedLane:
         obs_rows, reward, terminated, truncated = rows
         if obs.dtype != obs_rows.dtype or obs.shape != obs_rows.shape:
             return False
-        if obs is not obs_rows and obs.ctypes.data != obs_rows.ctypes.data:  # not written in place (see obs_rows)
+        # Not written in place (see obs_rows); an array that owns its memory never was.
+        if obs is not obs_rows and (obs.base is None or obs.ctypes.data != obs_rows.ctypes.data):
             obs_rows[...] = obs
         reward[...] = batch.reward
         terminated[...] = batch.terminated
