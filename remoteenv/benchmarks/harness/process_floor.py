@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import mmap
 import os
-import subprocess
 import sys
 from typing import Any
 
@@ -38,11 +37,10 @@ import numpy as np
 from remoteenv.agent.vector.sim_placement import AUTO, SimPlacement
 from remoteenv.agent.vector.torch_threads import TorchThreads
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, world_slices
+from remoteenv.benchmarks.harness.floor_children import FloorChildren, close_worlds, start_worlds, tick
 
 OBS_DIM, ACT_DIM = 10, 2
-#: Reacher's time limit (``remoteenv/Reacher-v0`` and Gymnasium's ``Reacher-v5``), in steps.
-MAX_EPISODE_STEPS = 50
-_STEP, _QUIT, _DONE = b"s", b"q", b"r"
+_STEP, _DONE = b"s", b"r"
 
 
 def _blocks(k: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
@@ -76,44 +74,21 @@ def region_views(buf: Any, k: int) -> dict[str, np.ndarray]:
 
 def serve(k: int, seed: int, request_fd: int, reply_fd: int, region_fd: int) -> None:
     """The child: K Reacher worlds reset with seeds ``seed..seed+K-1``, their
-    first observations in the region, then one tick per request byte (a
-    reset of every world on the tick after their time limit: Reacher never
-    terminates, so the worlds of a child end their episodes together)."""
-    from remoteenv.benchmarks.harness.step_profile import reacher_class
-    from remoteenv.sim.stepping.batch_commands import BatchCommands
-    from remoteenv.sim.stepping.lock_step import LockStepping
-
-    reacher = reacher_class()
-    envs = [reacher() for _ in range(k)]
-    commands = BatchCommands(LockStepping(envs).worlds, envs[0].action_space, 0)
-    first = commands.reset_batch({"worlds": list(range(k)), "seeds": list(range(seed, seed + k))}, None, None)
-    stepper = commands.stepper
-    assert stepper is not None
+    first observations in the region, then one tick per request byte
+    (:func:`~remoteenv.benchmarks.harness.floor_children.tick`)."""
+    envs, commands, first = start_worlds(k, seed)
     region = mmap.mmap(region_fd, region_size(k))
     views = region_views(region, k)
-    views["obs"][:] = np.asarray(first["obs"])
+    views["obs"][:] = first
     worlds = list(range(k))
     elapsed = 0
     try:
         os.write(reply_fd, _DONE)
         while os.read(request_fd, 1) == _STEP:
-            if elapsed == MAX_EPISODE_STEPS:
-                views["obs"][:] = np.asarray(commands.reset_batch({"worlds": worlds}, None, None)["obs"])
-                views["reward"][:] = 0.0
-                views["terminated"][:] = False
-                elapsed = 0
-            else:
-                result = stepper.step(worlds, views["actions"].copy())
-                views["obs"][:] = result.obs
-                views["reward"][:] = result.reward
-                views["terminated"][:] = result.terminated
-                elapsed += 1
-            views["truncated"][:] = elapsed == MAX_EPISODE_STEPS
+            elapsed = tick(commands, views, worlds, elapsed)
             os.write(reply_fd, _DONE)
     finally:
-        commands.close()
-        for env in envs:
-            env.close()
+        close_worlds(envs, commands)
         del views
         region.close()
 
@@ -130,43 +105,23 @@ class ProcessFloorVectorEnv:
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (OBS_DIM,), np.float64)
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (ACT_DIM,), np.float32)
         self._slices = world_slices(num_envs, default_envs_per_process(num_envs, stacked_hooks=False))
-        self._procs: list[subprocess.Popen[bytes]] = []
-        self._requests: list[int] = []
-        self._replies: list[int] = []
-        self._regions: list[mmap.mmap] = []
+        self._children = FloorChildren("process-floor")
         self._views: list[dict[str, np.ndarray]] = []
         try:
             for lo, hi in self._slices:
-                self._start(hi - lo, seed + lo)
-            for fd in self._replies:
-                self._read_done(fd)
+                region = self._children.spawn(__name__, (hi - lo, seed + lo), region_size(hi - lo))
+                self._views.append(region_views(region, hi - lo))
+            self._children.read_ready(_DONE)
         except BaseException:
             self.close()
             raise
         SimPlacement(AUTO, own_sims=True, real_time=False).apply([p.pid for p in self._procs])
         TorchThreads(AUTO, len(self._procs)).apply()
 
-    def _start(self, k: int, seed: int) -> None:
-        region_fd = os.memfd_create("remoteenv-floor")
-        os.ftruncate(region_fd, region_size(k))
-        request_r, request_w = os.pipe()
-        reply_r, reply_w = os.pipe()
-        self._requests.append(request_w)  # ours: closed by close(), even if the child never starts
-        self._replies.append(reply_r)
-        theirs = (request_r, reply_w, region_fd)
-        try:
-            self._procs.append(
-                subprocess.Popen(
-                    [sys.executable, "-m", __name__, str(k), str(seed), *map(str, theirs)],
-                    pass_fds=theirs,
-                )
-            )
-            region = mmap.mmap(region_fd, region_size(k))
-        finally:
-            for fd in theirs:
-                os.close(fd)
-        self._regions.append(region)
-        self._views.append(region_views(region, k))
+    @property
+    def _procs(self) -> list[Any]:
+        """The children's processes."""
+        return self._children.procs
 
     @staticmethod
     def _read_done(fd: int) -> None:
@@ -178,7 +133,7 @@ class ProcessFloorVectorEnv:
         reward = np.empty(self.num_envs)
         terminated = np.empty(self.num_envs, dtype=np.bool_)
         truncated = np.empty(self.num_envs, dtype=np.bool_)
-        for (lo, hi), fd, views in zip(self._slices, self._replies, self._views):
+        for (lo, hi), fd, views in zip(self._slices, self._children.replies, self._views):
             self._read_done(fd)
             obs[lo:hi] = views["obs"]
             reward[lo:hi] = views["reward"]
@@ -195,7 +150,7 @@ class ProcessFloorVectorEnv:
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """One tick of every world."""
-        for (lo, hi), fd, views in zip(self._slices, self._requests, self._views):
+        for (lo, hi), fd, views in zip(self._slices, self._children.requests, self._views):
             views["actions"][:] = actions[lo:hi]
             os.write(fd, _STEP)
         obs, reward, terminated, truncated = self._gather()
@@ -203,26 +158,8 @@ class ProcessFloorVectorEnv:
 
     def close(self) -> None:
         """Stop the children and wait for them."""
-        for fd in self._requests:
-            try:
-                os.write(fd, _QUIT)
-            except OSError:
-                pass
-            os.close(fd)
-        for fd in self._replies:
-            os.close(fd)
-        self._requests, self._replies = [], []
-        for proc in self._procs:
-            try:
-                proc.wait(30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        self._procs = []
         self._views = []
-        for region in self._regions:
-            region.close()
-        self._regions = []
+        self._children.stop()
 
 
 __all__ = ["ProcessFloorVectorEnv", "region_size", "region_views", "serve"]

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import mmap
 import os
-import subprocess
 import sys
 import time
 from typing import Any
@@ -47,25 +46,24 @@ from remoteenv.agent.connection.pipe_connection import HEADS_UP_WAIT_S
 from remoteenv.agent.vector.sim_placement import AUTO, SimPlacement
 from remoteenv.agent.vector.torch_threads import TorchThreads
 from remoteenv.agent.vector.vector_layout import default_envs_per_process, layout_threads, world_slices
-from remoteenv.benchmarks.harness.process_floor import (
-    ACT_DIM,
-    MAX_EPISODE_STEPS,
-    OBS_DIM,
-    region_size,
-    region_views,
-)
+from remoteenv.benchmarks.harness.floor_children import QUIT, FloorChildren, close_worlds, start_worlds, tick
+from remoteenv.benchmarks.harness.process_floor import ACT_DIM, OBS_DIM, region_size, region_views
 from remoteenv.wire.shared_memory.doorbell import SILENT, Doorbell
 
 #: Bytes before the blocks of a child's region: the doorbell's 16 ``<i8`` words.
 HEADER_BYTES = 128
-_DONE, _QUIT, _SOON, _STEP = b"r", b"q", b"h", b"s"
+_DONE, _SOON, _STEP = b"r", b"h", b"s"
 
 
-def _mapping(fd: int, k: int) -> tuple[mmap.mmap, np.ndarray, dict[str, np.ndarray]]:
-    """A child's region over ``fd``: the mapping, its header words and its blocks."""
-    region = mmap.mmap(fd, HEADER_BYTES + region_size(k))
+def _region_bytes(k: int) -> int:
+    """Bytes of a child's region: the header, then the blocks of ``process-floor``'s layout."""
+    return HEADER_BYTES + region_size(k)
+
+
+def _parts(region: mmap.mmap, k: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """A child's region: its header words and its blocks."""
     header = np.ndarray((16,), "<i8", buffer=region, offset=0)
-    return region, header, region_views(memoryview(region)[HEADER_BYTES:], k)
+    return header, region_views(memoryview(region)[HEADER_BYTES:], k)
 
 
 def serve(k: int, seed: int, threads: int, request_fd: int, reply_fd: int, region_fd: int) -> None:
@@ -73,26 +71,18 @@ def serve(k: int, seed: int, threads: int, request_fd: int, reply_fd: int, regio
     ``threads`` physics threads, their first observations in the region, then
     one tick per request posted on the doorbell (a reset of every world on
     the tick after their time limit, as ``process-floor``'s children do)."""
-    from remoteenv.benchmarks.harness.step_profile import reacher_class
     from remoteenv.sim.serving.sim_server import SIM_SPIN_S
-    from remoteenv.sim.stepping.batch_commands import BatchCommands
-    from remoteenv.sim.stepping.lock_step import LockStepping
 
-    reacher = reacher_class()
-    envs = [reacher() for _ in range(k)]
-    commands = BatchCommands(LockStepping(envs).worlds, envs[0].action_space, 0, threads=threads)
-    first = commands.reset_batch({"worlds": list(range(k)), "seeds": list(range(seed, seed + k))}, None, None)
-    assert commands.stepper is not None
-    region, header, views = _mapping(region_fd, k)
+    envs, commands, first = start_worlds(k, seed, threads)
+    region = mmap.mmap(region_fd, _region_bytes(k))
+    header, views = _parts(region, k)
     bell = Doorbell(header)
-    views["obs"][:] = np.asarray(first["obs"])
+    views["obs"][:] = first
     try:
         os.write(reply_fd, _DONE)
         _answer_requests(bell, views, commands, request_fd, reply_fd, SIM_SPIN_S)
     finally:
-        commands.close()
-        for env in envs:
-            env.close()
+        close_worlds(envs, commands)
         del views, header, bell  # the region's views, before it is unmapped
         region.close()
 
@@ -102,9 +92,7 @@ def _answer_requests(
 ) -> None:
     """The child's loop: wait for each request (hot for up to ``spin_s``,
     then blocking), tick every world, answer; until the agent quits."""
-    stepper = commands.stepper
-    k = len(views["reward"])
-    worlds = list(range(k))
+    worlds = list(range(len(views["reward"])))
     perf, yield_cpu = time.perf_counter, os.sched_yield
 
     def heads_up() -> None:
@@ -124,23 +112,12 @@ def _answer_requests(
             if seq:
                 break
             got = os.read(request_fd, 64)  # a ring, or one left from a request found awake
-            if not got or _QUIT in got:
+            if not got or QUIT in got:
                 return
             bell.sim_watches()
             seq = bell.posted(served)
         served = seq
-        if elapsed == MAX_EPISODE_STEPS:
-            views["obs"][:] = np.asarray(commands.reset_batch({"worlds": worlds}, None, None)["obs"])
-            views["reward"][:] = 0.0
-            views["terminated"][:] = False
-            elapsed = 0
-        else:
-            result = stepper.step(worlds, views["actions"].copy(), None, heads_up)
-            views["obs"][:] = result.obs
-            views["reward"][:] = result.reward
-            views["terminated"][:] = result.terminated
-            elapsed += 1
-        views["truncated"][:] = elapsed == MAX_EPISODE_STEPS
+        elapsed = tick(commands, views, worlds, elapsed, heads_up)
         if bell.reply(seq, 0):
             os.write(reply_fd, _DONE)
 
@@ -161,18 +138,17 @@ class WaitsFloorVectorEnv:
         k = default_envs_per_process(num_envs)
         self._slices = world_slices(num_envs, k)
         self.threads = layout_threads(num_envs, k) or 1
-        self._procs: list[subprocess.Popen[bytes]] = []
-        self._requests: list[int] = []
-        self._replies: list[int] = []
-        self._regions: list[mmap.mmap] = []
+        self._children = FloorChildren("waits-floor")
         self._lanes: list[tuple[int, int, int, int, Doorbell, dict[str, np.ndarray]]] = []
         self._seq = 0
         try:
             for lo, hi in self._slices:
-                self._start(lo, hi, seed + lo)
-            for fd in self._replies:
-                if os.read(fd, 1) != _DONE:
-                    raise RuntimeError("a waits-floor child ended; its error is above")
+                region = self._children.spawn(__name__, (hi - lo, seed + lo, self.threads), _region_bytes(hi - lo))
+                header, views = _parts(region, hi - lo)
+                p = len(self._lanes)
+                ends = self._children.requests[p], self._children.replies[p]
+                self._lanes.append((lo, hi, *ends, Doorbell(header), views))
+            self._children.read_ready(_DONE)
         except BaseException:
             self.close()
             raise
@@ -180,28 +156,10 @@ class WaitsFloorVectorEnv:
         self._torch = TorchThreads(AUTO, len(self._procs) * self.threads, away=self._away)
         self._torch.apply()
 
-    def _start(self, lo: int, hi: int, seed: int) -> None:
-        k = hi - lo
-        region_fd = os.memfd_create("remoteenv-waits-floor")
-        os.ftruncate(region_fd, HEADER_BYTES + region_size(k))
-        request_r, request_w = os.pipe()
-        reply_r, reply_w = os.pipe()
-        self._requests.append(request_w)  # ours: closed by close(), even if the child never starts
-        self._replies.append(reply_r)
-        theirs = (request_r, reply_w, region_fd)
-        try:
-            self._procs.append(
-                subprocess.Popen(
-                    [sys.executable, "-m", __name__, str(k), str(seed), str(self.threads), *map(str, theirs)],
-                    pass_fds=theirs,
-                )
-            )
-            region, header, views = _mapping(region_fd, k)
-        finally:
-            for fd in theirs:
-                os.close(fd)
-        self._regions.append(region)
-        self._lanes.append((lo, hi, request_w, reply_r, Doorbell(header), views))
+    @property
+    def _procs(self) -> list[Any]:
+        """The children's processes."""
+        return self._children.procs
 
     def _away(self) -> None:
         """The caller's update begins (torch's update threads say so): the children stop waiting hot."""
@@ -253,26 +211,8 @@ class WaitsFloorVectorEnv:
         torch_threads = getattr(self, "_torch", None)
         if torch_threads is not None:
             torch_threads.interrupted()
-        for fd in self._requests:
-            try:
-                os.write(fd, _QUIT)
-            except OSError:
-                pass
-            os.close(fd)
-        for fd in self._replies:
-            os.close(fd)
-        self._requests, self._replies = [], []
-        for proc in self._procs:
-            try:
-                proc.wait(30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        self._procs = []
         self._lanes = []
-        for region in self._regions:
-            region.close()
-        self._regions = []
+        self._children.stop()
 
 
 __all__ = ["WaitsFloorVectorEnv", "serve"]
