@@ -36,10 +36,7 @@ class FullServer:
         self.ctx = zmq.Context()
         self.sock, self.gate = open_router(self.ctx, f"ipc://{tmp_path}/gate.sock")
         self.endpoint = self.sock.getsockopt(zmq.LAST_ENDPOINT).decode()
-        # The fillers live in the process's shared context, as the agent's connections do;
-        # it is never terminated (a context of its own, terminated after refused handshakes,
-        # hung once in CI: see tests/unit/test_sim_budgets.py).
-        self.client_ctx = zmq.Context.instance()
+        self.client_ctx = zmq.Context()
         self.fillers = []
         for i in range(MAX_PEERS):
             filler = self.client_ctx.socket(zmq.DEALER)
@@ -73,6 +70,7 @@ class FullServer:
         self._thread.join(5)
         for filler in self.fillers:
             filler.close(linger=0)
+        self.client_ctx.term()
         self.gate.stop()
         self.sock.close(linger=0)
         self.ctx.term()

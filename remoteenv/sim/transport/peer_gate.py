@@ -142,15 +142,21 @@ class PeerGate:
         return gone
 
     def stop(self) -> None:
-        """End the thread and the monitor (call before the socket closes)."""
-        if self._thread.is_alive():
-            self._stopper.send(b"")
-            self._thread.join()
-        self._stopper.close(linger=0)
+        """End the monitor, then the thread (call before the socket closes).
+
+        The monitor goes first, while the thread still reads its events:
+        libzmq hands each event to the monitor with a send that waits for a
+        reader, under a lock that ``disable_monitor`` takes too, so a peer
+        that came or went after the thread had stopped reading left
+        ``disable_monitor`` waiting for good (seen once in CI, 2026-11-29)."""
         try:
             self._sock.disable_monitor()
         except zmq.ZMQError:
             pass
+        if self._thread.is_alive():
+            self._stopper.send(b"")
+            self._thread.join()
+        self._stopper.close(linger=0)
 
     # ------------------------------------------------------------ the thread
 
