@@ -20,6 +20,8 @@ clears the worlds a reset started afresh. The semantics are Gymnasium's
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
@@ -65,16 +67,11 @@ def plan_ops(
     return np.full(n, OP_STEP)
 
 
-#: Read-only ops of ``n`` worlds that all step, by ``n`` (the common plan, made once).
-_EVERY_WORLD_STEPS: dict[int, np.ndarray] = {}
-
-
+@functools.lru_cache(maxsize=64)
 def _every_world_steps(n: int) -> np.ndarray:
-    ops = _EVERY_WORLD_STEPS.get(n)
-    if ops is None:
-        ops = np.full(n, OP_STEP, dtype=np.int64)
-        ops.setflags(write=False)
-        _EVERY_WORLD_STEPS[n] = ops
+    """Read-only ops of ``n`` worlds that all step: the common plan, made once per ``n``."""
+    ops = np.full(n, OP_STEP, dtype=np.int64)
+    ops.setflags(write=False)
     return ops
 
 
@@ -90,7 +87,7 @@ def after_step(
     and ``truncated``. Returns ``(truncated, elapsed, needs_reset)``: the flags
     with the time limit applied, the new step counts, and which worlds the
     next step must reset. The inputs are not modified."""
-    if ops is _EVERY_WORLD_STEPS.get(len(ops)):  # plan_ops's plan where every world steps
+    if ops is _every_world_steps(len(ops)):  # plan_ops's plan where every world steps
         elapsed = elapsed + 1
         if max_episode_steps is not None:
             truncated = truncated | (elapsed >= max_episode_steps)

@@ -12,6 +12,7 @@ that form with :func:`step_reply_as_batch` and :func:`reset_reply_as_batch`.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -238,16 +239,11 @@ def _from_one_region(
     )
 
 
-#: A read-only mask of ``n`` worlds, all present, by ``n`` (copied for each reply, never handed out).
-_EVERY_WORLD: dict[int, np.ndarray] = {}
-
-
+@functools.lru_cache(maxsize=64)
 def _every_world(n: int) -> np.ndarray:
-    mask = _EVERY_WORLD.get(n)
-    if mask is None:
-        mask = np.ones(n, dtype=np.bool_)
-        mask.setflags(write=False)
-        _EVERY_WORLD[n] = mask
+    """A read-only mask of ``n`` worlds, all present, made once per ``n`` (copied for each reply, never handed out)."""
+    mask = np.ones(n, dtype=np.bool_)
+    mask.setflags(write=False)
     return mask
 
 

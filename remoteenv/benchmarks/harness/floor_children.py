@@ -60,8 +60,12 @@ class FloorChildren:
     def read_ready(self, done: bytes) -> None:
         """Wait for each child's first ``done`` byte (its worlds built and reset)."""
         for fd in self.replies:
-            if os.read(fd, 1) != done:
-                raise RuntimeError(f"a {self.name} child ended; its error is above")
+            self.read_done(fd, done)
+
+    def read_done(self, fd: int, done: bytes) -> None:
+        """Read one ``done`` byte from a child's reply pipe ``fd``; anything else (its end of file) is an error."""
+        if os.read(fd, 1) != done:
+            raise RuntimeError(f"a {self.name} child ended; its error is above")
 
     def stop(self) -> None:
         """Ask every child to exit, wait for it (killed after 30 s), close our

@@ -123,18 +123,13 @@ class ProcessFloorVectorEnv:
         """The children's processes."""
         return self._children.procs
 
-    @staticmethod
-    def _read_done(fd: int) -> None:
-        if os.read(fd, 1) != _DONE:
-            raise RuntimeError("a process-floor child ended; its error is above")
-
     def _gather(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         obs = np.empty((self.num_envs, OBS_DIM))
         reward = np.empty(self.num_envs)
         terminated = np.empty(self.num_envs, dtype=np.bool_)
         truncated = np.empty(self.num_envs, dtype=np.bool_)
         for (lo, hi), fd, views in zip(self._slices, self._children.replies, self._views):
-            self._read_done(fd)
+            self._children.read_done(fd, _DONE)
             obs[lo:hi] = views["obs"]
             reward[lo:hi] = views["reward"]
             terminated[lo:hi] = views["terminated"]
