@@ -17,6 +17,7 @@ Run by the launcher as ``python reacher_scene.py --address ... --seed ...``.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Sequence
@@ -135,13 +136,18 @@ class ReacherEnv(BaseEnv):
         state = stacked(envs)
         qpos, qvel, xpos = state.get("qpos"), state.get("qvel"), state.get("xpos")
         vec = xpos[:, tip] - xpos[:, target]
-        n = len(reachers)
-        dist_w = np.fromiter((env.reward_dist_weight for env in reachers), np.float64, n)
-        ctrl_w = np.fromiter((env.reward_control_weight for env in reachers), np.float32, n)
+        dist_w, ctrl_w = _weights(
+            tuple(env.reward_dist_weight for env in reachers), tuple(env.reward_control_weight for env in reachers)
+        )
         # The same operations as post_step, so the numbers (and types) match
-        # exactly: a stacked matmul is the dot product np.linalg.norm takes.
-        reward_dist = -np.sqrt(np.matmul(vec[:, None, :], vec[:, :, None])[:, 0, 0]) * dist_w
-        reward_ctrl = -np.square(actions, dtype=np.float32).sum(axis=1) * ctrl_w
+        # exactly: a stacked matmul is the dot product np.linalg.norm takes;
+        # a weight of 1 everywhere is left out (multiplying by 1 changes no bit).
+        reward_dist = -np.sqrt(np.matmul(vec[:, None, :], vec[:, :, None])[:, 0, 0])
+        reward_ctrl = -np.square(actions, dtype=np.float32).sum(axis=1)
+        if dist_w is not None:
+            reward_dist *= dist_w
+        if ctrl_w is not None:
+            reward_ctrl *= ctrl_w
         return BatchResult(
             _stacked_obs(qpos, qvel, vec),
             reward_dist + reward_ctrl,
@@ -164,13 +170,22 @@ class ReacherEnv(BaseEnv):
 
 def _stacked_obs(qpos: np.ndarray, qvel: np.ndarray, tip_minus_target: np.ndarray) -> np.ndarray:
     """The observations ``(n, 10)`` of worlds with stacked state, as :meth:`ReacherEnv._obs` per world."""
-    obs = np.empty((len(qpos), 10))
-    obs[:, 0:2] = np.cos(qpos[:, :2])
-    obs[:, 2:4] = np.sin(qpos[:, :2])
-    obs[:, 4:6] = qpos[:, 2:]
-    obs[:, 6:8] = qvel[:, :2]
-    obs[:, 8:10] = tip_minus_target[:, :2]
-    return obs
+    angles = qpos[:, :2]
+    return np.concatenate(
+        (np.cos(angles), np.sin(angles), qpos[:, 2:], qvel[:, :2], tip_minus_target[:, :2]), axis=1, dtype=np.float64
+    )
+
+
+@functools.lru_cache(maxsize=16)
+def _weights(dist: tuple[float, ...], control: tuple[float, ...]) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The worlds' reward weights as arrays (float64 and float32, as post_step
+    multiplies them), each None where every world's weight is 1."""
+    dist_w = None if all(w == 1.0 for w in dist) else np.array(dist, dtype=np.float64)
+    control_w = None if all(w == 1.0 for w in control) else np.array(control, dtype=np.float32)
+    for weights in (dist_w, control_w):
+        if weights is not None:
+            weights.setflags(write=False)
+    return dist_w, control_w
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -59,7 +59,7 @@ def _candidates(space, n, rng):
 
 
 @pytest.mark.parametrize("space", SPACES, ids=str)
-@pytest.mark.parametrize("n", [1, 3, 8, SMALL_BOX_ELEMENTS // 2 + 1])
+@pytest.mark.parametrize("n", [1, 3, 8, SMALL_BOX_ELEMENTS // 2 + 1, 4 * SMALL_BOX_ELEMENTS])
 def test_batch_check_decides_as_check_actions(space, n):
     rng = np.random.default_rng(n)
     check = BatchCheck(space)

@@ -4,6 +4,8 @@ autoresets included, for every shipped scene that implements the hooks."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from fakes import scene_class
@@ -22,8 +24,14 @@ def _scene_class(name: str, cls: str) -> type[BaseEnv]:
 
 Reacher = _scene_class("reacher", "ReacherEnv")
 CartPole = _scene_class("cartpole", "CartPoleEnv")
+_made = itertools.count()
 SCENES = {
     "reacher": (lambda: Reacher(), {}),
+    # Weights that differ between worlds (1 among them), the same for world w of both paths (K % 3 == 0).
+    "reacher-weighted": (
+        lambda: Reacher(reward_dist_weight=(1.0, 0.5, 2.0)[next(_made) % 3], reward_control_weight=0.25),
+        {},
+    ),
     "cartpole": (lambda: CartPole(), {}),
     "cartpole-continuous": (lambda: CartPole(continuous=True), {}),
 }
@@ -134,18 +142,23 @@ def test_worlds_with_delays_step_one_by_one(delays) -> None:
             env.close()
 
 
-def test_batched_observations_are_checked_against_the_space() -> None:
+@pytest.mark.parametrize(
+    "wrong",
+    [lambda obs: obs.astype(np.float32), lambda obs: obs[:, :9], lambda obs: obs.reshape(2, 2, 5)],
+    ids=["dtype", "row-length", "row-shape"],
+)
+def test_batched_observations_are_checked_against_the_space(wrong) -> None:
     """The batched path checks what post_steps returns, as finish_tick does per world."""
     from remoteenv.sim.scene.obs_check import ObservationError
 
-    class WrongDtype(Reacher):  # type: ignore[misc,valid-type]
+    class WrongObs(Reacher):  # type: ignore[misc,valid-type]
         @classmethod
         def post_steps(cls, envs, actions):
             result = super().post_steps(envs, actions)
-            result.obs = result.obs.astype(np.float32)
+            result.obs = wrong(result.obs)
             return result
 
-    envs = [WrongDtype() for _ in range(2)]
+    envs = [WrongObs() for _ in range(2)]
     commands = BatchCommands(LockStepping(envs).worlds, envs[0].action_space, 0)
     try:
         commands.reset_batch({"worlds": [0, 1]}, None, None)

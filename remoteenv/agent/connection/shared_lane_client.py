@@ -132,6 +132,9 @@ class SharedLanes:
         self._infos: dict[int, tuple[int, list[tuple[str, np.dtype, bool]]]] = {}
         #: Per process, the views of its last region reply (reused while ``n`` and the layout stay).
         self._views: dict[int, RegionReply] = {}
+        #: Per process, the views of its last request's blocks (actions, ops, worlds of ``n`` rows) and
+        #: the read-only ops array last written there (not written again: only the agent writes that block).
+        self._blocks: dict[int, _RequestBlocks] = {}
         #: Per process, the request whose actions are in its region and whose reply has not been read.
         self._pending: dict[int, int] = {}
         #: The processes whose last actions went through their region (``"shared": true`` requests).
@@ -148,6 +151,7 @@ class SharedLanes:
         self._bells.pop(p, None)
         self._infos.pop(p, None)
         self._views.pop(p, None)
+        self._blocks.pop(p, None)
         self._pending.pop(p, None)
         arrays = attach(conn) if offered and conn.waits_in_turn else None
         if arrays is not None and self._obs_layout is not None:
@@ -187,11 +191,15 @@ class SharedLanes:
         if arrays is None or bell is None or not _fits(arrays.actions, actions) or self._tampered(p, conn):
             return None
         n = len(actions)
-        assert arrays.ops is not None and arrays.worlds is not None
-        arrays.actions[:n] = actions
-        arrays.ops[:n] = ops
+        blocks = self._blocks.get(p)
+        if blocks is None or blocks.n != n:
+            blocks = self._blocks[p] = _RequestBlocks(arrays, n)
+        blocks.actions[...] = actions
+        if ops is not blocks.ops_written:
+            blocks.ops[...] = ops
+            blocks.ops_written = None if ops.flags.writeable else ops
         if worlds is not None:
-            arrays.worlds[:n] = worlds
+            blocks.worlds[...] = worlds
         seq: int = conn.post(bell, n, worlds is not None, think_s)  # type: ignore[attr-defined]
         self._pending[p] = seq
         return seq
@@ -293,6 +301,7 @@ class SharedLanes:
         self._bells.pop(p, None)
         self._infos.pop(p, None)
         self._views.pop(p, None)
+        self._blocks.pop(p, None)
         _fall_back(conn, f"it was tampered with: {why}")
         return True
 
@@ -315,7 +324,21 @@ class SharedLanes:
         self._bells.clear()
         self._infos.clear()
         self._views.clear()
+        self._blocks.clear()
         self._pending.clear()
+
+
+class _RequestBlocks:
+    """Views of rows ``0 .. n-1`` of a region's request blocks, and the read-only
+    ops array written there last (None: write the ops again)."""
+
+    __slots__ = ("actions", "n", "ops", "ops_written", "worlds")
+
+    def __init__(self, arrays: SharedArrays, n: int) -> None:
+        assert arrays.ops is not None and arrays.worlds is not None
+        self.n = n
+        self.actions, self.ops, self.worlds = arrays.actions[:n], arrays.ops[:n], arrays.worlds[:n]
+        self.ops_written: np.ndarray | None = None
 
 
 def _fits(block: np.ndarray, actions: Any) -> bool:

@@ -50,7 +50,7 @@ def plan_ops(
     """
     n = len(needs_reset)
     if mode == AutoresetMode.NEXT_STEP:
-        if not needs_reset.any():
+        if not _any(needs_reset):
             return _every_world_steps(n)
         return np.where(needs_reset, OP_RESET, OP_STEP)
     if mode == AutoresetMode.SAME_STEP:
@@ -65,6 +65,13 @@ def plan_ops(
             "them with reset(options={'reset_mask': mask}) before stepping again"
         )
     return np.full(n, OP_STEP)
+
+
+def _any(flags: np.ndarray) -> bool:
+    """Whether any of the bools ``flags`` is set: for a few worlds as Python
+    bools (a numpy reduction is the slowest call of a step right after the
+    caller's own numpy or torch work), else numpy's."""
+    return True in flags.tolist() if len(flags) <= 64 else bool(flags.any())
 
 
 @functools.lru_cache(maxsize=64)

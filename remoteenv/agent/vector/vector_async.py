@@ -60,6 +60,8 @@ class AsyncWorlds:
         self._owner = np.repeat(np.arange(len(self.slices)), [hi - lo for lo, hi in self.slices])
         #: Worlds sent and not yet returned by :meth:`recv`.
         self.in_flight = np.zeros(num_envs, dtype=np.bool_)
+        #: How many worlds :attr:`in_flight` marks (read on every step: no numpy call).
+        self._in_flight_count = 0
         self._queues: list[deque[tuple[int, np.ndarray, np.ndarray]]] = [deque() for _ in self.slices]
         self._ready: deque[Chunk] = deque()
         self._ready_count = 0
@@ -67,7 +69,7 @@ class AsyncWorlds:
     @property
     def busy(self) -> bool:
         """Some world is in flight (sent, not yet received)."""
-        return bool(self.in_flight.any())
+        return self._in_flight_count > 0
 
     def send(self, ids: np.ndarray, ops: np.ndarray, actions: Any) -> None:
         """Send ``actions[j]`` with op ``ops[j]`` to world ``ids[j]`` (distinct, none in flight)."""
@@ -91,13 +93,14 @@ class AsyncWorlds:
                 )
             self._queues[p].append((seq, ids[sel], ops[sel]))
         self.in_flight[ids] = True
+        self._in_flight_count += len(ids)
 
     def recv(self, batch_size: int) -> list[Chunk]:
         """Chunks covering exactly ``batch_size`` worlds, the earliest replies first."""
-        if batch_size > int(self.in_flight.sum()):  # received, not yet returned worlds count as in flight
+        if batch_size > self._in_flight_count:  # received, not yet returned worlds count as in flight
             raise StateError(
                 f"recv() needs {batch_size} worlds in flight or received, but only "
-                f"{int(self.in_flight.sum())} are: send() actions for more worlds first"
+                f"{self._in_flight_count} are: send() actions for more worlds first"
             )
         try:
             self._wait_for(batch_size)
@@ -116,6 +119,7 @@ class AsyncWorlds:
             need -= len(ids)
             self._ready_count -= len(ids)
             self.in_flight[ids] = False
+            self._in_flight_count -= len(ids)
         return out
 
     def abandon(self) -> None:
@@ -128,6 +132,7 @@ class AsyncWorlds:
         self._ready.clear()
         self._ready_count = 0
         self.in_flight[:] = False
+        self._in_flight_count = 0
 
     # ------------------------------------------------------------ waiting
 

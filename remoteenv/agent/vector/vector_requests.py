@@ -125,10 +125,11 @@ class VectorRequests:
         pending = {}
         handshakes, lanes = self.session.handshakes, self.lanes
         ops_list: list[int] | None = None
+        whole = len(self.slices) == 1  # one process of every world: its blocks are the arrays themselves
         for p, (lo, hi) in enumerate(self.slices):
-            acts = actions[lo:hi]
+            acts = actions if whole else actions[lo:hi]
             offered = handshakes[p].offers("shared_batch")
-            seq = lanes.post(p, conns[p], offered, ops[lo:hi], acts, think_s=think_s)
+            seq = lanes.post(p, conns[p], offered, ops if whole else ops[lo:hi], acts, think_s=think_s)
             if seq is not None:
                 pending[p] = seq
                 continue
@@ -153,10 +154,11 @@ class VectorRequests:
             replies, failed = self.gather(pending, "step_batch")
             for p, reply in replies.items():
                 lo, hi = self.slices[p]
-                lanes.vouch(p, sent[p], reply)  # a reply from the region answers a request that used it
                 if reply.get("region") is not True:  # a region reply's numbers have the layouts checked before
+                    lanes.vouch(p, sent[p], reply)  # a reply marked shared answers a request that used the region
                     checks.batch(conns[p], "step_batch", reply, hi - lo, shared=reply.get("shared") is True)
-                # A shared reply's arrays come from the region; an announcement of its info columns is checked there.
+                # Vouched for again there (a region reply: first); a shared reply's arrays come from the
+                # region; an announcement of its info columns is checked there.
                 results[p] = lanes.take(p, conns[p], sent[p], reply, hi - lo)
         except BaseException:
             for p in sent:  # abandoned: their replies will not be read

@@ -12,7 +12,6 @@ that form with :func:`step_reply_as_batch` and :func:`reset_reply_as_batch`.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -223,13 +222,14 @@ def _from_one_region(
     r: RegionReply, n: int, obs_dtype: Any
 ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
     """:func:`_from_regions` for one process's region, which holds every world:
-    the same arrays, each made in one call."""
+    the same arrays, each made in one call (the info masks are the rows of one)."""
     infos: dict[str, Any] = {}
-    if r.columns:
-        every = _every_world(n)
-        for key, mask_key, dtype, values in r.columns:
+    columns = r.columns
+    if columns:
+        masks = np.ones((len(columns), n), dtype=np.bool_)
+        for (key, mask_key, dtype, values), mask in zip(columns, masks):
             infos[key] = np.array(values, dtype=dtype)
-            infos[mask_key] = every.copy()
+            infos[mask_key] = mask
     return (
         np.array(r.obs, dtype=obs_dtype),
         np.array(r.reward, dtype=np.float64),
@@ -237,14 +237,6 @@ def _from_one_region(
         r.truncated != 0,
         infos,
     )
-
-
-@functools.lru_cache(maxsize=64)
-def _every_world(n: int) -> np.ndarray:
-    """A read-only mask of ``n`` worlds, all present, made once per ``n`` (copied for each reply, never handed out)."""
-    mask = np.ones(n, dtype=np.bool_)
-    mask.setflags(write=False)
-    return mask
 
 
 __all__ = ["ObsBatch", "assemble", "reset_reply_as_batch", "step_reply_as_batch"]

@@ -69,6 +69,10 @@ class BatchedWorlds:
         self._data_newer = np.ones(n, dtype=np.bool_)
         #: The batch's copy is newer than the world's MjData (copy it out before it is read).
         self._batch_newer = np.zeros(n, dtype=np.bool_)
+        # The same two facts as Python flags, read on every step without a numpy call:
+        # some world's MjData is newer; every world's batch copy is newer.
+        self._some_data_newer = True
+        self._every_batch_newer = False
         self._fields: dict[str, np.ndarray] = {}
         for w, env in enumerate(self.envs):
             env._batch_link, env._batch_index = self, w
@@ -81,22 +85,27 @@ class BatchedWorlds:
         if self._batch_newer[w]:
             self.batch.get_data(w, self.envs[w]._data)
             self._batch_newer[w] = False
+            self._every_batch_newer = False
         self._data_newer[w] = True
+        self._some_data_newer = True
 
     def claim(self, w: int) -> None:
         """World ``w``'s ``MjData`` is about to be rewritten whole (a reset): no copy."""
         self._batch_newer[w] = False
         self._data_newer[w] = True
+        self._every_batch_newer = False
+        self._some_data_newer = True
 
     def take_back(self) -> None:
         """Load the state rows of the worlds whose ``MjData`` is newer than their row."""
-        if not self._data_newer.any():
+        if not self._some_data_newer:
             return
         rows, envs = self._rows, self.envs
         for w in np.flatnonzero(self._data_newer).tolist():
             env = envs[w]
             mujoco.mj_getState(env.model, env._data, rows[w], _STATE)
         self._data_newer[:] = False
+        self._some_data_newer = False
 
     # ------------------------------------------------------------ batched steps
 
@@ -125,6 +134,7 @@ class BatchedWorlds:
             self._data_newer[:] = False
         else:
             self._data_newer[ids] = False  # their MjData's state is void, not to be taken back
+        self._some_data_newer = bool(self._data_newer.any())
         self.batch.reset(ids, stage=mujoco.mjtStage.mjSTAGE_NONE)
         self._mark(ids)
 
@@ -137,7 +147,9 @@ class BatchedWorlds:
     def _mark(self, ids: np.ndarray | None) -> None:
         """The batch's copy of worlds ``ids`` (None: all) is now newer than their ``MjData``."""
         if ids is None:
-            self._batch_newer[:] = True
+            if not self._every_batch_newer:
+                self._batch_newer[:] = True
+                self._every_batch_newer = True
         else:
             self._batch_newer[ids] = True
 

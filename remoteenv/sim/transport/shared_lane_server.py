@@ -82,8 +82,8 @@ class SharedLane:
         self.agent_think_s = 0.0
         self._info_version = 0
         self._info_signature: tuple[tuple[str, np.dtype, bool], ...] | None = None
-        #: Views of the region's info columns, by column and dtype (made once).
-        self._column_views: dict[tuple[int, np.dtype], np.ndarray] = {}
+        #: Views of rows ``0 .. n-1`` of the region's info columns, by column, dtype and ``n`` (made once).
+        self._column_views: dict[tuple[int, np.dtype, int], np.ndarray] = {}
         #: Views of the region's obs, reward, terminated and truncated rows ``0 .. n-1``, by ``n`` (made once).
         self._row_views: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
         #: Why the region is no longer used (its header was tampered with), or None.
@@ -243,11 +243,12 @@ class SharedLane:
         n = len(batch.reward)
         views = self._column_views
         for c, (_, values, _) in enumerate(columns):
-            view = views.get((c, values.dtype))
+            key = (c, values.dtype, n)
+            view = views.get(key)
             if view is None:
-                view = views[c, values.dtype] = arrays.info_column(c, values.dtype)
-            view[:n] = values
-        signature = tuple((key, values.dtype, python) for key, values, python in columns)
+                view = views[key] = arrays.info_column(c, values.dtype)[:n]
+            view[...] = values
+        signature = tuple([(key, values.dtype, python) for key, values, python in columns])
         if signature != self._info_signature:
             self._info_version += 1
             self._info_signature = signature

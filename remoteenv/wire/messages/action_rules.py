@@ -31,6 +31,9 @@ from gymnasium import spaces
 
 from remoteenv.wire.wire_errors import InvalidAction, short_repr
 
+#: The smallest and largest element of an array, NaN if it holds one (numpy's reductions propagate NaN).
+_smallest, _largest = np.minimum.reduce, np.maximum.reduce
+
 
 def check_action(space: spaces.Space, action: Any, where: str = "") -> Any:
     """``action`` in its canonical form for ``space``; raises :class:`InvalidAction`.
@@ -124,7 +127,10 @@ class BatchCheck:
     A numeric array of a small Box batch (at most :data:`SMALL_BOX_ELEMENTS`
     elements) is compared element by element as Python numbers (exact: a
     value of the space's dtype widens to a Python float or int without
-    rounding; NaN compares False); anything else, and every refusal with its
+    rounding; NaN compares False). A larger one whose elements all share
+    one pair of bounds (the usual Box) is accepted on its smallest and
+    largest element, two reductions (numpy's minimum and maximum propagate
+    NaN, which compares False). Anything else, and every refusal with its
     message, is :func:`check_actions`'s.
     """
 
@@ -148,17 +154,21 @@ class BatchCheck:
             self._box
             and type(actions) is np.ndarray
             and actions.dtype.kind in "biuf"
-            and actions.size <= SMALL_BOX_ELEMENTS
             and actions.shape == (n, *self._shape)
         ):
             arr = actions.astype(self._dtype, copy=False)
-            values = arr.reshape(-1).tolist()
             uniform = self._uniform
-            if uniform is not None:
-                lo, hi = uniform
-                inside = all(lo <= v <= hi for v in values)
-            else:
-                inside = all(lo <= v <= hi for v, lo, hi in zip(values, cycle(self._lows), cycle(self._highs)))
-            if inside:
-                return arr
+            if actions.size <= SMALL_BOX_ELEMENTS:
+                values = arr.reshape(-1).tolist()
+                if uniform is not None:
+                    lo, hi = uniform
+                    inside = all(lo <= v <= hi for v in values)
+                else:
+                    inside = all(lo <= v <= hi for v, lo, hi in zip(values, cycle(self._lows), cycle(self._highs)))
+                if inside:
+                    return arr
+            elif uniform is not None:
+                flat = arr.reshape(-1)
+                if uniform[0] <= _smallest(flat) and _largest(flat) <= uniform[1]:
+                    return arr
         return check_actions(self.space, actions, n)
