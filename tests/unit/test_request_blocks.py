@@ -33,13 +33,13 @@ class LaneConn:
         self.pid = os.getpid()
         self.fd = fd
         self.layout = layout
-        self.posted: list[tuple[int, bool]] = []
+        self.posted: list[tuple[int, bool, bool]] = []
 
     def request(self, cmd: str, **args: object) -> dict:
         return {"pid": self.pid, "fd": self.fd, "layout": self.layout.to_wire()}
 
-    def post(self, doorbell: object, n: int, named: bool, think_s: float = 0.0) -> int:
-        self.posted.append((n, named))
+    def post(self, doorbell: object, n: int, named: bool, think_s: float = 0.0, plain: bool = False) -> int:
+        self.posted.append((n, named, plain))
         return len(self.posted)
 
 
@@ -62,11 +62,12 @@ def test_every_posted_request_is_in_the_region_whatever_the_plan_before_it() -> 
             assert sim_end.ops is not None
             assert sim_end.ops.tolist() == ops.tolist(), i
             assert sim_end.actions.tolist() == actions.tolist(), i
+            assert conn.posted[-1] == (K, False, OP_RESET not in ops.tolist()), i  # a plain step or not
             lanes.forget(0)  # its reply is not read here
         # A smaller request that names its worlds: its rows and worlds, the rest as they were.
         ops = np.array([OP_STEP, OP_STEP], np.int64)
         seq = lanes.post(0, conn, True, ops, np.ones((2, 2), np.float32), worlds=np.array([3, 1]))  # type: ignore[arg-type]
-        assert seq == len(plans) + 1 and conn.posted[-1] == (2, True)
+        assert seq == len(plans) + 1 and conn.posted[-1] == (2, True, True)
         assert sim_end.ops[:2].tolist() == [OP_STEP, OP_STEP] and sim_end.worlds is not None
         assert sim_end.worlds[:2].tolist() == [3, 1] and sim_end.actions[:2].tolist() == [[1.0, 1.0]] * 2
     finally:

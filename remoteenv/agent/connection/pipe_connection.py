@@ -4,7 +4,8 @@ end is its :class:`~remoteenv.sim.transport.channels.PipeChannel`).
 Runs in the agent process. A Unix socketpair carrying length-prefixed frames
 (see :mod:`remoteenv.wire.protocol`): no I/O threads sit between the two
 processes, and the sim's death shows at once as end of file. Waits for a
-reply start hot while replies have been quick (:mod:`remoteenv.wire.shared_memory.hot_wait`);
+reply start hot while replies have been quick (:mod:`remoteenv.wire.shared_memory.hot_wait`;
+a plain step's reply in the shared region on those replies' own history);
 a wait that blocks for a reply in the shared region asks the sim for a
 heads-up once its physics is done, and waits hot from it (the fast lane's
 heads-up, :mod:`remoteenv.wire.shared_memory.doorbell`).
@@ -30,6 +31,12 @@ from remoteenv.wire.shared_memory.hot_wait import HotWait
 _EXIT_REPORT_S = 2.0
 #: Longest busy-wait (seconds) for a reply on the local pipe (see :mod:`remoteenv.wire.shared_memory.hot_wait`).
 AGENT_SPIN_S = 200e-6
+#: Longest busy-wait (seconds) for the reply to a plain step posted in the shared
+#: region (every world steps, none resets first), on the history of those waits
+#: alone: where the sims' physics threads take every CPU, an agent that waits
+#: hot takes CPU time from them, which costs more than the wake-up it saves once
+#: the wait is longer than about this (docs/performance.md, "The lane's own wait").
+LANE_SPIN_S = 500e-6
 #: Longest busy-wait (seconds) for a reply after the sim's heads-up that it is
 #: due (its physics done; the sim sends none where the rest of its tick takes
 #: longer than :data:`~remoteenv.sim.transport.shared_lane_server.HEADS_UP_TAIL_S`).
@@ -69,6 +76,8 @@ class PipeConnection(SimConnection):
         self._frames: deque[bytes] = deque()
         #: The request posted in the shared region whose reply is awaited there, and its doorbell.
         self._watch: tuple[int, Doorbell] | None = None
+        #: That request is a plain step (its wait may be hot on :attr:`_lane_hot`).
+        self._watch_plain = False
         #: The request a wait is for (a region reply is taken only for its own request).
         self._awaiting = 0
         #: Replies to later requests that came while the awaited one's reply was due in
@@ -76,6 +85,8 @@ class PipeConnection(SimConnection):
         self._held: dict[int, dict[str, Any]] = {}
         self._eof = False
         self._hot = HotWait(AGENT_SPIN_S)
+        #: The hot wait for plain steps' region replies, on their own history (:data:`LANE_SPIN_S`).
+        self._lane_hot = HotWait(LANE_SPIN_S)
         #: The hot wait after a heads-up (asked for only where waiting hot is allowed).
         self._soon = HotWait(HEADS_UP_WAIT_S)
         #: Heads-ups this connection was woken by (see :meth:`_after_heads_up`).
@@ -120,12 +131,13 @@ class PipeConnection(SimConnection):
 
     # ------------------------------------------------------------ the shared region's fast lane
 
-    def post(self, doorbell: Doorbell, n: int, named: bool, think_s: float = 0.0) -> int:
+    def post(self, doorbell: Doorbell, n: int, named: bool, think_s: float = 0.0, plain: bool = False) -> int:
         """Post a ``step_batch`` whose ops, worlds and actions are in the shared
         region (written by the caller; see :mod:`remoteenv.wire.shared_memory.doorbell`);
         its frame goes on the pipe only when the sim sleeps. ``think_s``: the
         agent's think time before it (seconds, 0: not told; the doorbell's
-        ``AGENT_THINK_US``). Returns its ``seq``:
+        ``AGENT_THINK_US``); ``plain``: every position steps, none resets
+        first (its reply may be waited for hot, see :data:`LANE_SPIN_S`). Returns its ``seq``:
         its reply comes as a frame or in the region (a reply map with
         ``"region": true`` either way)."""
         if self.closed:
@@ -136,6 +148,7 @@ class PipeConnection(SimConnection):
         seq = self._seq
         self._unanswered[seq] = None
         self._watch = (seq, doorbell)
+        self._watch_plain = plain
         if doorbell.post(seq, n, named, think_s):
             self._send_frame(protocol.region_ring(seq))
         return seq
@@ -208,19 +221,24 @@ class PipeConnection(SimConnection):
         region = self._region_reply() or self._take_held()
         if region is not None:
             return region
-        if not self._frames and self._hot.worth_it():
+        # A plain step's region reply is waited for on its own history: a frame
+        # (an announcement, an error) and a step with resets do not count there.
+        lane = self._watch_plain and self._watch is not None and self._watch[0] == self._awaiting
+        hot = self._lane_hot if lane else self._hot
+        if not self._frames and hot.worth_it():
             start = time.perf_counter()
             self._read(False)
-            while not self._frames and self._hot.spin():
+            while not self._frames and hot.spin():
                 region = self._region_reply()
                 if region is not None:
-                    self._hot.waited(time.perf_counter() - start)
+                    hot.waited(time.perf_counter() - start)
                     return region
                 self._read(False)
             if self._frames:
-                self._hot.waited(time.perf_counter() - start)
+                if not lane:
+                    hot.waited(time.perf_counter() - start)
                 return self._frames.popleft()
-            self._hot.waited(float("inf"))
+            hot.waited(float("inf"))
         if not self._frames:
             watch = self._watch if self._watch is not None and self._watch[0] == self._awaiting else None
             if watch is not None and not watch[1].agent_sleeps(watch[0], heads_up=self._soon.allowed()):

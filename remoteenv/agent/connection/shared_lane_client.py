@@ -39,6 +39,7 @@ from remoteenv.agent.connection.reply_checks import ReplyChecks
 from remoteenv.agent.connection.sim_connection import SimConnection
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.wire.codec.arrays import wire_dtype
+from remoteenv.wire.protocol import OP_RESET, OP_STEP_RESET
 from remoteenv.wire.shared_memory.doorbell import REP_INFO, REP_SEQ, Doorbell
 from remoteenv.wire.shared_memory.shared_batch import SharedArrays, SharedLayout, UnsealedRegion, map_region
 from remoteenv.wire.wire_errors import ProtocolError
@@ -198,9 +199,10 @@ class SharedLanes:
         if ops is not blocks.ops_written:
             blocks.ops[...] = ops
             blocks.ops_written = None if ops.flags.writeable else ops
+            blocks.plain = _plain(ops)
         if worlds is not None:
             blocks.worlds[...] = worlds
-        seq: int = conn.post(bell, n, worlds is not None, think_s)  # type: ignore[attr-defined]
+        seq: int = conn.post(bell, n, worlds is not None, think_s, blocks.plain)  # type: ignore[attr-defined]
         self._pending[p] = seq
         return seq
 
@@ -332,13 +334,22 @@ class _RequestBlocks:
     """Views of rows ``0 .. n-1`` of a region's request blocks, and the read-only
     ops array written there last (None: write the ops again)."""
 
-    __slots__ = ("actions", "n", "ops", "ops_written", "worlds")
+    __slots__ = ("actions", "n", "ops", "ops_written", "plain", "worlds")
 
     def __init__(self, arrays: SharedArrays, n: int) -> None:
         assert arrays.ops is not None and arrays.worlds is not None
         self.n = n
         self.actions, self.ops, self.worlds = arrays.actions[:n], arrays.ops[:n], arrays.worlds[:n]
         self.ops_written: np.ndarray | None = None
+        #: The ops written last reset no world first (a plain step, see :func:`_plain`).
+        self.plain = False
+
+
+def _plain(ops: np.ndarray) -> bool:
+    """Whether a request of ``ops`` is a plain step: no position resets before it
+    steps (its reply comes in the region unless an episode ends within it)."""
+    listed = ops.tolist()
+    return OP_RESET not in listed and OP_STEP_RESET not in listed
 
 
 def _fits(block: np.ndarray, actions: Any) -> bool:
