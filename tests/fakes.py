@@ -1,9 +1,11 @@
-"""Stand-ins the unit tests share: a torch module that only counts threads, and
-a shipped scene's env class loaded from its script."""
+"""Stand-ins the unit tests share: a torch module that only counts threads, a
+shipped scene's env class loaded from its script, a pipe connection that
+offers a region of this process, and hot waits allowed as on two CPUs."""
 
 from __future__ import annotations
 
 import importlib.util
+import os
 import sys
 import types
 from typing import Any
@@ -12,6 +14,8 @@ import pytest
 
 import remoteenv
 from remoteenv.agent.vector import torch_threads
+from remoteenv.wire.shared_memory import hot_wait
+from remoteenv.wire.shared_memory.shared_batch import SharedLayout
 
 
 class FakeTorch(types.ModuleType):
@@ -48,3 +52,35 @@ def scene_class(name: str, cls: str, module_name: str) -> Any:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return getattr(module, cls)
+
+
+class RegionConn:
+    """A pipe connection whose sim offers ``fd`` of this process as its region;
+    :meth:`post` only numbers the requests posted there (no sim reads them)."""
+
+    waits_in_turn = True
+    instance = 0
+    endpoint = "pipe"
+
+    def __init__(self, fd: int, layout: SharedLayout) -> None:
+        self.pid = os.getpid()
+        self.fd = fd
+        self.layout = layout
+        #: ``(n, named, plain)`` of each request posted.
+        self.posted: list[tuple[int, bool, bool]] = []
+
+    def request(self, cmd: str, **args: object) -> dict:
+        return {"pid": self.pid, "fd": self.fd, "layout": self.layout.to_wire()}
+
+    def post(self, doorbell: object, n: int, named: bool, think_s: float = 0.0, plain: bool = False) -> int:
+        self.posted.append((n, named, plain))
+        return len(self.posted)
+
+
+def hot_waits_allowed(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Hot waits as on a two-CPU machine with no stall behind them (whatever this one is)."""
+    monkeypatch.delenv("REMOTEENV_NO_SPIN", raising=False)
+    monkeypatch.setattr(hot_wait, "usable_cpus", lambda: 2)
+    monkeypatch.setattr(hot_wait._Neighbours, "cool_until", 0.0)
+    monkeypatch.setattr(hot_wait._Neighbours, "last_stall", float("-inf"))
+    monkeypatch.setattr(hot_wait._Neighbours, "cool_s", 0.0)

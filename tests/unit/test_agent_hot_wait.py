@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+from fakes import hot_waits_allowed
 
 from remoteenv.wire.shared_memory import hot_wait
 from remoteenv.wire.shared_memory.hot_wait import HotWait
@@ -10,11 +11,7 @@ from remoteenv.wire.shared_memory.hot_wait import HotWait
 
 @pytest.fixture(autouse=True)
 def two_cpus(monkeypatch):
-    monkeypatch.delenv("REMOTEENV_NO_SPIN", raising=False)
-    monkeypatch.setattr(hot_wait, "usable_cpus", lambda: 2)
-    monkeypatch.setattr(hot_wait._Neighbours, "cool_until", 0.0)
-    monkeypatch.setattr(hot_wait._Neighbours, "last_stall", float("-inf"))
-    monkeypatch.setattr(hot_wait._Neighbours, "cool_s", 0.0)
+    hot_waits_allowed(monkeypatch)
 
 
 def test_waits_hot_while_the_peer_answers_within_the_window():

@@ -11,6 +11,7 @@ import socket
 
 import numpy as np
 import pytest
+from fakes import hot_waits_allowed
 
 from remoteenv.agent.connection import pipe_connection
 from remoteenv.agent.connection.pipe_connection import PipeConnection
@@ -23,11 +24,7 @@ pytestmark = pytest.mark.skipif(not doorbell_module.SILENT, reason="the region i
 
 @pytest.fixture(autouse=True)
 def two_cpus(monkeypatch):
-    monkeypatch.delenv("REMOTEENV_NO_SPIN", raising=False)
-    monkeypatch.setattr(hot_wait, "usable_cpus", lambda: 2)
-    monkeypatch.setattr(hot_wait._Neighbours, "cool_until", 0.0)
-    monkeypatch.setattr(hot_wait._Neighbours, "last_stall", float("-inf"))
-    monkeypatch.setattr(hot_wait._Neighbours, "cool_s", 0.0)
+    hot_waits_allowed(monkeypatch)
 
 
 def _answer_in_the_spin(hot: hot_wait.HotWait, header: np.ndarray, seq: int) -> None:

@@ -10,6 +10,7 @@ import os
 
 import numpy as np
 import pytest
+from fakes import RegionConn
 from gymnasium import spaces
 
 from remoteenv.agent.connection import shared_lane_client as shared_lane
@@ -21,28 +22,6 @@ OBS = spaces.Box(-1.0, 1.0, (3,), np.float32)
 K = 4
 
 
-class LaneConn:
-    """A pipe connection whose sim offers ``fd`` of this process as its region;
-    :meth:`post` only numbers the requests (no sim reads them)."""
-
-    waits_in_turn = True
-    instance = 0
-    endpoint = "pipe"
-
-    def __init__(self, fd: int, layout: SharedLayout) -> None:
-        self.pid = os.getpid()
-        self.fd = fd
-        self.layout = layout
-        self.posted: list[tuple[int, bool, bool]] = []
-
-    def request(self, cmd: str, **args: object) -> dict:
-        return {"pid": self.pid, "fd": self.fd, "layout": self.layout.to_wire()}
-
-    def post(self, doorbell: object, n: int, named: bool, think_s: float = 0.0, plain: bool = False) -> int:
-        self.posted.append((n, named, plain))
-        return len(self.posted)
-
-
 @pytest.mark.skipif(not hasattr(os, "memfd_create"), reason="memfd_create is Linux only")
 def test_every_posted_request_is_in_the_region_whatever_the_plan_before_it() -> None:
     from gymnasium.vector import AutoresetMode
@@ -50,7 +29,7 @@ def test_every_posted_request_is_in_the_region_whatever_the_plan_before_it() -> 
     layout = SharedLayout(K, "<f4", (2,), "<f4", (3,), info_columns=2)
     fd, sim_end = create_region(layout)
     lanes = shared_lane.SharedLanes(OBS)
-    conn = LaneConn(fd, layout)
+    conn = RegionConn(fd, layout)
     try:
         every_step = plan_ops(AutoresetMode.NEXT_STEP, np.zeros(K, np.bool_), np.zeros(K, np.int64), None)
         one_reset = plan_ops(AutoresetMode.NEXT_STEP, np.eye(K, dtype=np.bool_)[1], np.zeros(K, np.int64), None)

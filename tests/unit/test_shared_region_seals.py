@@ -11,6 +11,7 @@ import warnings
 
 import numpy as np
 import pytest
+from fakes import RegionConn
 from gymnasium import spaces
 
 from remoteenv.agent.connection import shared_lane_client as shared_lane
@@ -18,22 +19,6 @@ from remoteenv.wire.shared_memory.shared_batch import SharedLayout, create_regio
 
 OBS = spaces.Box(-1.0, 1.0, (3,), np.float32)
 linux_only = pytest.mark.skipif(not hasattr(os, "memfd_create"), reason="memfd_create is Linux only")
-
-
-class RegionConn:
-    """A pipe connection whose sim offers ``fd`` of this process as its region."""
-
-    waits_in_turn = True
-    instance = 0
-    endpoint = "pipe"
-
-    def __init__(self, fd: int, layout: SharedLayout) -> None:
-        self.pid = os.getpid()
-        self.fd = fd
-        self.layout = layout
-
-    def request(self, cmd: str, **args: object) -> dict:
-        return {"pid": self.pid, "fd": self.fd, "layout": self.layout.to_wire()}
 
 
 @linux_only
