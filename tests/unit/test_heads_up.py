@@ -12,12 +12,14 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+from fakes import hot_waits_allowed
 from gymnasium import spaces
 
 from remoteenv.agent.connection.pipe_connection import PipeConnection
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.sim.transport.shared_lane_server import HEADS_UP_TAIL_S, SharedLane
 from remoteenv.wire import protocol
+from remoteenv.wire.shared_memory import hot_wait
 from remoteenv.wire.shared_memory.doorbell import AGENT_HEADS_UP, AGENT_WATCHING, Doorbell
 from remoteenv.wire.shared_memory.hot_wait import usable_cpus
 
@@ -26,8 +28,9 @@ needs_two_cpus = pytest.mark.skipif(usable_cpus() < 2, reason="no hot waits (nor
 
 @pytest.fixture
 def lane(monkeypatch):
-    """An agent's pipe and doorbell, the stand-in sim's socket and doorbell on the same header."""
-    monkeypatch.delenv("REMOTEENV_NO_SPIN", raising=False)
+    """An agent's pipe and doorbell, the stand-in sim's socket and doorbell on the same header
+    (no cool-down left by an earlier stall in this process)."""
+    hot_waits_allowed(monkeypatch)
     agent_end, sim_end = socket.socketpair()
     header = np.zeros(16, dtype="<i8")
     conn = PipeConnection(agent_end, timeout=10.0)
@@ -60,8 +63,12 @@ def _heads_up_once_asked(sim_bell: Doorbell, sock: socket.socket, seq: int) -> N
 
 
 @needs_two_cpus
-def test_a_blocked_agent_asks_and_takes_the_region_reply_after_the_heads_up(lane):
+def test_a_blocked_agent_asks_and_takes_the_region_reply_after_the_heads_up(lane, monkeypatch):
     conn, agent_bell, sim_end, sim_bell = lane
+    # The woken agent waits hot until the reply, however the scheduler runs the two threads
+    # (beside busy CPUs a 1 ms window, or a stall, could end it first: then a frame is due).
+    conn._soon.window_s = 30.0
+    monkeypatch.setattr(hot_wait, "STALL_S", 30.0)
     seq = conn.post(agent_bell, 1, False)
 
     wake_frames: list[bool] = []
