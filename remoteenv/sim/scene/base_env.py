@@ -225,10 +225,14 @@ class BaseEnv(BatchedHooks, SceneCameras):
             return result
         return (self.observe(result[0]), *result[1:])
 
+    @property
+    def _hooks_obs_space(self) -> spaces.Space:
+        """The space the hooks' observations are checked against (without the cameras' images)."""
+        return self.observation_space if self.camera_rig is None else self.state_space
+
     def _check_obs(self, obs: Any, hook: str) -> None:
         scene = type(self).__name__
-        space = self.observation_space if self.camera_rig is None else self.state_space
-        check_observation(space, obs, scene=scene, hook=hook, bounds=self.check_obs_bounds)
+        check_observation(self._hooks_obs_space, obs, scene=scene, hook=hook, bounds=self.check_obs_bounds)
         if self.check_finite:
             check_finite_obs(obs, scene=scene, hook=hook)
 

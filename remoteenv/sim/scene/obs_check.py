@@ -29,9 +29,13 @@ def _describe(obs: Any) -> str:
     return f"a {type(obs).__name__} {short_repr(obs, 80)}"
 
 
+#: Spaces whose observation is one numpy array of the space's dtype and shape.
+_ARRAY_SPACES = (spaces.Box, spaces.MultiDiscrete, spaces.MultiBinary)
+
+
 def _problem(space: spaces.Space, obs: Any, bounds: bool) -> str | None:
     """What is wrong with ``obs`` for ``space`` (None if it fits)."""
-    if isinstance(space, (spaces.Box, spaces.MultiDiscrete, spaces.MultiBinary)):
+    if isinstance(space, _ARRAY_SPACES):
         if not isinstance(obs, np.ndarray):
             return f"got {_describe(obs)}, not a numpy array"
         if obs.dtype != space.dtype or obs.shape != space.shape:
@@ -72,4 +76,11 @@ def check_observation(space: spaces.Space, obs: Any, *, scene: str, hook: str, b
         )
 
 
-__all__ = ["ObservationError", "check_observation"]
+def rows_fit(space: spaces.Space, rows: np.ndarray) -> bool:
+    """Whether every row of the stacked observations ``rows`` fits ``space`` as
+    :func:`check_observation` checks it without bounds: the dtype and shape of an
+    array space, read once off the stack (False: check the rows one by one)."""
+    return isinstance(space, _ARRAY_SPACES) and rows.dtype == space.dtype and rows.shape[1:] == space.shape
+
+
+__all__ = ["ObservationError", "check_observation", "rows_fit"]

@@ -19,11 +19,11 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.scene.batch_result import BatchResult
 from remoteenv.sim.scene.camera_rig import observe_worlds
+from remoteenv.sim.scene.obs_check import rows_fit
 from remoteenv.sim.scene.step_check import check_batch, check_reset_batch
 from remoteenv.sim.stepping.batch_physics import PhysicsThreads, default_threads
 from remoteenv.sim.stepping.batch_worlds import (
@@ -175,14 +175,7 @@ class WorldsStepper:
         when the scene asks for bounds; other batches world by world."""
         env = self.envs[0]
         if isinstance(obs, np.ndarray) and obs.ndim >= 1 and not env.check_obs_bounds:
-            space = env.observation_space if env.camera_rig is None else env.state_space
-            if (
-                type(space) is spaces.Box
-                and not env.check_finite
-                and len(obs)
-                and obs.dtype == space.dtype
-                and obs.shape[1:] == space.shape
-            ):
+            if not env.check_finite and len(obs) and rows_fit(env._hooks_obs_space, obs):
                 return  # what the first row's check looks at, read off the batch
             rows = obs[:1]
         else:
