@@ -34,6 +34,7 @@ from remoteenv.sim.stepping.real_time import Clock
 from remoteenv.sim.transport.channels import Channel, Outgoing, PipeChannel, ZmqChannel
 from remoteenv.sim.transport.limits import EXPENSIVE_COMMANDS, EXPENSIVE_PER_PASS, raise_fd_limit, return_large_frees
 from remoteenv.sim.transport.router import open_router
+from remoteenv.sim.transport.router_close import close_router
 from remoteenv.wire import protocol
 from remoteenv.wire.addresses import is_loopback
 from remoteenv.wire.run_options.options import RunOptions
@@ -288,15 +289,15 @@ class RemoteControlledAgent:
         return self._table.handle(msg, channel, reply_to)
 
     def shutdown(self) -> None:
-        """Close the envs and the socket (libzmq unlinks an ipc socket file it bound)."""
+        """Close the envs, then the socket, its gate and its context (waiting for
+        those at most :data:`~remoteenv.sim.transport.router_close.CLOSE_WAIT_S`),
+        the pipe, and remove an ipc socket file that is left."""
         for env in self.envs:
             try:
                 env.close()
             except Exception:
                 log.exception("closing %s (a world of sim instance %d) raised", type(env).__name__, self.instance)
-        self._gate.stop()
-        self.socket.close(linger=0)
-        self._ctx.term()
+        close_router(self._gate, self.socket, self._ctx, self.instance)
         if self._pipe is not None:
             self._pipe.close()
         remove_ipc_file(self.endpoint)
