@@ -221,7 +221,9 @@ def test_the_gate_admits_at_most_max_peers_and_admits_again_when_one_leaves(serv
     # The clients live in the process's shared context, as the agent's connections
     # do, which is never terminated: terminating a context of its own after these
     # refusals hung once in CI (2026-11-29), every socket closed with linger 0 (a
-    # rare hang in libzmq's ctx_t::terminate, libzmq issue #2586).
+    # rare hang in libzmq's ctx_t::terminate, libzmq issue #2586). No send blocks:
+    # a client refused before its send has no connection to queue on, and a
+    # blocking send would then wait for good (twice beside two CPU hogs).
     ctx = zmq.Context.instance()
     socks = []
     try:
@@ -229,8 +231,14 @@ def test_the_gate_admits_at_most_max_peers_and_admits_again_when_one_leaves(serv
             sock = ctx.socket(zmq.DEALER)
             sock.setsockopt(zmq.LINGER, 0)
             sock.connect(server.endpoint)
-            sock.send(request(i, "handshake", protocol=1))
             socks.append(sock)
+            try:
+                sock.send(request(i, "handshake", protocol=1), zmq.NOBLOCK)
+            except zmq.Again:
+                # Refused already (a busy machine can run connect, greeting and
+                # ZAP refusal between two lines here): libzmq has dropped the
+                # connection, so a blocking send would wait for good.
+                assert i >= limits.MAX_PEERS, f"admitted client {i} had no connection to send on"
         got: list[tuple[bytes, Any]] = []
 
         def seen(count: int):
@@ -256,7 +264,7 @@ def test_the_gate_admits_at_most_max_peers_and_admits_again_when_one_leaves(serv
         newcomer.setsockopt(zmq.LINGER, 0)
         socks.append(newcomer)
         newcomer.connect(server.endpoint)
-        newcomer.send(request(99, "handshake", protocol=1))
+        newcomer.send(request(99, "handshake", protocol=1), zmq.NOBLOCK)  # admitted: its connection is there
         _wait_for(seen(limits.MAX_PEERS + 1), "the newcomer's frame")
         assert ids(got)[-1][1] == 99
     finally:
