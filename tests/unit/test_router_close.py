@@ -44,22 +44,22 @@ class Recorder:
         self._call("context.term")
 
 
-def _closer_threads() -> list[threading.Thread]:
-    return [t for t in threading.enumerate() if t.name.startswith("remoteenv-router-close-")]
+def _closer_threads(instance: int) -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name == f"remoteenv-router-close-{instance}"]
 
 
-def _release_and_join(recorder: Recorder) -> None:
-    recorder.release.set()
-    for thread in _closer_threads():
+def _release_and_join(release: threading.Event, instance: int) -> None:
+    release.set()
+    for thread in _closer_threads(instance):
         thread.join(JOIN_S)
-    assert not _closer_threads(), "the closer thread did not end once released"
+    assert not _closer_threads(instance), "the closer thread did not end once released"
 
 
 def test_the_gate_stops_then_the_socket_closes_then_the_context_ends() -> None:
     r = Recorder()
     assert close_router(r, r, r, instance=3) is True  # type: ignore[arg-type]
     assert r.calls == [("gate.stop",), ("socket.close", 0), ("context.term",)]
-    assert not _closer_threads()
+    assert not _closer_threads(3)
 
 
 @pytest.mark.parametrize(
@@ -80,7 +80,7 @@ def test_a_step_that_never_returns_is_left_behind_with_a_warning(caplog, hold: s
         assert f"sim instance 7: {step} did not finish" in record.getMessage()
         assert "libzmq" in record.getMessage()
     finally:
-        _release_and_join(r)
+        _release_and_join(r.release, 7)
     assert r.calls[-1] == ("context.term",)  # released, it finishes the rest in order
 
 
@@ -111,8 +111,5 @@ def test_a_server_whose_context_never_ends_still_shuts_down(tmp_path, monkeypatc
         assert [r.getMessage() for r in caplog.records if "terminating the context" in r.getMessage()]
         assert not socket_file.exists()  # the socket file is gone all the same
     finally:
-        stuck.release.set()
-        for thread in _closer_threads():
-            thread.join(JOIN_S)
-    assert not _closer_threads()
+        _release_and_join(stuck.release, srv.instance)
     assert stuck.ctx.closed  # released, the real context ended
