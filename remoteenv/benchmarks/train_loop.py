@@ -237,14 +237,23 @@ def measure(
 
 
 def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The ratios of medians of :data:`TARGETS` where both were measured, then
-    their CPU per step inverted (> 1: the numerator is cheaper)."""
+    """The ratios of medians of :data:`TARGETS` where both were measured, each
+    with its ratio round by round (``rounds``: the two contenders' rates of
+    the same round, which ran them one after the other), then their CPU per
+    step inverted (> 1: the numerator is cheaper)."""
     by = {(r["name"], r["num_envs"]): r for r in rows}
     out = []
     for num, den, n, target in TARGETS:
         a, b = by.get((num, n)), by.get((den, n))
         if a and b:
-            out.append({"ratio": f"{num} / {den}, N={n}", "value": a["median"] / b["median"], "target": target})
+            out.append(
+                {
+                    "ratio": f"{num} / {den}, N={n}",
+                    "value": a["median"] / b["median"],
+                    "target": target,
+                    "rounds": paired_rounds(a, b),
+                }
+            )
     for num, den, n, _ in TARGETS:
         a, b = by.get((num, n)), by.get((den, n))
         if a and b:
@@ -256,6 +265,36 @@ def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 }
             )
     return out
+
+
+def paired_rounds(a: dict[str, Any], b: dict[str, Any]) -> list[float]:
+    """Row ``a``'s rate over row ``b``'s in each round, in round order ([]
+    when either lacks its rates or they ran a different number of rounds).
+
+    A round runs every contender once, one after the other, so the two rates
+    of one round met the same host; how far these ratios spread shows how
+    much of a ratio of medians is the host's drift between rounds."""
+    ra, rb = a.get("rates") or [], b.get("rates") or []
+    if len(ra) != len(rb):
+        return []
+    return [x / y for x, y in zip(ra, rb) if y > 0]
+
+
+def _verdict(r: dict[str, Any]) -> str:
+    """The target column of ratio ``r``: met or missed by the ratio of medians,
+    and in how many rounds the round's own ratio met it."""
+    if r["target"] is None:
+        return ""
+    verdict = f">={r['target']:.1f} {'met' if r['value'] >= r['target'] else 'MISSED'}"
+    paired = r.get("rounds") or []
+    if paired:
+        verdict += f" ({sum(x >= r['target'] for x in paired)}/{len(paired)} rounds)"
+    return verdict
+
+
+def _spread(r: dict[str, Any]) -> str:
+    paired = r.get("rounds") or []
+    return f"{min(paired):.2f}-{max(paired):.2f}" if paired else ""
 
 
 def format_table(result: dict[str, Any]) -> str:
@@ -278,13 +317,11 @@ def format_table(result: dict[str, Any]) -> str:
         "vol/invol: context switches per step of every thread of the process tree; "
         "act/step/update: shares of the trainer's wall time",
         "",
-        f"{'ratio of medians (> 1: numerator better)':44s} {'value':>6s} {'target':>12s}",
+        f"{'ratio of medians (> 1: numerator better)':44s} {'value':>6s} {'rounds':>9s}   target",
     ]
     for r in result["ratios"]:
-        target = (
-            "" if r["target"] is None else f">={r['target']:.1f} {'met' if r['value'] >= r['target'] else 'MISSED'}"
-        )
-        lines.append(f"{r['ratio']:44s} {r['value']:6.2f} {target:>12s}")
+        lines.append(f"{r['ratio']:44s} {r['value']:6.2f} {_spread(r):>9s}   {_verdict(r)}".rstrip())
+    lines.append("rounds: the lowest and highest ratio of one round's two rates (they ran one after the other)")
     m = result["machine"]
     loads = ", ".join(f"{x:.2f}" for x in result["load_avg_per_round"])
     extra = " ".join(f"{k}={v}" for k, v in result["train_env"].items())

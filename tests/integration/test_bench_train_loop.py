@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from remoteenv.benchmarks.train_loop import _contender, ratios
+from remoteenv.benchmarks.train_loop import _contender, format_table, ratios
 
 
 def test_a_tiny_training_loop_benchmark_writes_every_contender_and_the_ratios(tmp_path):
@@ -85,3 +85,39 @@ def test_a_contender_with_its_own_pythonpath_runs_that_code_whatever_the_working
         assert trainer.ready == {"module": "its PYTHONPATH"}
     finally:
         trainer.close()
+
+
+def test_each_ratio_carries_its_ratio_round_by_round_and_the_table_counts_the_rounds_that_met_it():
+    rows = [
+        {"name": "remoteenv", "num_envs": 16, "median": 110.0, "rates": [90.0, 110.0, 120.0], "cpu_us_per_step": 1.0},
+        {"name": "EnvPool", "num_envs": 16, "median": 100.0, "rates": [100.0, 100.0, 100.0], "cpu_us_per_step": 1.0},
+        # A row whose rounds cannot be paired (another count): no ratio round by round.
+        {"name": "SyncVectorEnv", "num_envs": 16, "median": 50.0, "rates": [50.0], "cpu_us_per_step": 1.0},
+    ]
+    found = {r["ratio"]: r for r in ratios(rows)}
+    assert found["remoteenv / EnvPool, N=16"]["rounds"] == pytest.approx([0.9, 1.1, 1.2])
+    assert found["remoteenv / SyncVectorEnv, N=16"]["rounds"] == []
+    result = {
+        "rows": rows,
+        "ratios": list(found.values()),
+        "machine": {"cpus": 2, "platform": "p", "python": "3"},
+        "load_avg_per_round": [1.0],
+        "date": "d",
+        "rounds": 3,
+        "duration_s": 1.0,
+        "hogs": 0,
+        "train_env": {},
+        "skipped": [],
+    }
+    rows[0]["wall_share"] = rows[1]["wall_share"] = rows[2]["wall_share"] = {"act": 0, "env_step": 0, "update": 0}
+    for r in rows:
+        r.update(trainer_cpu_us_per_step=1.0, voluntary_switches_per_step=0.0, involuntary_switches_per_step=0.0)
+    lines = format_table(result).splitlines()
+    [envpool] = [line for line in lines if line.startswith("remoteenv / EnvPool, N=16")]
+    assert envpool.split()[-6:] == ["1.10", "0.90-1.20", ">=1.0", "met", "(2/3", "rounds)"]
+    [sync] = [line for line in lines if line.startswith("remoteenv / SyncVectorEnv, N=16")]
+    assert sync.split()[-3:] == ["2.20", ">=1.5", "met"]
+    # A result written before ratios had their rounds still reads.
+    for r in result["ratios"]:
+        r.pop("rounds", None)
+    assert "MISSED" not in format_table(result)
