@@ -269,15 +269,16 @@ def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def paired_rounds(a: dict[str, Any], b: dict[str, Any]) -> list[float]:
     """Row ``a``'s rate over row ``b``'s in each round, in round order ([]
-    when either lacks its rates or they ran a different number of rounds).
+    when either lacks its rates, they ran a different number of rounds or a
+    rate of ``b`` is not positive).
 
     A round runs every contender once, one after the other, so the two rates
     of one round met the same host; how far these ratios spread shows how
     much of a ratio of medians is the host's drift between rounds."""
     ra, rb = a.get("rates") or [], b.get("rates") or []
-    if len(ra) != len(rb):
+    if len(ra) != len(rb) or not all(y > 0 for y in rb):
         return []
-    return [x / y for x, y in zip(ra, rb) if y > 0]
+    return [x / y for x, y in zip(ra, rb)]
 
 
 def _verdict(r: dict[str, Any]) -> str:
