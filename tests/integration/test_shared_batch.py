@@ -15,6 +15,7 @@ from remoteenv.agent.connection import shared_lane_client as shared_lane
 from remoteenv.agent.connection.connect import Connection
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.agent.launch.launcher import Launcher
+from remoteenv.agent.vector import lean_step
 from remoteenv.wire.shared_memory import doorbell
 
 
@@ -57,6 +58,26 @@ def test_the_region_gives_the_results_of_the_msgpack_path(monkeypatch, env_id, a
     plain = _trajectory(env_id, 6, 120, 3, autoreset)
     assert shared[-1] == ("lanes", [True, True]) and plain[-1] == ("lanes", [False, False])
     assert_same(shared[:-1], plain[:-1], "trajectory")
+
+
+@pytest.mark.parametrize("env_id", ["remoteenv/Reacher-v0", "remoteenv/CartPole-v0"])
+def test_plain_steps_of_one_process_go_lean_with_the_usual_results(monkeypatch, env_id):
+    posted: list[bool] = []
+    post = lean_step.LeanStep.post
+
+    def counted(self, *args):
+        seq = post(self, *args)
+        posted.append(seq is not None)
+        return seq
+
+    monkeypatch.setattr(lean_step.LeanStep, "post", counted)
+    lean = _trajectory(env_id, 6, 120, 6, "NextStep")
+    monkeypatch.setattr(lean_step.LeanStep, "post", lambda self, *args: None)
+    usual = _trajectory(env_id, 6, 120, 6, "NextStep")
+    # Every step but the first and those that reset a world can go lean.
+    assert len(posted) == 120 and sum(posted) >= 60, posted
+    assert lean[-1] == usual[-1] == ("lanes", [True])
+    assert_same(lean[:-1], usual[:-1], "trajectory")
 
 
 def test_only_the_launching_pipe_gets_the_region():

@@ -19,3 +19,24 @@ def no_processes(monkeypatch: pytest.MonkeyPatch) -> None:
     for name in ("fork", "forkpty", "posix_spawn", "posix_spawnp", "system", "execv", "execve"):
         if hasattr(os, name):
             monkeypatch.setattr(os, name, _refuse)
+
+
+@pytest.fixture
+def lane(monkeypatch):
+    """An agent's pipe and doorbell, the stand-in sim's socket and doorbell on the same header
+    (no cool-down left by an earlier stall in this process)."""
+    import socket
+
+    import numpy as np
+    from fakes import hot_waits_allowed
+
+    from remoteenv.agent.connection.pipe_connection import PipeConnection
+    from remoteenv.wire.shared_memory.doorbell import Doorbell
+
+    hot_waits_allowed(monkeypatch)
+    agent_end, sim_end = socket.socketpair()
+    header = np.zeros(16, dtype="<i8")
+    conn = PipeConnection(agent_end, timeout=10.0)
+    yield conn, Doorbell(header, silent=True), sim_end, Doorbell(header, silent=True)
+    conn.close()
+    sim_end.close()

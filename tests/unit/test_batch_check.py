@@ -17,6 +17,7 @@ SPACES = [
     spaces.Box(-3.0, 3.0, (2, 2), np.float64),
     spaces.Box(0, 10, (3,), np.int64),
     spaces.Box(np.float32(0.1), np.float32(0.7), (1,), np.float32),
+    spaces.Box(-np.inf, np.inf, (2,), np.float64),  # one pair of bounds, both infinite
     spaces.Discrete(4, start=1),
 ]
 
@@ -50,6 +51,9 @@ def _candidates(space, n, rng):
         yield arr
         yield arr.astype(np.float32)
     yield np.nextafter(np.broadcast_to(high, shape).astype(np.float32), np.float32(np.inf))
+    both = inside.astype(np.float64).copy()  # inf and -inf together: their sum is NaN, yet no element is
+    both.reshape(-1)[:2] = (np.inf, -np.inf) if both.size >= 2 else (np.inf,)
+    yield both
     yield np.zeros(shape, np.bool_)
     yield np.zeros(shape, np.int8)
     yield np.zeros((n + 1, *space.shape), space.dtype)  # another shape

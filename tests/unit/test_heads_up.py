@@ -12,7 +12,6 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
-from fakes import hot_waits_allowed
 from gymnasium import spaces
 
 from remoteenv.agent.connection.pipe_connection import PipeConnection
@@ -24,19 +23,6 @@ from remoteenv.wire.shared_memory.doorbell import AGENT_HEADS_UP, AGENT_WATCHING
 from remoteenv.wire.shared_memory.hot_wait import usable_cpus
 
 needs_two_cpus = pytest.mark.skipif(usable_cpus() < 2, reason="no hot waits (nor heads-ups) on one CPU")
-
-
-@pytest.fixture
-def lane(monkeypatch):
-    """An agent's pipe and doorbell, the stand-in sim's socket and doorbell on the same header
-    (no cool-down left by an earlier stall in this process)."""
-    hot_waits_allowed(monkeypatch)
-    agent_end, sim_end = socket.socketpair()
-    header = np.zeros(16, dtype="<i8")
-    conn = PipeConnection(agent_end, timeout=10.0)
-    yield conn, Doorbell(header, silent=True), sim_end, Doorbell(header, silent=True)
-    conn.close()
-    sim_end.close()
 
 
 def _sim(work: Callable[[], None]) -> threading.Thread:

@@ -20,6 +20,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
+from remoteenv.agent.connection.region_watch import RegionWatch
 from remoteenv.agent.connection.sim_connection import LIVENESS_CHECK_S, SimConnection
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.wire import protocol
@@ -44,7 +45,7 @@ LANE_SPIN_S = 500e-6
 HEADS_UP_WAIT_S = 1e-3
 
 
-class PipeConnection(SimConnection):
+class PipeConnection(RegionWatch, SimConnection):
     """Request/reply channel to a sim this process launched, over its local pipe.
 
     A vector call waits for its pipes' replies in turn (:attr:`waits_in_turn`):
@@ -115,66 +116,26 @@ class PipeConnection(SimConnection):
     def _read(self, wait: bool) -> None:
         """Move whatever has arrived (with ``wait``: waiting up to
         :data:`LIVENESS_CHECK_S` for something) into the frame queue."""
-        if self._eof:
+        if not self._read_quietly(wait):
             self._check_alive("a reply", closed=True)
+
+    def _read_quietly(self, wait: bool) -> bool:
+        """:meth:`_read`, but False at the pipe's end (nothing raised: the wait that reports it is the caller's)."""
+        if self._eof:
+            return False
         data = self._decoder.recv_from(self.pipe, wait)
         if data is None:
-            return
+            return True
         if not data:
             self._eof = True
-            self._check_alive("a reply", closed=True)
+            return False
         try:
             self._frames.extend(self._decoder.feed(data))
         except protocol.ProtocolError as exc:
             raise RemoteEnvError(
                 f"sim instance {self.instance} broke the pipe framing: {exc}", kind="protocol", instance=self.instance
             ) from None
-
-    # ------------------------------------------------------------ the shared region's fast lane
-
-    def post(self, doorbell: Doorbell, n: int, named: bool, think_s: float = 0.0, plain: bool = False) -> int:
-        """Post a ``step_batch`` whose ops, worlds and actions are in the shared
-        region (written by the caller; see :mod:`remoteenv.wire.shared_memory.doorbell`);
-        its frame goes on the pipe only when the sim sleeps. ``think_s``: the
-        agent's think time before it (seconds, 0: not told; the doorbell's
-        ``AGENT_THINK_US``); ``plain``: every position steps, none resets
-        first (its reply may be waited for hot, see :data:`LANE_SPIN_S`). Returns its ``seq``:
-        its reply comes as a frame or in the region (a reply map with
-        ``"region": true`` either way)."""
-        if self.closed:
-            raise RemoteEnvError(
-                f"connection to sim instance {self.instance} is closed", kind="state", instance=self.instance
-            )
-        self._seq += 1
-        seq = self._seq
-        self._unanswered[seq] = None
-        self._watch = (seq, doorbell)
-        self._watch_plain = plain
-        if doorbell.post(seq, n, named, think_s):
-            self._send_frame(protocol.region_ring(seq))
-        return seq
-
-    def _region_reply(self) -> dict[str, Any] | None:
-        """The awaited reply, if it is the region's and the region holds it
-        (then the watch ends). Frames for requests sent later may be buffered
-        already: they wait for their turn (replies come in request order)."""
-        watch = self._watch
-        if watch is None or watch[0] != self._awaiting or not watch[1].answered(watch[0]):
-            return None
-        self._watch = None
-        return {"seq": watch[0], "ok": True, "region": True}
-
-    def will_block(self) -> bool:
-        """The caller is about to block on :attr:`pollable`: make the sim send a
-        frame when it answers the region's request. False if the region holds
-        the reply already (then do not block); call :meth:`woke` after the block."""
-        watch = self._watch
-        return watch is None or watch[1].agent_sleeps(watch[0])
-
-    def woke(self) -> None:
-        """After a block that :meth:`will_block` prepared: back to watching the region."""
-        if self._watch is not None:
-            self._watch[1].agent_wakes()
+        return True
 
     def receive(self, seq: int, timeout: float | None = ..., what: str = "reply") -> dict[str, Any]:  # type: ignore[assignment]
         self._awaiting = seq
@@ -259,29 +220,6 @@ class PipeConnection(SimConnection):
                     if region is not None:
                         return region
         return self._frames.popleft() if self._frames else None
-
-    def _after_heads_up(self, seq: int) -> dict[str, Any] | None:
-        """If the frames just read hold the sim's heads-up for ``seq`` (its
-        physics is done, its reply due), drop it and wait hot for the reply, at
-        most :data:`HEADS_UP_WAIT_S`: the region's reply, else None (a frame
-        came, or the wait ran out: the caller goes on as after any wake-up)."""
-        soon = protocol.reply_soon(seq)
-        if soon not in self._frames:
-            return None
-        self._frames.remove(soon)
-        self.heads_ups += 1
-        if self._frames or not self._soon.begin():
-            return None
-        while True:
-            region = self._region_reply()
-            if region is not None:
-                return region
-            # Yields the CPU between looks: the sim may share this one.
-            if not self._soon.spin():
-                return None
-            self._read(False)
-            if self._frames:
-                return None
 
     def _recv_frame_nowait(self) -> Any:
         region = self._region_reply() or self._take_held()

@@ -140,6 +140,8 @@ class SharedLanes:
         self._pending: dict[int, int] = {}
         #: The processes whose last actions went through their region (``"shared": true`` requests).
         self._written: set[int] = set()
+        #: Changes whenever what is kept of a region changes (a :class:`LaneReady` of an older one is stale).
+        self.generation = 0
 
     def get(self, p: int, conn: SimConnection, offered: bool) -> SharedArrays | None:
         """Process ``p``'s region (``conn`` is its connection; ``offered``: its
@@ -147,12 +149,7 @@ class SharedLanes:
         known = self._lanes.get(p)
         if known is not None and known[0] is conn:
             return known[1]
-        if known is not None and known[1] is not None:
-            known[1].close()
-        self._bells.pop(p, None)
-        self._infos.pop(p, None)
-        self._views.pop(p, None)
-        self._blocks.pop(p, None)
+        self._drop(p)
         self._pending.pop(p, None)
         arrays = attach(conn) if offered and conn.waits_in_turn else None
         if arrays is not None and self._obs_layout is not None:
@@ -197,6 +194,7 @@ class SharedLanes:
             blocks = self._blocks[p] = _RequestBlocks(arrays, n)
         blocks.actions[...] = actions
         if ops is not blocks.ops_written:
+            self.generation += 1
             blocks.ops[...] = ops
             blocks.ops_written = None if ops.flags.writeable else ops
             blocks.plain = _plain(ops)
@@ -286,7 +284,27 @@ class SharedLanes:
         view = self._views.get(p)
         if view is None or view.n != n or view.version != version:
             view = self._views[p] = RegionReply(arrays, version, infos[1], n)
+            self.generation += 1
         return view
+
+    def ready(self, p: int, conn: SimConnection, n: int, ops: np.ndarray) -> LaneReady | None:
+        """What a plain step of ``n`` positions of process ``p`` (connection
+        ``conn``) with the read-only ``ops`` needs to go through its region with
+        no look-up on the way, once such a step went the usual way (its request
+        blocks hold ``ops``, its reply views and info layout are known); else None."""
+        known, bell, infos = self._lanes.get(p), self._bells.get(p), self._infos.get(p)
+        blocks, view = self._blocks.get(p), self._views.get(p)
+        if known is None or known[0] is not conn or bell is None or infos is None or blocks is None or view is None:
+            return None
+        if (
+            blocks.n != n
+            or blocks.ops_written is not ops
+            or not blocks.plain
+            or view.n != n
+            or view.version != infos[0]
+        ):
+            return None
+        return LaneReady(self, p, conn, bell, blocks.actions, ops, view)
 
     def _tampered(self, p: int, conn: SimConnection) -> bool:
         """Whether process ``p``'s region header is not what the two sides can
@@ -296,22 +314,28 @@ class SharedLanes:
         why = None if bell is None else bell.agent_tampered()
         if why is None:
             return False
+        self._drop(p)
+        self._lanes[p] = (conn, None)
+        _fall_back(conn, f"it was tampered with: {why}")
+        return True
+
+    def _drop(self, p: int) -> None:
+        """Unmap process ``p``'s region and forget what was kept of it (its request in flight aside)."""
         known = self._lanes.get(p)
         if known is not None and known[1] is not None:
             known[1].close()
-        self._lanes[p] = (conn, None)
         self._bells.pop(p, None)
         self._infos.pop(p, None)
         self._views.pop(p, None)
         self._blocks.pop(p, None)
-        _fall_back(conn, f"it was tampered with: {why}")
-        return True
+        self.generation += 1
 
     def _learn(self, p: int, conn: SimConnection, layout: Any) -> None:
         arrays = self._lanes[p][1]
         if arrays is None or arrays.info is None or self._checks is None:
             return
         known = self._infos.get(p)
+        self.generation += 1
         self._infos[p] = self._checks.info_layout(conn, layout, arrays.layout.info_columns, known[0] if known else 0)
 
     @staticmethod
@@ -328,6 +352,29 @@ class SharedLanes:
         self._views.clear()
         self._blocks.clear()
         self._pending.clear()
+        self.generation += 1
+
+
+class LaneReady:
+    """A process's region as :meth:`SharedLanes.ready` found it ready for plain
+    steps: valid while :attr:`SharedLanes.generation` stays :attr:`generation`."""
+
+    __slots__ = ("actions", "bell", "conn", "generation", "ops", "p", "pending", "view")
+
+    def __init__(
+        self,
+        lanes: SharedLanes,
+        p: int,
+        conn: SimConnection,
+        bell: Doorbell,
+        actions: np.ndarray,
+        ops: np.ndarray,
+        view: RegionReply,
+    ) -> None:
+        self.generation = lanes.generation
+        #: The lanes' requests in flight by process (a request posted here is entered there).
+        self.pending = lanes._pending
+        self.p, self.conn, self.bell, self.actions, self.ops, self.view = p, conn, bell, actions, ops, view
 
 
 class _RequestBlocks:
@@ -362,4 +409,4 @@ def _fits(block: np.ndarray, actions: Any) -> bool:
     )
 
 
-__all__ = ["RegionReply", "SharedLanes", "attach"]
+__all__ = ["LaneReady", "RegionReply", "SharedLanes", "attach"]

@@ -29,6 +29,7 @@ from remoteenv.agent.launch.restart import restarted_info
 from remoteenv.agent.session.reset_args import split_reset_mask, world_seeds
 from remoteenv.agent.session.sim_session import SimSession
 from remoteenv.agent.vector.autoreset import after_reset, after_step, plan_ops
+from remoteenv.agent.vector.lean_step import LeanStep
 from remoteenv.agent.vector.vector_async import AsyncWorlds, assemble_chunks
 from remoteenv.agent.vector.vector_layout import check_sims
 from remoteenv.agent.vector.vector_requests import VectorRequests
@@ -79,7 +80,14 @@ class VectorEpisodes:
         same_step = autoreset_mode == AutoresetMode.SAME_STEP
         self.requests = VectorRequests(session, self.slices, real_time=real_time, same_step=same_step)
         self.async_worlds = AsyncWorlds(session, self.slices, n, self.requests.lanes)
-        self._pending_step: tuple[np.ndarray, Any, dict[int, int], float] | None = None
+        #: Plain steps through the region of the only sim process, when there is one such (else None).
+        self._lean = (
+            LeanStep(session, self.requests.lanes, n, observation_space.dtype)
+            if len(self.slices) == 1 and not self.requests.plain_steps and self.obs_batch.box
+            else None
+        )
+        #: The step in flight: its ops, actions, ``{process: seq}``, start time, and whether :attr:`_lean` posted it.
+        self._pending_step: tuple[np.ndarray, Any, dict[int, int], float, bool] | None = None
         #: Steps of each world's current episode.
         self.elapsed = np.zeros(n, dtype=np.int64)
         #: Worlds whose episode ended and that the next step resets.
@@ -136,17 +144,23 @@ class VectorEpisodes:
         acts = self.check_actions(actions, self.num_envs)
         ops = plan_ops(self.mode, self.needs_reset, self.elapsed, self.max_episode_steps)
         started = time.perf_counter()
-        self._pending_step = (ops, acts, self.requests.start_step(ops, acts, think_s), started)
+        lean = self._lean
+        seq = None if lean is None else lean.post(ops, acts, think_s)
+        pending = {0: seq} if seq is not None else self.requests.start_step(ops, acts, think_s)
+        self._pending_step = (ops, acts, pending, started, seq is not None)
 
     def finish_step(self, add_info: AddInfo) -> tuple[StepResult, float]:
         """The results of the step :meth:`start_step` sent, and its wall round trip (s)."""
         if self._pending_step is None:
             raise StateError("step_wait() without step_async(): nothing is in flight")
-        ops, acts, pending, started = self._pending_step
+        ops, acts, pending, started, lean = self._pending_step
         self._pending_step = None
-        results = self.requests.finish_step(pending, ops, acts, self.obs, self.obs_batch)
+        out = self._lean.finish(pending[0]) if lean and self._lean is not None else None
+        if out is None:
+            results = self.requests.finish_step(pending, ops, acts, self.obs, self.obs_batch)
+            out = assemble(results, self.slices, self.obs_batch, add_info)
         round_trip = time.perf_counter() - started
-        obs, rewards, terminated, truncated, infos = assemble(results, self.slices, self.obs_batch, add_info)
+        obs, rewards, terminated, truncated, infos = out
         mode, limit = self.mode, self.max_episode_steps
         truncated, self.elapsed, self.needs_reset = after_step(mode, ops, terminated, truncated, self.elapsed, limit)
         self.obs = obs

@@ -196,7 +196,7 @@ def _from_regions(
     n = obs_batch.num_envs
     space = obs_batch.space
     if len(slices) == 1:
-        return _from_one_region(results[0], n, space.dtype)
+        return from_one_region(results[0], n, space.dtype)
     obs = np.empty((n, *space.shape), dtype=space.dtype)  # type: ignore[misc]
     rewards = np.empty(n, dtype=np.float64)
     terminated = np.empty(n, dtype=np.bool_)
@@ -218,7 +218,7 @@ def _from_regions(
     return obs, rewards, terminated, truncated, infos
 
 
-def _from_one_region(
+def from_one_region(
     r: RegionReply, n: int, obs_dtype: Any
 ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
     """:func:`_from_regions` for one process's region, which holds every world:
@@ -239,4 +239,4 @@ def _from_one_region(
     )
 
 
-__all__ = ["ObsBatch", "assemble", "reset_reply_as_batch", "step_reply_as_batch"]
+__all__ = ["ObsBatch", "assemble", "from_one_region", "reset_reply_as_batch", "step_reply_as_batch"]

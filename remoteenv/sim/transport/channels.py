@@ -20,6 +20,8 @@ from remoteenv.wire import protocol
 from remoteenv.wire.shared_memory.hot_wait import HotWait
 from remoteenv.wire.wire_errors import PROTOCOL, STATE
 
+#: A hot wait on the pipe with a region reads the pipe once every this many looks at the region.
+PIPE_LOOK_EVERY = 4
 #: Routing ids whose connection is noted at most (beyond: drivers' only).
 _MAX_PEERS_NOTED = 4 * MAX_PEERS
 
@@ -277,13 +279,21 @@ class PipeChannel:
 
         Waiting hot avoids the sleep/wake-up of a blocking wait, which on a
         virtual machine costs tens of microseconds per message. It stops when
-        the agent says in the region that its caller began a long think.
+        the agent says in the region that its caller began a long think. With
+        the region's lane it reads the pipe on every :data:`PIPE_LOOK_EVERY`-th
+        look only, and whenever a request is posted there (the frames the
+        agent sent before it are then served first).
         """
         lane = self.lane
+        looks = 0
         while True:
-            frames = self.receive_nowait()
-            if frames or self.closed or (lane is not None and lane.agent_away()) or not hot.spin():
-                return frames
+            if lane is None or looks % PIPE_LOOK_EVERY == 0 or lane.posted():
+                frames = self.receive_nowait()
+                if frames or self.closed:
+                    return frames
+            looks += 1
+            if (lane is not None and lane.agent_away()) or not hot.spin():
+                return []
 
     def send(self, reply_to: Any, payload: bytes) -> None:
         try:

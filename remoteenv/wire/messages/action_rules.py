@@ -125,9 +125,11 @@ class BatchCheck:
     accepts, returns and refuses exactly what ``check_actions(space, actions, n)`` does.
 
     A numeric array of a small Box batch (at most :data:`SMALL_BOX_ELEMENTS`
-    elements) is compared element by element as Python numbers (exact: a
-    value of the space's dtype widens to a Python float or int without
-    rounding; NaN compares False). A larger one whose elements all share
+    elements) is compared as Python numbers (exact: a value of the space's
+    dtype widens to a Python float or int without rounding): with one pair of
+    bounds for every element, its smallest and largest element, trusted when
+    the elements' sum is a number (no NaN among them); with bounds per
+    element, element by element (NaN compares False). A larger one whose elements all share
     one pair of bounds (the usual Box) is accepted on its smallest and
     largest element, two reductions (numpy's minimum and maximum propagate
     NaN, which compares False). Anything else, and every refusal with its
@@ -161,8 +163,10 @@ class BatchCheck:
             if actions.size <= SMALL_BOX_ELEMENTS:
                 values = arr.reshape(-1).tolist()
                 if uniform is not None:
-                    lo, hi = uniform
-                    inside = all(lo <= v <= hi for v in values)
+                    # min and max are exact unless a NaN is there, and then the sum is NaN
+                    # (or where inf meets -inf: the exact check below decides).
+                    total = sum(values)
+                    inside = total == total and uniform[0] <= min(values) and max(values) <= uniform[1]
                 else:
                     inside = all(lo <= v <= hi for v, lo, hi in zip(values, cycle(self._lows), cycle(self._highs)))
                 if inside:

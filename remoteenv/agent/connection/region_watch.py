@@ -1,0 +1,167 @@
+"""The agent's watch of a request posted in a sim's shared region (the fast lane).
+
+Runs in the agent process: the part of :class:`~remoteenv.agent.connection.pipe_connection.PipeConnection`
+that posts ``step_batch`` requests in the region of its sim
+(:mod:`remoteenv.wire.shared_memory.doorbell`) and looks there for their
+replies: within the connection's frame reading (:meth:`RegionWatch._region_reply`,
+the heads-up's hot wait) and, for a vector step that waits for nothing else,
+on its own (:meth:`RegionWatch.wait_region`: no frame handled, no reply map
+made while the reply comes in the region).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.wire import protocol
+from remoteenv.wire.shared_memory.doorbell import Doorbell
+from remoteenv.wire.shared_memory.hot_wait import HotWait
+
+#: A hot wait for a region reply reads the pipe (for an error or another frame) once every this many looks.
+PIPE_LOOK_EVERY = 4
+
+
+class RegionWatch:
+    """The fast lane's side of a pipe connection (a mixin of
+    :class:`~remoteenv.agent.connection.pipe_connection.PipeConnection`, which
+    sets the attributes below)."""
+
+    instance: int
+    closed: bool
+    heads_ups: int
+    _seq: int
+    _unanswered: Any
+    _frames: deque[Any]
+    _held: dict[int, dict[str, Any]]
+    _eof: bool
+    _watch: tuple[int, Doorbell] | None
+    _watch_plain: bool
+    _awaiting: int
+    _hot: HotWait
+    _lane_hot: HotWait
+    _soon: HotWait
+    _read: Callable[[bool], None]
+    _read_quietly: Callable[[bool], bool]
+    _send_frame: Callable[[bytes], None]
+
+    def post(self, doorbell: Doorbell, n: int, named: bool, think_s: float = 0.0, plain: bool = False) -> int:
+        """Post a ``step_batch`` whose ops, worlds and actions are in the shared
+        region (written by the caller; see :mod:`remoteenv.wire.shared_memory.doorbell`);
+        its frame goes on the pipe only when the sim sleeps. ``think_s``: the
+        agent's think time before it (seconds, 0: not told; the doorbell's
+        ``AGENT_THINK_US``); ``plain``: every position steps, none resets
+        first (its reply may be waited for hot, see :data:`LANE_SPIN_S`). Returns its ``seq``:
+        its reply comes as a frame or in the region (a reply map with
+        ``"region": true`` either way)."""
+        if self.closed:
+            raise RemoteEnvError(
+                f"connection to sim instance {self.instance} is closed", kind="state", instance=self.instance
+            )
+        self._seq += 1
+        seq = self._seq
+        self._unanswered[seq] = None
+        self._watch = (seq, doorbell)
+        self._watch_plain = plain
+        if doorbell.post(seq, n, named, think_s):
+            self._send_frame(protocol.region_ring(seq))
+        return seq
+
+    def _region_reply(self) -> dict[str, Any] | None:
+        """The awaited reply, if it is the region's and the region holds it
+        (then the watch ends). Frames for requests sent later may be buffered
+        already: they wait for their turn (replies come in request order)."""
+        watch = self._watch
+        if watch is None or watch[0] != self._awaiting or not watch[1].answered(watch[0]):
+            return None
+        self._watch = None
+        return {"seq": watch[0], "ok": True, "region": True}
+
+    def will_block(self) -> bool:
+        """The caller is about to block on :attr:`pollable`: make the sim send a
+        frame when it answers the region's request. False if the region holds
+        the reply already (then do not block); call :meth:`woke` after the block."""
+        watch = self._watch
+        return watch is None or watch[1].agent_sleeps(watch[0])
+
+    def woke(self) -> None:
+        """After a block that :meth:`will_block` prepared: back to watching the region."""
+        if self._watch is not None:
+            self._watch[1].agent_wakes()
+
+    def wait_region(self, seq: int) -> bool:
+        """Wait for the reply to request ``seq``, posted in the region, as
+        :meth:`receive` waits for it, while nothing else needs handling: True
+        once the region holds it (the request is answered: read its blocks);
+        False as soon as anything else must be read first (a frame came or is
+        held, the pipe ended, a blocked wait ran out): then :meth:`receive`
+        takes over the wait where it stands. Never raises for the sim."""
+        watch = self._watch
+        if watch is None or watch[0] != seq or self._frames or self._held or self._eof:
+            return False
+        bell = watch[1]
+        self._awaiting = seq
+        if not bell.answered(seq):
+            hot = self._lane_hot if self._watch_plain else self._hot
+            if hot.worth_it():
+                start = time.perf_counter()
+                looks = 0
+                while not bell.answered(seq):
+                    if not hot.spin():
+                        hot.waited(float("inf"))
+                        break
+                    looks += 1
+                    if looks % PIPE_LOOK_EVERY == 0 and (not self._read_quietly(False) or self._frames):
+                        return False
+                else:
+                    hot.waited(time.perf_counter() - start)
+            if not bell.answered(seq) and not self._block_for(seq, bell):
+                return False
+        self._watch = None
+        self._unanswered.pop(seq, None)
+        return True
+
+    def _block_for(self, seq: int, bell: Doorbell) -> bool:
+        """Block on the pipe for the region's reply to ``seq`` (asking for a
+        heads-up where waiting hot after it is allowed): whether the region holds it after."""
+        if bell.agent_sleeps(seq, heads_up=self._soon.allowed()):
+            try:
+                read = self._read_quietly(True)
+            finally:
+                bell.agent_wakes()
+            if not read:
+                return False
+            if self._after_heads_up(seq) is not None:
+                return True
+            if self._frames:
+                return False
+        return bell.answered(seq)
+
+    def _after_heads_up(self, seq: int) -> dict[str, Any] | None:
+        """If the frames just read hold the sim's heads-up for ``seq`` (its
+        physics is done, its reply due), drop it and wait hot for the reply, at
+        most :data:`HEADS_UP_WAIT_S`: the region's reply, else None (a frame
+        came, or the wait ran out: the caller goes on as after any wake-up)."""
+        soon = protocol.reply_soon(seq)
+        if soon not in self._frames:
+            return None
+        self._frames.remove(soon)
+        self.heads_ups += 1
+        if self._frames or not self._soon.begin():
+            return None
+        while True:
+            region = self._region_reply()
+            if region is not None:
+                return region
+            # Yields the CPU between looks: the sim may share this one.
+            if not self._soon.spin():
+                return None
+            self._read(False)
+            if self._frames:
+                return None
+
+
+__all__ = ["PIPE_LOOK_EVERY", "RegionWatch"]

@@ -1,0 +1,75 @@
+"""The agent's wait for a reply in its sim's region with nothing else on the
+way (:meth:`~remoteenv.agent.connection.region_watch.RegionWatch.wait_region`),
+against a stand-in sim on a socketpair: a reply in the region is taken; a
+heads-up is followed; anything else is left, unread or queued, for
+``receive``, which then reports or returns it as it always did."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from remoteenv.agent.errors import RemoteEnvError
+from remoteenv.wire import protocol
+from remoteenv.wire.shared_memory import hot_wait
+from remoteenv.wire.shared_memory.doorbell import AGENT_HEADS_UP
+from remoteenv.wire.shared_memory.hot_wait import usable_cpus
+
+
+def test_a_reply_in_the_region_is_taken_and_its_request_answered(lane):
+    conn, agent_bell, _, sim_bell = lane
+    seq = conn.post(agent_bell, 2, False, plain=True)
+    assert not conn.wait_region(seq + 1)  # another request's: nothing to wait for
+    sim_bell.reply(seq, 0)
+    assert conn.wait_region(seq)
+    assert seq not in conn._unanswered
+    assert not conn.wait_region(seq)  # the watch ended with it
+
+
+def test_an_error_frame_instead_is_left_for_receive_to_raise(lane):
+    conn, agent_bell, sim_end, _ = lane
+    seq = conn.post(agent_bell, 2, False, plain=True)
+    sim_end.sendall(protocol.stream_frame(protocol.pack(protocol.error_reply(seq, "scene", "boom"))))
+    assert not conn.wait_region(seq)
+    with pytest.raises(RemoteEnvError) as info:
+        conn.receive(seq)
+    assert info.value.kind == "scene" and "boom" in str(info.value)
+
+
+def test_the_pipe_s_end_is_left_for_receive_to_report(lane):
+    conn, agent_bell, sim_end, _ = lane
+    seq = conn.post(agent_bell, 2, False, plain=True)
+    sim_end.close()
+    assert not conn.wait_region(seq)  # nothing raised here
+    with pytest.raises(RemoteEnvError) as info:
+        conn.receive(seq)
+    assert info.value.kind == "died"
+
+
+@pytest.mark.skipif(usable_cpus() < 2, reason="no hot waits (nor heads-ups) on one CPU")
+def test_a_blocked_wait_follows_the_heads_up_to_the_region_reply(lane, monkeypatch):
+    conn, agent_bell, sim_end, sim_bell = lane
+    conn._lane_hot.window_s = 0.0  # straight to the blocked wait
+    conn._soon.window_s = 30.0  # and after the heads-up, hot until the reply however the threads run
+    monkeypatch.setattr(hot_wait, "STALL_S", 30.0)
+    seq = conn.post(agent_bell, 2, False, plain=True)
+    frames: list[bool] = []
+
+    def sim() -> None:
+        deadline = time.monotonic() + 10.0
+        while not sim_bell.agent_wants_heads_up():
+            assert time.monotonic() < deadline
+            time.sleep(0.0002)
+        sim_end.sendall(protocol.stream_frame(protocol.reply_soon(seq)))
+        while sim_bell.agent_wants_heads_up():
+            time.sleep(0.0002)
+        frames.append(sim_bell.reply(seq, 0))
+
+    thread = threading.Thread(target=sim, daemon=True)
+    thread.start()
+    assert conn.wait_region(seq)
+    thread.join(5)
+    assert frames == [False]  # the woken agent watched: the reply needed no frame
+    assert conn.heads_ups == 1 and agent_bell.word(AGENT_HEADS_UP) == 0
