@@ -60,8 +60,8 @@ def test_the_region_gives_the_results_of_the_msgpack_path(monkeypatch, env_id, a
     assert_same(shared[:-1], plain[:-1], "trajectory")
 
 
-@pytest.mark.parametrize("env_id", ["remoteenv/Reacher-v0", "remoteenv/CartPole-v0"])
-def test_plain_steps_of_one_process_go_lean_with_the_usual_results(monkeypatch, env_id):
+@pytest.mark.parametrize("env_id, least", [("remoteenv/Reacher-v0", 100), ("remoteenv/CartPole-v0", 30)])
+def test_plain_steps_of_one_process_go_lean_with_the_usual_results(monkeypatch, env_id, least):
     posted: list[bool] = []
     post = lean_step.LeanStep.post
 
@@ -74,8 +74,10 @@ def test_plain_steps_of_one_process_go_lean_with_the_usual_results(monkeypatch, 
     lean = _trajectory(env_id, 6, 120, 6, "NextStep")
     monkeypatch.setattr(lean_step.LeanStep, "post", lambda self, *args: None)
     usual = _trajectory(env_id, 6, 120, 6, "NextStep")
-    # Every step but the first and those that reset a world can go lean.
-    assert len(posted) == 120 and sum(posted) >= 60, posted
+    # A step goes lean unless it resets a world or follows one that did (or is the first):
+    # Reacher's worlds end together every 50 steps, CartPole's one by one, often.
+    print(f"{sum(posted)} of 120 steps went lean")
+    assert len(posted) == 120 and sum(posted) >= least, posted
     assert lean[-1] == usual[-1] == ("lanes", [True])
     assert_same(lean[:-1], usual[:-1], "trajectory")
 
