@@ -73,3 +73,29 @@ def test_a_blocked_wait_follows_the_heads_up_to_the_region_reply(lane, monkeypat
     thread.join(5)
     assert frames == [False]  # the woken agent watched: the reply needed no frame
     assert conn.heads_ups == 1 and agent_bell.word(AGENT_HEADS_UP) == 0
+
+
+@pytest.mark.skipif(usable_cpus() < 2, reason="no hot waits (nor heads-ups) on one CPU")
+def test_a_sim_gone_after_its_heads_up_is_left_for_receive_to_report(lane, monkeypatch):
+    conn, agent_bell, sim_end, sim_bell = lane
+    conn._lane_hot.window_s = 0.0
+    conn._soon.window_s = 30.0
+    monkeypatch.setattr(hot_wait, "STALL_S", 30.0)
+    seq = conn.post(agent_bell, 2, False, plain=True)
+
+    def sim() -> None:
+        deadline = time.monotonic() + 10.0
+        while not sim_bell.agent_wants_heads_up():
+            assert time.monotonic() < deadline
+            time.sleep(0.0002)
+        sim_end.sendall(protocol.stream_frame(protocol.reply_soon(seq)))
+        sim_end.close()  # gone before its reply
+
+    thread = threading.Thread(target=sim, daemon=True)
+    thread.start()
+    assert not conn.wait_region(seq)  # nothing raised here: a vector env's restart rule sees it in receive
+    thread.join(5)
+    assert conn.heads_ups == 1
+    with pytest.raises(RemoteEnvError) as info:
+        conn.receive(seq)
+    assert info.value.kind == "died"

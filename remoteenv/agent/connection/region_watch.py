@@ -98,7 +98,9 @@ class RegionWatch:
         once the region holds it (the request is answered: read its blocks);
         False as soon as anything else must be read first (a frame came or is
         held, the pipe ended, a blocked wait ran out): then :meth:`receive`
-        takes over the wait where it stands. Never raises for the sim."""
+        takes over the wait where it stands, and reports what it finds (a sim
+        gone, an error reply) as it always does. Raises only for a pipe whose
+        framing the sim broke."""
         watch = self._watch
         if watch is None or watch[0] != seq or self._frames or self._held or self._eof:
             return False
@@ -144,7 +146,8 @@ class RegionWatch:
         """If the frames just read hold the sim's heads-up for ``seq`` (its
         physics is done, its reply due), drop it and wait hot for the reply, at
         most :data:`HEADS_UP_WAIT_S`: the region's reply, else None (a frame
-        came, or the wait ran out: the caller goes on as after any wake-up)."""
+        came, the pipe ended or the wait ran out: the caller goes on as after
+        any wake-up)."""
         soon = protocol.reply_soon(seq)
         if soon not in self._frames:
             return None
@@ -159,8 +162,8 @@ class RegionWatch:
             # Yields the CPU between looks: the sim may share this one.
             if not self._soon.spin():
                 return None
-            self._read(False)
-            if self._frames:
+            # The pipe's end is reported by the caller's wait (which may restart the sim).
+            if not self._read_quietly(False) or self._frames:
                 return None
 
 
