@@ -6,15 +6,21 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import socket
 import sys
+import threading
+import time
 import types
+from collections.abc import Callable
 from typing import Any
 
 import pytest
 
 import remoteenv
 from remoteenv.agent.vector import torch_threads
+from remoteenv.wire import protocol
 from remoteenv.wire.shared_memory import hot_wait
+from remoteenv.wire.shared_memory.doorbell import Doorbell
 from remoteenv.wire.shared_memory.shared_batch import SharedLayout
 
 
@@ -84,3 +90,24 @@ def hot_waits_allowed(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(hot_wait._Neighbours, "cool_until", 0.0)
     monkeypatch.setattr(hot_wait._Neighbours, "last_stall", float("-inf"))
     monkeypatch.setattr(hot_wait._Neighbours, "cool_s", 0.0)
+
+
+def in_thread(work: Callable[[], None]) -> threading.Thread:
+    """Run a stand-in sim's ``work`` in a daemon thread (started)."""
+    thread = threading.Thread(target=work, daemon=True)
+    thread.start()
+    return thread
+
+
+def until(predicate: Callable[[], bool], timeout: float = 10.0) -> None:
+    """Wait (polling every 0.2 ms) until ``predicate()``; fail after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "the agent never blocked asking for a heads-up"
+        time.sleep(0.0002)
+
+
+def heads_up_once_asked(sim_bell: Doorbell, sock: socket.socket, seq: int) -> None:
+    """The stand-in sim's physics is done: once the agent sleeps asking, send it a heads-up for ``seq``."""
+    until(sim_bell.agent_wants_heads_up)
+    sock.sendall(protocol.stream_frame(protocol.reply_soon(seq)))

@@ -6,12 +6,11 @@ sleeps and asked, and not after a long tail."""
 from __future__ import annotations
 
 import socket
-import threading
 import time
-from collections.abc import Callable
 
 import numpy as np
 import pytest
+from fakes import heads_up_once_asked, in_thread, until
 from gymnasium import spaces
 
 from remoteenv.agent.connection.pipe_connection import PipeConnection
@@ -25,27 +24,8 @@ from remoteenv.wire.shared_memory.hot_wait import usable_cpus
 needs_two_cpus = pytest.mark.skipif(usable_cpus() < 2, reason="no hot waits (nor heads-ups) on one CPU")
 
 
-def _sim(work: Callable[[], None]) -> threading.Thread:
-    thread = threading.Thread(target=work, daemon=True)
-    thread.start()
-    return thread
-
-
-def _until(predicate: Callable[[], bool], timeout: float = 10.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "the agent never blocked asking for a heads-up"
-        time.sleep(0.0002)
-
-
 def _send(sock: socket.socket, message: dict) -> None:
     sock.sendall(protocol.stream_frame(protocol.pack(message)))
-
-
-def _heads_up_once_asked(sim_bell: Doorbell, sock: socket.socket, seq: int) -> None:
-    """The stand-in sim's physics is done: once the agent sleeps asking, send it a heads-up for ``seq``."""
-    _until(sim_bell.agent_wants_heads_up)
-    sock.sendall(protocol.stream_frame(protocol.reply_soon(seq)))
 
 
 @needs_two_cpus
@@ -60,12 +40,12 @@ def test_a_blocked_agent_asks_and_takes_the_region_reply_after_the_heads_up(lane
     wake_frames: list[bool] = []
 
     def sim() -> None:
-        _heads_up_once_asked(sim_bell, sim_end, seq)
-        _until(lambda: not sim_bell.agent_wants_heads_up())  # woken: watching again
+        heads_up_once_asked(sim_bell, sim_end, seq)
+        until(lambda: not sim_bell.agent_wants_heads_up())  # woken: watching again
         time.sleep(0.0003)  # the rest of the tick
         wake_frames.append(sim_bell.reply(seq, 0))
 
-    thread = _sim(sim)
+    thread = in_thread(sim)
     assert conn.receive(seq) == {"seq": seq, "ok": True, "region": True}
     thread.join(5)
     assert wake_frames == [False]  # the woken agent watched: the reply needed no frame
@@ -78,11 +58,11 @@ def test_an_error_after_the_heads_up_is_raised(lane):
     seq = conn.post(agent_bell, 1, False)
 
     def sim() -> None:
-        _heads_up_once_asked(sim_bell, sim_end, seq)
+        heads_up_once_asked(sim_bell, sim_end, seq)
         time.sleep(0.0003)
         _send(sim_end, protocol.error_reply(seq, "scene", "the hook raised"))
 
-    thread = _sim(sim)
+    thread = in_thread(sim)
     with pytest.raises(RemoteEnvError, match="the hook raised") as info:
         conn.receive(seq)
     thread.join(5)
@@ -95,13 +75,13 @@ def test_a_heads_up_for_another_request_answers_nothing(lane):
     seq = conn.post(agent_bell, 1, False)
 
     def sim() -> None:
-        _heads_up_once_asked(sim_bell, sim_end, seq - 1)  # not the awaited request's
+        heads_up_once_asked(sim_bell, sim_end, seq - 1)  # not the awaited request's
         time.sleep(0.002)
-        _until(sim_bell.agent_wants_heads_up)  # it dropped it and blocked again
+        until(sim_bell.agent_wants_heads_up)  # it dropped it and blocked again
         if sim_bell.reply(seq, 0):
             _send(sim_end, {"seq": seq, "ok": True, "region": True})
 
-    thread = _sim(sim)
+    thread = in_thread(sim)
     assert conn.receive(seq) == {"seq": seq, "ok": True, "region": True}
     thread.join(5)
     assert conn.heads_ups == 0
@@ -117,12 +97,12 @@ def test_an_agent_told_not_to_wait_hot_blocks_without_asking(lane, monkeypatch):
         seen: list[int] = []
 
         def sim() -> None:
-            _until(lambda: agent_bell.word(AGENT_WATCHING) == 0)  # it blocks
+            until(lambda: agent_bell.word(AGENT_WATCHING) == 0)  # it blocks
             seen.append(agent_bell.word(AGENT_HEADS_UP))
             if sim_bell.reply(seq, 0):
                 own_end[1].sendall(protocol.stream_frame(protocol.pack({"seq": seq, "ok": True, "region": True})))
 
-        thread = _sim(sim)
+        thread = in_thread(sim)
         assert conn.receive(seq)["region"] is True
         thread.join(5)
         assert seen == [0] and conn.heads_ups == 0

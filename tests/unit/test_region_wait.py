@@ -6,16 +6,23 @@ heads-up is followed; anything else is left, unread or queued, for
 
 from __future__ import annotations
 
-import threading
-import time
-
 import pytest
+from fakes import heads_up_once_asked, in_thread, until
 
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.wire import protocol
 from remoteenv.wire.shared_memory import hot_wait
 from remoteenv.wire.shared_memory.doorbell import AGENT_HEADS_UP
 from remoteenv.wire.shared_memory.hot_wait import usable_cpus
+
+
+def _post_to_block_for(conn, agent_bell, monkeypatch) -> int:
+    """Post a plain step whose wait blocks at once and, after the heads-up, waits hot until
+    the reply however the threads run (a 30 s window, no stall); its ``seq``."""
+    conn._lane_hot.window_s = 0.0
+    conn._soon.window_s = 30.0
+    monkeypatch.setattr(hot_wait, "STALL_S", 30.0)
+    return conn.post(agent_bell, 2, False, plain=True)
 
 
 def test_a_reply_in_the_region_is_taken_and_its_request_answered(lane):
@@ -51,24 +58,15 @@ def test_the_pipe_s_end_is_left_for_receive_to_report(lane):
 @pytest.mark.skipif(usable_cpus() < 2, reason="no hot waits (nor heads-ups) on one CPU")
 def test_a_blocked_wait_follows_the_heads_up_to_the_region_reply(lane, monkeypatch):
     conn, agent_bell, sim_end, sim_bell = lane
-    conn._lane_hot.window_s = 0.0  # straight to the blocked wait
-    conn._soon.window_s = 30.0  # and after the heads-up, hot until the reply however the threads run
-    monkeypatch.setattr(hot_wait, "STALL_S", 30.0)
-    seq = conn.post(agent_bell, 2, False, plain=True)
+    seq = _post_to_block_for(conn, agent_bell, monkeypatch)
     frames: list[bool] = []
 
     def sim() -> None:
-        deadline = time.monotonic() + 10.0
-        while not sim_bell.agent_wants_heads_up():
-            assert time.monotonic() < deadline
-            time.sleep(0.0002)
-        sim_end.sendall(protocol.stream_frame(protocol.reply_soon(seq)))
-        while sim_bell.agent_wants_heads_up():
-            time.sleep(0.0002)
+        heads_up_once_asked(sim_bell, sim_end, seq)
+        until(lambda: not sim_bell.agent_wants_heads_up())  # woken: watching again
         frames.append(sim_bell.reply(seq, 0))
 
-    thread = threading.Thread(target=sim, daemon=True)
-    thread.start()
+    thread = in_thread(sim)
     assert conn.wait_region(seq)
     thread.join(5)
     assert frames == [False]  # the woken agent watched: the reply needed no frame
@@ -78,21 +76,13 @@ def test_a_blocked_wait_follows_the_heads_up_to_the_region_reply(lane, monkeypat
 @pytest.mark.skipif(usable_cpus() < 2, reason="no hot waits (nor heads-ups) on one CPU")
 def test_a_sim_gone_after_its_heads_up_is_left_for_receive_to_report(lane, monkeypatch):
     conn, agent_bell, sim_end, sim_bell = lane
-    conn._lane_hot.window_s = 0.0
-    conn._soon.window_s = 30.0
-    monkeypatch.setattr(hot_wait, "STALL_S", 30.0)
-    seq = conn.post(agent_bell, 2, False, plain=True)
+    seq = _post_to_block_for(conn, agent_bell, monkeypatch)
 
     def sim() -> None:
-        deadline = time.monotonic() + 10.0
-        while not sim_bell.agent_wants_heads_up():
-            assert time.monotonic() < deadline
-            time.sleep(0.0002)
-        sim_end.sendall(protocol.stream_frame(protocol.reply_soon(seq)))
+        heads_up_once_asked(sim_bell, sim_end, seq)
         sim_end.close()  # gone before its reply
 
-    thread = threading.Thread(target=sim, daemon=True)
-    thread.start()
+    thread = in_thread(sim)
     assert not conn.wait_region(seq)  # nothing raised here: a vector env's restart rule sees it in receive
     thread.join(5)
     assert conn.heads_ups == 1
