@@ -237,11 +237,14 @@ class PipeChannel:
         self.lane: LaneWatch | None = None
 
     def receive_nowait(self) -> list[tuple[Any, Any]]:
+        # The region first: a frame the agent sent before it posted there is then read.
+        lane = self.lane
+        return self._receive(lane.posted() if lane is not None else 0)
+
+    def _receive(self, posted: int) -> list[tuple[Any, Any]]:
+        """:meth:`receive_nowait`, the region's posted request (0: none) looked up already."""
         if self.closed:
             return []
-        # The region first: a frame the agent sent before it posted there is then read below.
-        lane = self.lane
-        posted = lane.posted() if lane is not None else 0
         out: list[tuple[Any, Any]] = []
         data = self._decoder.recv_from(self.sock)
         if data is not None:
@@ -287,8 +290,9 @@ class PipeChannel:
         lane = self.lane
         looks = 0
         while True:
-            if lane is None or looks % PIPE_LOOK_EVERY == 0 or lane.posted():
-                frames = self.receive_nowait()
+            posted = lane.posted() if lane is not None else 0
+            if posted or lane is None or looks % PIPE_LOOK_EVERY == 0:
+                frames = self._receive(posted)
                 if frames or self.closed:
                     return frames
             looks += 1
