@@ -60,7 +60,7 @@ def test_the_region_gives_the_results_of_the_msgpack_path(monkeypatch, env_id, a
     assert_same(shared[:-1], plain[:-1], "trajectory")
 
 
-@pytest.mark.parametrize("env_id, least", [("remoteenv/Reacher-v0", 100), ("remoteenv/CartPole-v0", 30)])
+@pytest.mark.parametrize("env_id, least", [("remoteenv/Reacher-v0", 115), ("remoteenv/CartPole-v0", 75)])
 def test_plain_steps_of_one_process_go_lean_with_the_usual_results(monkeypatch, env_id, least):
     posted: list[bool] = []
     post = lean_step.LeanStep.post
@@ -74,8 +74,9 @@ def test_plain_steps_of_one_process_go_lean_with_the_usual_results(monkeypatch, 
     lean = _trajectory(env_id, 6, 120, 6, "NextStep")
     monkeypatch.setattr(lean_step.LeanStep, "post", lambda self, *args: None)
     usual = _trajectory(env_id, 6, 120, 6, "NextStep")
-    # A step goes lean unless it resets a world or follows one that did (or is the first):
-    # Reacher's worlds end together every 50 steps, CartPole's one by one, often.
+    # A step goes lean unless it resets a world (or is the first; the step after a reset
+    # writes its plain ops again and goes lean): Reacher's worlds end together every
+    # 50 steps, CartPole's one by one, often (116 and 82 steps of 120 with these seeds).
     print(f"{sum(posted)} of 120 steps went lean")
     assert len(posted) == 120 and sum(posted) >= least, posted
     assert lean[-1] == usual[-1] == ("lanes", [True])

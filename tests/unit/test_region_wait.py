@@ -89,3 +89,43 @@ def test_a_sim_gone_after_its_heads_up_is_left_for_receive_to_report(lane, monke
     with pytest.raises(RemoteEnvError) as info:
         conn.receive(seq)
     assert info.value.kind == "died"
+
+
+def _wake_up(seq: int) -> bytes:
+    """The frame a sim sends with a region reply when the agent was not watching."""
+    return protocol.stream_frame(protocol.pack({"region": True, "seq": seq, "ok": True}))
+
+
+def test_wake_ups_and_heads_ups_of_replies_already_read_are_dropped_and_the_wait_stays_lean(lane):
+    conn, agent_bell, sim_end, sim_bell = lane
+    first = conn.post(agent_bell, 2, False, plain=True)
+    sim_bell.reply(first, 0)
+    assert conn.wait_region(first)
+    # The reply was read from the region; its wake-up and a late heads-up come after it.
+    sim_end.sendall(_wake_up(first) + protocol.stream_frame(protocol.reply_soon(first)))
+    second = conn.post(agent_bell, 2, False, plain=True)
+    until(lambda: conn._read_quietly(False) and len(conn._frames) == 2)
+    sim_bell.reply(second, 0)
+    assert conn.wait_region(second)  # not handed back to receive
+    assert not conn._frames and second not in conn._unanswered
+
+
+def test_a_wake_up_read_during_the_wait_is_dropped_once_its_reply_is_in_the_region(lane):
+    conn, agent_bell, sim_end, sim_bell = lane
+    seq = conn.post(agent_bell, 2, False, plain=True)
+    sim_bell.reply(seq, 0)
+    sim_end.sendall(_wake_up(seq))
+    until(lambda: conn._read_quietly(False) and len(conn._frames) == 1)
+    assert conn.wait_region(seq)
+    assert not conn._frames
+
+
+def test_a_frame_that_still_answers_a_request_is_left_for_receive(lane):
+    conn, agent_bell, sim_end, sim_bell = lane
+    seq = conn.post(agent_bell, 2, False, plain=True)
+    # Its own wake-up before the region holds the reply (which the sim never writes):
+    # receive must see it, as it sees an error reply.
+    sim_end.sendall(_wake_up(seq))
+    until(lambda: conn._read_quietly(False) and len(conn._frames) == 1)
+    assert not conn.wait_region(seq)
+    assert len(conn._frames) == 1

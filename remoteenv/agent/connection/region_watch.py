@@ -23,6 +23,9 @@ from remoteenv.wire.shared_memory.hot_wait import HotWait
 
 #: A hot wait for a region reply reads the pipe (for an error or another frame) once every this many looks.
 PIPE_LOOK_EVERY = 4
+#: Longest frame :meth:`RegionWatch._drop_answered` decodes to see whether it answers anything
+#: (a wake-up or a heads-up takes a few dozen bytes; anything longer is left to ``receive``).
+_SMALL_FRAME = 64
 
 
 class RegionWatch:
@@ -102,9 +105,11 @@ class RegionWatch:
         gone, an error reply) as it always does. Raises only for a pipe whose
         framing the sim broke."""
         watch = self._watch
-        if watch is None or watch[0] != seq or self._frames or self._held or self._eof:
+        if watch is None or watch[0] != seq or self._held or self._eof:
             return False
         bell = watch[1]
+        if self._frames and not self._drop_answered(seq, bell):
+            return False
         self._awaiting = seq
         if not bell.answered(seq):
             hot = self._lane_hot if self._watch_plain else self._hot
@@ -116,7 +121,9 @@ class RegionWatch:
                         hot.waited(float("inf"))
                         break
                     looks += 1
-                    if looks % PIPE_LOOK_EVERY == 0 and (not self._read_quietly(False) or self._frames):
+                    if looks % PIPE_LOOK_EVERY == 0 and (
+                        not self._read_quietly(False) or (self._frames and not self._drop_answered(seq, bell))
+                    ):
                         return False
                 else:
                     hot.waited(time.perf_counter() - start)
@@ -136,11 +143,46 @@ class RegionWatch:
                 bell.agent_wakes()
             if not read:
                 return False
+            self._drop_answered(seq, bell)
             if self._after_heads_up(seq) is not None:
                 return True
             if self._frames:
                 return False
         return bell.answered(seq)
+
+    def _drop_answered(self, seq: int, bell: Doorbell) -> bool:
+        """Drop the queued frames that ``receive`` would drop unread while it
+        waits for ``seq``: a heads-up for an earlier request, a reply to a
+        request answered or abandoned already (its ``seq`` neither ``seq`` nor
+        still unanswered), and ``seq``'s own wake-up once the region holds its
+        reply. These are the wake-ups a sim sends when it answers in the region
+        while the agent has stopped watching: read after the reply was taken
+        from the region, they would otherwise turn the next lean wait back to
+        ``receive``. True once no frame is left."""
+        frames = self._frames
+        kept = [frame for frame in frames if not self._answers_nothing(frame, seq, bell)]
+        if len(kept) != len(frames):
+            frames.clear()
+            frames.extend(kept)
+        return not frames
+
+    def _answers_nothing(self, frame: Any, seq: int, bell: Doorbell) -> bool:
+        """Whether ``frame`` is one that :meth:`_drop_answered` drops (a frame it
+        cannot decode, or a long one, is left for ``receive`` to report)."""
+        if len(frame) > _SMALL_FRAME:
+            return False
+        try:
+            reply = protocol.unpack(frame, max_values=8, big_ints=True)
+        except protocol.ProtocolError:
+            return False
+        if not isinstance(reply, dict):
+            return False
+        got = reply.get("seq")
+        if type(got) is not int or got == -1:
+            return False
+        if got == seq:
+            return reply == {"seq": seq, "ok": True, "region": True} and bell.answered(seq)
+        return protocol.is_reply_soon(reply) or got not in self._unanswered
 
     def _after_heads_up(self, seq: int) -> dict[str, Any] | None:
         """If the frames just read hold the sim's heads-up for ``seq`` (its

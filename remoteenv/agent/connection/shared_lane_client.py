@@ -194,10 +194,7 @@ class SharedLanes:
             blocks = self._blocks[p] = _RequestBlocks(arrays, n)
         blocks.actions[...] = actions
         if ops is not blocks.ops_written:
-            self.generation += 1
-            blocks.ops[...] = ops
-            blocks.ops_written = None if ops.flags.writeable else ops
-            blocks.plain = _plain(ops)
+            self._write_ops(blocks, ops)
         if worlds is not None:
             blocks.worlds[...] = worlds
         seq: int = conn.post(bell, n, worlds is not None, think_s, blocks.plain)  # type: ignore[attr-defined]
@@ -296,15 +293,20 @@ class SharedLanes:
         blocks, view = self._blocks.get(p), self._views.get(p)
         if known is None or known[0] is not conn or bell is None or infos is None or blocks is None or view is None:
             return None
-        if (
-            blocks.n != n
-            or blocks.ops_written is not ops
-            or not blocks.plain
-            or view.n != n
-            or view.version != infos[0]
-        ):
+        if blocks.n != n or view.n != n or view.version != infos[0] or p in self._pending:
+            return None
+        if blocks.ops_written is not ops:  # e.g. the step after a reset: its plain plan written again
+            self._write_ops(blocks, ops)
+        if not blocks.plain:
             return None
         return LaneReady(self, p, conn, bell, blocks.actions, ops, view)
+
+    def _write_ops(self, blocks: _RequestBlocks, ops: np.ndarray) -> None:
+        """Write ``ops`` into the request blocks (a request's other blocks come with it)."""
+        self.generation += 1
+        blocks.ops[...] = ops
+        blocks.ops_written = None if ops.flags.writeable else ops
+        blocks.plain = _plain(ops)
 
     def _tampered(self, p: int, conn: SimConnection) -> bool:
         """Whether process ``p``'s region header is not what the two sides can
