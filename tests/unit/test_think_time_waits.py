@@ -140,3 +140,36 @@ def test_an_agent_gone_away_during_a_hot_wait_ends_it_at_the_next_look(monkeypat
     finally:
         pipe.close()
         agent_end.close()
+
+
+def test_a_wait_through_an_announced_think_is_not_held_against_the_next_request(monkeypatch) -> None:
+    """The sim blocked through the agent's update (``AGENT_AWAY``): the request after it
+    is waited for hot, as the ones before the update were, not as after a slow agent."""
+    agent, sim = socket.socketpair()
+    quiet_a, quiet_b = socket.socketpair()
+    pipe = PipeChannel(sim.detach())
+    try:
+        lane = Lane(0.0, away_from=1)
+        pipe.lane = lane
+        waits = ServingWaits(
+            IdleRouter(quiet_a),  # type: ignore[arg-type]
+            pipe,
+            hot_window_s=0.05,
+            think_limit_s=200e-6,
+            spin_s=0.0,
+            answer=lambda channel, frames: None,
+            send=lambda outgoing: None,
+            pipe_closed=lambda: None,
+        )
+        waits.hot.window_s = 0.05
+        monkeypatch.setattr(hot_wait._Neighbours, "cool_until", 0.0)
+        waits.hot.waited(1e-4)  # the agent's steps came quickly so far
+        waits.hot.since -= 10.0  # then it went away for 10 s (its update)
+        agent.sendall(protocol.stream_frame(protocol.pack({"seq": 1, "cmd": "ping"})))
+        waits.for_requests()  # blocked: the agent said it was away
+        lane.away_from = None  # the next request came with its step
+        assert waits.hot.worth_it()
+    finally:
+        pipe.close()
+        for s in (agent, quiet_a, quiet_b):
+            s.close()

@@ -71,7 +71,11 @@ class ServingWaits:
         nothing came (idle), or None when a request was answered from the pipe
         at once (the loop goes round again before anything else)."""
         pipe, router, hot = self.pipe, self.router, self.hot
-        if pipe is not None and not self._agent_thinks(pipe) and hot.worth_it():
+        # A wait through a think the agent announced (its update, a long think time)
+        # says nothing of how soon its requests follow its steps: it is not recorded,
+        # so the first request after it is waited for hot again.
+        thinks = pipe is not None and self._agent_thinks(pipe)
+        if pipe is not None and not thinks and hot.worth_it():
             # The agent has been sending its next request quickly: wait hot.
             frames = pipe.receive_spinning(hot)
             if frames:
@@ -94,7 +98,7 @@ class ServingWaits:
             if channel.pollable not in events and not channel.more:
                 continue
             frames = channel.receive_nowait()
-            if channel is pipe and frames:
+            if channel is pipe and frames and not thinks:
                 hot.waited(time.perf_counter() - hot.since)
             self._answer(channel, frames)
             if channel is pipe:
