@@ -20,7 +20,7 @@ from typing import Any
 
 from remoteenv.sim.scene.base_env import BaseEnv
 from remoteenv.sim.serving.attributes import AttributeCommands
-from remoteenv.sim.serving.commands import Commands, Handler
+from remoteenv.sim.serving.commands import Commands, Handler, RegionHandler
 from remoteenv.sim.serving.stepping_modes import stepping_and_commands
 from remoteenv.sim.stepping.interfaces import Stepping
 from remoteenv.sim.stepping.real_time import Clock
@@ -35,8 +35,10 @@ from remoteenv.wire.wire_errors import INVALID_ACTION, PROTOCOL, SCENE, InvalidA
 class CommandTable:
     """Command name -> handler; :meth:`handle` answers a decoded request with it."""
 
-    def __init__(self, handlers: dict[str, Handler]) -> None:
+    def __init__(self, handlers: dict[str, Handler], region: RegionHandler | None = None) -> None:
         self.handlers = handlers
+        #: The handler of the requests found posted in the pipe's region (lock-step), or None.
+        self.region = region
 
     @property
     def commands(self) -> list[str]:
@@ -52,8 +54,21 @@ class CommandTable:
             return protocol.error_reply(
                 seq, PROTOCOL, f"unknown command {short_repr(msg['cmd'])}; known: {sorted(self.handlers)}"
             )
+        return self._answered(seq, handler, msg, channel, reply_to)
+
+    def handle_region(self, msg: dict[str, Any], pipe: Channel) -> dict[str, Any] | None:
+        """:meth:`handle` for a request the launching agent's ``pipe`` found
+        posted in its region (:func:`~remoteenv.sim.transport.channels.region_request`):
+        straight to the region's handler, as its ``step_batch`` would reach it
+        (that pipe drives every world: the driver rule lets it through)."""
+        if self.region is None:
+            return self.handle(msg, pipe, None)
+        return self._answered(msg["seq"], self.region, msg, pipe)
+
+    def _answered(self, seq: int, handler: Callable[..., dict[str, Any] | None], *args: Any) -> dict[str, Any] | None:
+        """``handler(*args)``'s reply to request ``seq``, every failure a typed error reply."""
         try:
-            reply = handler(msg, channel, reply_to)
+            reply = handler(*args)
         except RequestError as exc:
             return protocol.error_reply(seq, exc.kind, str(exc))
         except InvalidAction as exc:
@@ -83,7 +98,7 @@ def build_table(
     :func:`~remoteenv.sim.serving.stepping_modes.stepping_and_commands`'s;
     ``world_factory`` makes a scratch world for the handshake's cost
     measurement (:class:`~remoteenv.sim.serving.commands.Commands`)."""
-    stepping, mode_commands, physics = stepping_and_commands(envs, instance, run, seed=seed, clock=clock)
+    stepping, mode_commands, physics, region = stepping_and_commands(envs, instance, run, seed=seed, clock=clock)
     common = Commands(envs, stepping, instance, stop, launcher_channel=pipe, world_factory=world_factory)
     common.physics = physics
     handlers: dict[str, Handler] = common.handlers()
@@ -97,7 +112,7 @@ def build_table(
         handlers["reset_batch"] = drivers.guard_reset_batch(handlers["reset_batch"])
         handlers["step_batch"] = drivers.guard_step_batch(handlers["step_batch"])
     common.advertised = sorted(handlers)
-    return stepping, CommandTable(handlers), drivers
+    return stepping, CommandTable(handlers, region), drivers
 
 
 def pack_reply(reply: dict[str, Any]) -> bytes:

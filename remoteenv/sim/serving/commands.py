@@ -36,6 +36,8 @@ from remoteenv.wire.messages.action_rules import check_action
 #: A command handler: ``(request, channel, reply_to) -> reply fields``, or None
 #: when the reply will be sent later.
 Handler = Callable[[dict[str, Any], "Channel | None", Any], "dict[str, Any] | None"]
+#: The handler of a request found posted in the pipe's region (its decoded map and the pipe).
+RegionHandler = Callable[[dict[str, Any], "Channel | None"], "dict[str, Any] | None"]
 
 
 class Commands:

@@ -222,18 +222,20 @@ class RemoteControlledAgent:
         stepping, router = self.stepping, self.router
         for i, (reply_to, frame) in enumerate(frames):
             reply: dict[str, Any] | None
-            try:
-                # A request found in the pipe's region comes decoded (channels.region_request).
-                msg = frame if type(frame) is dict else protocol.decode_request(frame)
-            except protocol.ProtocolError as exc:
-                reply = protocol.error_reply(-1, PROTOCOL, str(exc))
+            if type(frame) is dict:  # a request found in the pipe's region, decoded (channels.region_request)
+                reply = self._table.handle_region(frame, channel)
             else:
-                if msg["cmd"] in EXPENSIVE_COMMANDS and channel is router and router.budgeted(reply_to):
-                    if self._expensive_left <= 0:  # this pass's share is spent: the rest waits
-                        router.defer(frames[i:])
-                        return
-                    self._expensive_left -= 1
-                reply = self.handle(msg, channel, reply_to)
+                try:
+                    msg = protocol.decode_request(frame)
+                except protocol.ProtocolError as exc:
+                    reply = protocol.error_reply(-1, PROTOCOL, str(exc))
+                else:
+                    if msg["cmd"] in EXPENSIVE_COMMANDS and channel is router and router.budgeted(reply_to):
+                        if self._expensive_left <= 0:  # this pass's share is spent: the rest waits
+                            router.defer(frames[i:])
+                            return
+                        self._expensive_left -= 1
+                    reply = self.handle(msg, channel, reply_to)
             if reply is not None:
                 payload = pack_reply(reply)
                 if stepping.clock_waiting:  # a reset was answered: its world's clock starts as the reply goes
