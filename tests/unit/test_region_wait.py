@@ -12,7 +12,7 @@ from fakes import heads_up_once_asked, in_thread, until
 from remoteenv.agent.errors import RemoteEnvError
 from remoteenv.wire import protocol
 from remoteenv.wire.shared_memory import hot_wait
-from remoteenv.wire.shared_memory.doorbell import AGENT_HEADS_UP
+from remoteenv.wire.shared_memory.doorbell import AGENT_HEADS_UP, AGENT_WATCHING
 from remoteenv.wire.shared_memory.hot_wait import usable_cpus
 
 
@@ -129,3 +129,27 @@ def test_a_frame_that_still_answers_a_request_is_left_for_receive(lane):
     until(lambda: conn._read_quietly(False) and len(conn._frames) == 1)
     assert not conn.wait_region(seq)
     assert len(conn._frames) == 1
+
+
+@pytest.mark.skipif(usable_cpus() < 2, reason="no hot waits on one CPU")
+@pytest.mark.parametrize("sim_slept", [True, False])
+def test_a_wait_that_rang_a_sleeping_sim_does_not_turn_the_lane_s_hot_wait_cold(lane, monkeypatch, sim_slept):
+    """A reply later than the hot wait's window turns the next plain waits cold,
+    unless the request rang a sim that slept: its wake-up, not the lane, took the time."""
+    conn, agent_bell, sim_end, sim_bell = lane
+    monkeypatch.setattr(hot_wait, "STALL_S", 30.0)
+    conn._lane_hot.window_s = 1e-3
+    conn._soon.window_s = 0.0  # blocks without a heads-up
+    if not sim_slept:
+        sim_bell.sim_watches()
+    seq = conn.post(agent_bell, 2, False, plain=True)
+
+    def sim() -> None:
+        until(lambda: agent_bell.word(AGENT_WATCHING) == 0)  # the agent blocked after its hot wait
+        if sim_bell.reply(seq, 0):
+            sim_end.sendall(_wake_up(seq))
+
+    thread = in_thread(sim)
+    assert conn.wait_region(seq)
+    thread.join(5)
+    assert conn._lane_hot.worth_it() is sim_slept

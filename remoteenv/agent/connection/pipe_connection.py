@@ -80,6 +80,8 @@ class PipeConnection(RegionWatch, SimConnection):
         self._watch: tuple[int, Doorbell] | None = None
         #: That request is a plain step (its wait may be hot on :attr:`_lane_hot`).
         self._watch_plain = False
+        #: Whether the watched request rang its sim (it slept: the wait includes its wake-up).
+        self._watch_rang = False
         #: The request a wait is for (a region reply is taken only for its own request).
         self._awaiting = 0
         #: Replies to later requests that came while the awaited one's reply was due in
@@ -200,7 +202,8 @@ class PipeConnection(RegionWatch, SimConnection):
                 if not lane:
                     hot.waited(time.perf_counter() - start)
                 return self._frames.popleft()
-            hot.waited(float("inf"))
+            if not (lane and self._watch_rang):  # a sim woken first says nothing of the lane's pace
+                hot.waited(float("inf"))
         if not self._frames:
             watch = self._watch if self._watch is not None and self._watch[0] == self._awaiting else None
             if watch is not None and not watch[1].agent_sleeps(watch[0], heads_up=self._soon.allowed()):
