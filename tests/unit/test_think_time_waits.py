@@ -63,6 +63,23 @@ class IdleRouter:
         return []
 
 
+def _waits(pipe: PipeChannel, quiet: socket.socket, answer: Any) -> ServingWaits:
+    """The sim's waits over ``pipe`` and a router on which nothing comes: hot for up to
+    50 ms, a think longer than 200 us announced, frames to ``answer``."""
+    waits = ServingWaits(
+        IdleRouter(quiet),  # type: ignore[arg-type]
+        pipe,
+        hot_window_s=0.05,
+        think_limit_s=200e-6,
+        spin_s=0.0,
+        answer=answer,
+        send=lambda outgoing: None,
+        pipe_closed=lambda: None,
+    )
+    waits.hot.window_s = 0.05  # whatever this machine's CPUs or REMOTEENV_NO_SPIN say
+    return waits
+
+
 def _one_pass(agent_think_s: float, away_from: int | None = None) -> tuple[list[Any], int]:
     """One lock-step pass over a pipe holding one request: what was answered, and
     how many times the pass waited hot on the pipe."""
@@ -80,17 +97,7 @@ def _one_pass(agent_think_s: float, away_from: int | None = None) -> tuple[list[
             return receive_spinning(hot)
 
         pipe.receive_spinning = spy  # type: ignore[method-assign]
-        waits = ServingWaits(
-            IdleRouter(quiet_a),  # type: ignore[arg-type]
-            pipe,
-            hot_window_s=0.05,
-            think_limit_s=200e-6,
-            spin_s=0.0,
-            answer=lambda channel, frames: answered.extend(frames),
-            send=lambda outgoing: None,
-            pipe_closed=lambda: None,
-        )
-        waits.hot.window_s = 0.05  # whatever this machine's CPUs or REMOTEENV_NO_SPIN say
+        waits = _waits(pipe, quiet_a, answer=lambda channel, frames: answered.extend(frames))
         hot_wait._Neighbours.cool_until = 0.0  # nor an earlier spin's stall beside a busy neighbour
         agent.sendall(protocol.stream_frame(protocol.pack({"seq": 1, "cmd": "ping"})))
         waits.for_requests()
@@ -151,17 +158,7 @@ def test_a_wait_through_an_announced_think_is_not_held_against_the_next_request(
     try:
         lane = Lane(0.0, away_from=1)
         pipe.lane = lane
-        waits = ServingWaits(
-            IdleRouter(quiet_a),  # type: ignore[arg-type]
-            pipe,
-            hot_window_s=0.05,
-            think_limit_s=200e-6,
-            spin_s=0.0,
-            answer=lambda channel, frames: None,
-            send=lambda outgoing: None,
-            pipe_closed=lambda: None,
-        )
-        waits.hot.window_s = 0.05
+        waits = _waits(pipe, quiet_a, answer=lambda channel, frames: None)
         monkeypatch.setattr(hot_wait._Neighbours, "cool_until", 0.0)
         waits.hot.waited(1e-4)  # the agent's steps came quickly so far
         waits.hot.since -= 10.0  # then it went away for 10 s (its update)
