@@ -465,6 +465,13 @@ def region_ring(seq: int) -> bytes:
     return pack({"seq": seq, "cmd": "step_batch", "region": True})
 
 
+def region_reply(seq: int) -> dict[str, Any]:
+    """The reply to request ``seq`` when it is in the shared region:
+    ``{"seq": seq, "ok": true, "region": true}``, the map the sim's wake-up
+    frame for it carries (see "The fast lane" above)."""
+    return {"seq": seq, "ok": True, "region": True}
+
+
 def reply_soon(seq: int) -> bytes:
     """The heads-up a sim may send once the physics of region request ``seq``
     is done and the agent sleeps waiting for it: ``{"seq": seq, "soon": true}``
@@ -639,6 +646,7 @@ __all__ = [
     "is_reply_soon",
     "pack",
     "peek_seq",
+    "region_reply",
     "region_ring",
     "reply_soon",
     "stream_frame",

@@ -84,7 +84,7 @@ class RegionWatch:
         if watch is None or watch[0] != self._awaiting or not watch[1].answered(watch[0]):
             return None
         self._watch = None
-        return {"seq": watch[0], "ok": True, "region": True}
+        return protocol.region_reply(watch[0])
 
     def will_block(self) -> bool:
         """The caller is about to block on :attr:`pollable`: make the sim send a
@@ -185,7 +185,7 @@ class RegionWatch:
         if type(got) is not int or got == -1:
             return False
         if got == seq:
-            return reply == {"seq": seq, "ok": True, "region": True} and bell.answered(seq)
+            return reply == protocol.region_reply(seq) and bell.answered(seq)
         return protocol.is_reply_soon(reply) or got not in self._unanswered
 
     def _after_heads_up(self, seq: int) -> dict[str, Any] | None:

@@ -27,6 +27,7 @@ import numpy as np
 from remoteenv.agent.connection.shared_lane_client import LaneReady, SharedLanes
 from remoteenv.agent.session.sim_session import SimSession
 from remoteenv.agent.vector.vector_results import from_one_region
+from remoteenv.wire import protocol
 from remoteenv.wire.shared_memory.doorbell import REP_INFO
 
 
@@ -82,7 +83,7 @@ class LeanStep:
                 return None
             view = ready.view
             if ready.bell.word(REP_INFO) != view.version:  # the usual way refuses it, and says why
-                self._lanes.take(0, ready.conn, seq, {"seq": seq, "ok": True, "region": True}, self._n)
+                self._lanes.take(0, ready.conn, seq, protocol.region_reply(seq), self._n)
             del ready.pending[0]
             return from_one_region(view, self._n, self._obs_dtype)
         except BaseException:
