@@ -126,3 +126,41 @@ def test_begin_starts_a_window_whatever_the_last_waits_took_unless_spinning_is_o
     assert not hot.allowed() and not hot.begin()  # ...begin() included
     monkeypatch.setenv("REMOTEENV_NO_SPIN", "1")
     assert not HotWait(1e-3).begin()
+
+
+def _cold_after_run_out(hot: HotWait, cold_wait_s: float | None = None) -> int:
+    """The hot wait under way runs out its window: how many waits are cold
+    before the next hot one (which is then under way); each cold wait took
+    ``cold_wait_s`` when given."""
+    hot.ran_out()
+    cold = 0
+    while not hot.worth_it():
+        cold += 1
+        assert cold <= hot_wait.MAX_SKIP
+        if cold_wait_s is not None:
+            hot.waited(cold_wait_s)
+    return cold
+
+
+def test_a_window_that_runs_out_makes_the_next_waits_cold_more_of_them_each_time_up_to_the_limit():
+    hot = HotWait(1e-3)
+    assert hot.worth_it()
+    # A busy neighbour: every hot wait runs out, while the cold ones between them
+    # (the spinner's CPU left to the peer) find the peer quick: they do not count.
+    streak = [_cold_after_run_out(hot, cold_wait_s=0.2e-3) for _ in range(8)]
+    assert streak == [1, 2, 4, 8, 16, hot_wait.MAX_SKIP, hot_wait.MAX_SKIP, hot_wait.MAX_SKIP]
+
+
+def test_hot_waits_the_peer_ends_in_time_halve_the_cold_waits_again():
+    hot = HotWait(1e-3)
+    assert hot.worth_it()
+    for _ in range(6):
+        _cold_after_run_out(hot)
+    for _ in range(3):  # the neighbour left: three hot waits answered in time
+        hot.waited(0.2e-3)
+        assert hot.worth_it()
+    assert _cold_after_run_out(hot) == hot_wait.MAX_SKIP // 8
+    for _ in range(8):
+        hot.waited(0.2e-3)
+        assert hot.worth_it()
+    assert _cold_after_run_out(hot) == 1  # a lone run-out costs one cold wait again
