@@ -2,8 +2,7 @@
 
 Runs in the sim process (:meth:`remoteenv.sim.serving.sim_server.RemoteControlledAgent.serve`).
 With no deadline (lock-step) a pass waits for requests: hot on the local pipe
-while the agent has been answering quickly and the hot waits have not been
-running out their windows (:class:`~remoteenv.wire.shared_memory.hot_wait.HotWait`)
+while the agent has been answering quickly (:class:`~remoteenv.wire.shared_memory.hot_wait.HotWait`)
 and, when it posts in the pipe's shared region, said it thinks briefly
 between its vector steps (the doorbell's ``AGENT_THINK_US``), else blocking
 on every channel for up to :data:`~remoteenv.sim.process.orphan.CHECK_INTERVAL_S`.
@@ -87,8 +86,6 @@ class ServingWaits:
             if pipe.closed:
                 self._pipe_closed()
                 return None
-            if not self._agent_thinks(pipe):  # the window ran out, not a think the agent announced
-                hot.ran_out()
         if pipe is not None and not router.more:
             # About to block: a request posted in the pipe's region comes with a frame from now on.
             frames = pipe.settle()

@@ -27,16 +27,6 @@ the virtual CPU away. After it the process cools down for
 stall within :data:`STALL_MEMORY_S` of the last doubles the cool-down, up to
 :data:`COOL_DOWN_S`: beside a CPU hog the process reaches the long cool-down
 after a handful of stalls and stays there while the hog runs.
-
-A busy neighbour also shows itself more quietly: a spin that is never kept
-off its CPU long enough to stall, but whose whole window passes without the
-peer. Beside a hog the spinner's own CPU is what the peer lacks (the peer
-shares the other CPU with the hog), so the peer's answer comes later while
-the spin lasts than after a blocking wait: a wait measured while blocking
-says nothing of the next hot one. A user whose hot waits run out reports it
-(:meth:`HotWait.ran_out`): the next wait is cold, and each window that runs
-out again soon after doubles the cold waits that follow, up to
-:data:`MAX_SKIP`; each hot wait the peer ends in time halves them again.
 """
 
 from __future__ import annotations
@@ -46,8 +36,6 @@ import time
 
 #: Re-try waiting hot once every this many cold waits.
 _PROBE_EVERY = 32
-#: Most waits :meth:`HotWait.ran_out` skips at once (the probe's interval, less the probe).
-MAX_SKIP = _PROBE_EVERY - 1
 #: A spin kept off the CPU this long (seconds) at once stalled: it may have met a busy neighbour.
 STALL_S = 2.5e-3
 #: Seconds every hot wait of the process sleeps after a stall that follows no
@@ -121,9 +109,6 @@ class HotWait:
         self._cold = 0
         self._until = 0.0
         self._last_spin = 0.0
-        self._skip = 0  # waits still to be cold after a window ran out (:meth:`ran_out`)
-        self._skip_next = 1  # cold waits the next run-out asks for
-        self._hot_now = False  # the wait under way began hot
         #: perf_counter() time the current wait started (set by the caller).
         self.since = time.perf_counter()
 
@@ -140,16 +125,11 @@ class HotWait:
         now = time.perf_counter()
         self._until = now + self.window_s
         self._last_spin = now
-        self._hot_now = True
         return True
 
     def worth_it(self) -> bool:
         """Whether the next wait should start hot; if so, the spin's window starts now."""
-        self._hot_now = False
         if not self.window_s:
-            return False
-        if self._skip:
-            self._skip -= 1
             return False
         if self._last_wait_s > self.window_s:
             self._cold += 1
@@ -161,7 +141,6 @@ class HotWait:
             return False
         self._until = now + self.window_s
         self._last_spin = now
-        self._hot_now = True
         return True
 
     def spin(self) -> bool:
@@ -180,13 +159,3 @@ class HotWait:
     def waited(self, seconds: float) -> None:
         """Record how long the last wait for the peer took."""
         self._last_wait_s = seconds
-        if self._hot_now and seconds <= self.window_s:
-            self._skip_next = max(1, self._skip_next // 2)
-
-    def ran_out(self) -> None:
-        """The hot wait under way ended with its window, the peer not there yet
-        (see the module's docstring): the next waits are cold, more of them
-        each time this comes again before a hot wait ends in time."""
-        self._skip = self._skip_next
-        self._skip_next = min(MAX_SKIP, 2 * self._skip_next)
-        self._hot_now = False
