@@ -458,11 +458,19 @@ def peek_seq(frame: Any, prefix: int = 64) -> int:
     return -1
 
 
+def region_request(seq: int) -> dict[str, Any]:
+    """Request ``seq`` posted in the shared region, as a map:
+    ``{"seq": seq, "cmd": "step_batch", "region": true}``. The frame that
+    rings a sleeping sim for it carries this map (:func:`region_ring`); a sim
+    that finds the request in the region while watching serves the same map
+    without a frame (see "The fast lane" above)."""
+    return {"seq": seq, "cmd": "step_batch", "region": True}
+
+
 def region_ring(seq: int) -> bytes:
     """The frame that rings a sim for request ``seq`` posted in its shared
-    region: ``{"seq": seq, "cmd": "step_batch", "region": true}`` (see "The
-    fast lane" above)."""
-    return pack({"seq": seq, "cmd": "step_batch", "region": True})
+    region: :func:`region_request`'s map, packed."""
+    return pack(region_request(seq))
 
 
 def region_reply(seq: int) -> dict[str, Any]:
@@ -647,6 +655,7 @@ __all__ = [
     "pack",
     "peek_seq",
     "region_reply",
+    "region_request",
     "region_ring",
     "reply_soon",
     "stream_frame",

@@ -9,8 +9,8 @@ from typing import Any
 import pytest
 
 from remoteenv.sim.serving.command_table import CommandTable
-from remoteenv.sim.transport.channels import region_request
 from remoteenv.sim.transport.checks import RequestError
+from remoteenv.wire.protocol import region_request
 from remoteenv.wire.wire_errors import INVALID_ACTION, PROTOCOL, SCENE, STATE, InvalidAction
 
 

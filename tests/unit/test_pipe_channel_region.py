@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import socket
 
-from remoteenv.sim.transport.channels import PipeChannel, region_request
+from remoteenv.sim.transport.channels import PipeChannel
 from remoteenv.wire import protocol
+from remoteenv.wire.protocol import region_request
 
 
 class PostedOnce:

@@ -58,7 +58,7 @@ class CommandTable:
 
     def handle_region(self, msg: dict[str, Any], pipe: Channel) -> dict[str, Any] | None:
         """:meth:`handle` for a request the launching agent's ``pipe`` found
-        posted in its region (:func:`~remoteenv.sim.transport.channels.region_request`):
+        posted in its region (:func:`~remoteenv.wire.protocol.region_request`):
         straight to the region's handler, as its ``step_batch`` would reach it
         (that pipe drives every world: the driver rule lets it through)."""
         if self.region is None:

@@ -222,7 +222,7 @@ class RemoteControlledAgent:
         stepping, router = self.stepping, self.router
         for i, (reply_to, frame) in enumerate(frames):
             reply: dict[str, Any] | None
-            if type(frame) is dict:  # a request found in the pipe's region, decoded (channels.region_request)
+            if type(frame) is dict:  # a request found in the pipe's region, decoded (protocol.region_request)
                 reply = self._table.handle_region(frame, channel)
             else:
                 try:

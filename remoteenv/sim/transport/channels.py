@@ -203,13 +203,6 @@ class LaneWatch(Protocol):
         ...
 
 
-def region_request(seq: int) -> dict[str, Any]:
-    """Request ``seq`` posted in the region, found by the watch: the map its
-    frame decodes to (as the agent sends it when rung), handed to the server
-    without the frame (nothing of it came from the socket)."""
-    return {"seq": seq, "cmd": "step_batch", "region": True}
-
-
 class PipeChannel:
     """The inherited end of the launcher's socketpair; one peer, no routing id.
 
@@ -219,7 +212,7 @@ class PipeChannel:
     Once the agent has the pipe's shared region (:attr:`lane`), a request
     posted there counts as a frame that arrived (:meth:`receive_nowait` looks
     at the region's doorbell too and hands it over decoded, see
-    :func:`region_request`), and :meth:`settle` must be called before
+    :func:`~remoteenv.wire.protocol.region_request`), and :meth:`settle` must be called before
     the loop blocks on the pipe, so that requests posted from then on come
     with a frame (:mod:`remoteenv.wire.shared_memory.doorbell`).
     """
@@ -264,7 +257,7 @@ class PipeChannel:
             at = len(out)
             while at and protocol.peek_seq(out[at - 1][1]) > posted:
                 at -= 1
-            out.insert(at, (None, region_request(posted)))
+            out.insert(at, (None, protocol.region_request(posted)))
         return out
 
     def settle(self) -> list[tuple[Any, Any]]:
