@@ -32,6 +32,31 @@ def test_stops_when_the_peer_is_slow_and_probes_every_32_waits():
     assert hot.worth_it()
 
 
+def test_patience_keeps_waiting_hot_through_fewer_late_waits_in_a_row_than_it_allows():
+    hot = HotWait(1e-3, patience=3)
+    for _ in range(2):
+        hot.waited(5e-3)
+        assert hot.worth_it()  # one or two late waits in a row: still hot
+    hot.waited(0.5e-3)  # a quick one starts the count again
+    hot.waited(5e-3)
+    hot.waited(5e-3)
+    assert hot.worth_it()
+    hot.waited(5e-3)  # the third late wait in a row: as slow a peer as patience allows
+    answers = [hot.worth_it() for _ in range(32)]
+    assert answers.count(True) == 1 and answers[31]  # cold, probing every 32 waits
+    hot.waited(0.1e-3)
+    assert hot.worth_it()
+
+
+def test_the_default_patience_goes_cold_after_one_late_wait_and_patience_counts_waits():
+    hot = HotWait(1e-3)
+    assert hot.patience == 1
+    hot.waited(5e-3)
+    assert not hot.worth_it()
+    with pytest.raises(ValueError, match="at least 1"):
+        HotWait(1e-3, patience=0)
+
+
 def test_disabled_by_a_zero_window_one_cpu_or_the_environment(monkeypatch):
     assert not HotWait(0.0).worth_it()
     monkeypatch.setattr(hot_wait, "usable_cpus", lambda: 1)

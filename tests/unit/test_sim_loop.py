@@ -14,7 +14,9 @@ from typing import Any
 import pytest
 
 from remoteenv.scenes.cartpole.cartpole_scene import CartPoleEnv
+from remoteenv.sim.serving import sim_server
 from remoteenv.sim.serving.sim_server import RemoteControlledAgent
+from remoteenv.sim.serving.waits import ServingWaits
 from remoteenv.wire import protocol
 
 # A loop that misses its stop condition would wait forever: fail instead.
@@ -99,3 +101,23 @@ def test_a_frame_longer_than_the_limit_is_skipped_and_answered(pipe_server):
     assert [r["seq"] for r in got] == [-1, 7, 8]
     assert str(protocol.MAX_MESSAGE_BYTES) in got[0]["error"]["message"]
     assert not server.orphaned
+
+
+def test_the_lock_step_loop_waits_hot_for_the_pipe_with_the_sims_patience(pipe_server, monkeypatch):
+    """A late request now and then does not put the sim to sleep for the next
+    one: the loop's hot wait on the pipe allows ``SIM_SPIN_PATIENCE`` late
+    waits in a row (:class:`~remoteenv.wire.shared_memory.hot_wait.HotWait`)."""
+    server, agent, _ = pipe_server
+    made: list[ServingWaits] = []
+    init = ServingWaits.__init__
+
+    def spy(self: ServingWaits, *args: Any, **kwargs: Any) -> None:
+        init(self, *args, **kwargs)
+        made.append(self)
+
+    monkeypatch.setattr(ServingWaits, "__init__", spy)
+    send(agent, 1, "close")
+    server.serve()
+    assert [r["seq"] for r in replies(agent)] == [1]
+    assert sim_server.SIM_SPIN_PATIENCE > 1
+    assert [waits.hot.patience for waits in made] == [sim_server.SIM_SPIN_PATIENCE]

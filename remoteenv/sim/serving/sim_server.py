@@ -44,6 +44,12 @@ log = logging.getLogger(__name__)
 
 #: Longest busy-wait (seconds) for the agent's next request on the local pipe.
 SIM_SPIN_S = 1e-3
+#: Waits for the agent's next request in a row that outlast :data:`SIM_SPIN_S`
+#: before the next ones start cold: an agent late now and then (its caller
+#: preempted, a slow host's hiccup) is still waited for hot, as a sim asleep
+#: costs the request a wake-up and its physics a slower start (docs/performance.md,
+#: "The sim's patience with a late request").
+SIM_SPIN_PATIENCE = 3
 #: Longest think time (seconds) of an agent whose next request is waited for
 #: hot: beyond it the agent runs its own code (a policy, an update) on the
 #: CPUs a spinning sim would take from it (see :class:`~remoteenv.sim.serving.waits.ServingWaits`).
@@ -195,6 +201,7 @@ class RemoteControlledAgent:
             self.router,
             pipe,
             hot_window_s=SIM_SPIN_S if pipe is not None and not self.real_time else 0.0,
+            hot_patience=SIM_SPIN_PATIENCE,
             think_limit_s=AGENT_THINK_SPIN_S,
             spin_s=self.deadline_spin_s,
             # A sim the agent pinned takes its CPUs back from a busy neighbour (lock step only).

@@ -34,6 +34,8 @@ class ServingWaits:
     Args:
         router, pipe: the server's channels (the launching agent's pipe is read first).
         hot_window_s: longest busy-wait (seconds) for the agent's next request on the pipe (0: never).
+        hot_patience: waits in a row that outlast ``hot_window_s`` before the
+            next ones start cold (see :class:`~remoteenv.wire.shared_memory.hot_wait.HotWait`).
         think_limit_s: no busy-wait after a region request whose agent thought
             longer than this (seconds) before it: the agent's own code (a
             policy, an update) then runs on the CPUs a spinning sim would take.
@@ -49,6 +51,7 @@ class ServingWaits:
         pipe: PipeChannel | None,
         *,
         hot_window_s: float,
+        hot_patience: int = 1,
         think_limit_s: float = float("inf"),
         spin_s: float,
         answer: Callable[[Channel, list[tuple[Any, Any]]], None],
@@ -56,7 +59,7 @@ class ServingWaits:
         pipe_closed: Callable[[], None],
     ) -> None:
         self.router, self.pipe = router, pipe
-        self.hot = HotWait(hot_window_s)
+        self.hot = HotWait(hot_window_s, hot_patience)
         self.served: list[Channel] = [router] if pipe is None else [pipe, router]  # the launching agent first
         self.poller = zmq.Poller()
         for channel in self.served:

@@ -99,13 +99,24 @@ class HotWait:
             also disabled when this process may use only one CPU (spinning
             would starve the peer) and when the environment variable
             ``REMOTEENV_NO_SPIN`` is set.
+        patience: how many waits in a row must outlast the window before the
+            next waits start cold (1: the last wait alone decides). A peer
+            that is quick but now and then late (preempted, a garbage
+            collection, a slow host's hiccup) keeps being waited for hot; a
+            peer that is slow every time still turns the waits cold after
+            ``patience`` of them.
     """
 
-    def __init__(self, window_s: float) -> None:
+    def __init__(self, window_s: float, patience: int = 1) -> None:
         if usable_cpus() < 2 or os.environ.get("REMOTEENV_NO_SPIN"):
             window_s = 0.0
+        if patience < 1:
+            raise ValueError(f"patience counts waits and must be at least 1, got {patience}")
         self.window_s = window_s
+        self.patience = patience
         self._last_wait_s = 0.0
+        #: Waits in a row, the last one included, that outlasted the window.
+        self._long_waits = 0
         self._cold = 0
         self._until = 0.0
         self._last_spin = 0.0
@@ -131,7 +142,7 @@ class HotWait:
         """Whether the next wait should start hot; if so, the spin's window starts now."""
         if not self.window_s:
             return False
-        if self._last_wait_s > self.window_s:
+        if self._long_waits >= self.patience:
             self._cold += 1
             if self._cold < _PROBE_EVERY:
                 return False
@@ -159,3 +170,4 @@ class HotWait:
     def waited(self, seconds: float) -> None:
         """Record how long the last wait for the peer took."""
         self._last_wait_s = seconds
+        self._long_waits = self._long_waits + 1 if seconds > self.window_s else 0
