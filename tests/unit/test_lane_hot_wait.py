@@ -25,6 +25,12 @@ pytestmark = pytest.mark.skipif(not doorbell_module.SILENT, reason="the region i
 @pytest.fixture(autouse=True)
 def two_cpus(monkeypatch):
     hot_waits_allowed(monkeypatch)
+    # Which history a wait counts on, not how long a spin may last: a busy
+    # machine may deschedule this process past a window (the wait, which rang
+    # the absent sim, would then not count) or long enough to be a stall.
+    monkeypatch.setattr(hot_wait, "STALL_S", float("inf"))
+    monkeypatch.setattr(pipe_connection, "LANE_SPIN_S", 10.0)
+    monkeypatch.setattr(pipe_connection, "AGENT_SPIN_S", 5.0)
 
 
 def _answer_in_the_spin(hot: hot_wait.HotWait, header: np.ndarray, seq: int) -> None:
