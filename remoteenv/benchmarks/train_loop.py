@@ -40,7 +40,9 @@ from collections.abc import Callable
 from typing import IO, Any
 
 from remoteenv.benchmarks.harness.anchors import CpuHog
+from remoteenv.benchmarks.harness.host_speed import FULL_SPEED, HostSpeed
 from remoteenv.benchmarks.harness.loop_plot import plot_train_loop
+from remoteenv.benchmarks.harness.paired_interval import CONFIDENCE, paired_interval, settled
 from remoteenv.benchmarks.harness.report import emit, progress_log, rounds_record
 from remoteenv.benchmarks.train_loop_worker import CONTENDERS, DEFAULT_CONTENDERS
 from remoteenv.wire.files.file_reads import read_text
@@ -177,6 +179,7 @@ def _row(t: Trainer) -> dict[str, Any]:
         "num_envs": t.num_envs,
         "median": statistics.median(r["steps_per_s"] for r in rounds),
         "rates": [r["steps_per_s"] for r in rounds],
+        "host_speeds": [r["host_speed"] for r in rounds if "host_speed" in r],
         "cpu_us_per_step": statistics.median(r["cpu_us_per_step"] for r in rounds),
         "trainer_cpu_us_per_step": per_step("trainer_cpu_s") * 1e6,
         "voluntary_switches_per_step": per_step("voluntary_switches"),
@@ -200,6 +203,7 @@ def measure(
     trainers: list[Trainer] = []
     loads: list[float] = []
     skipped: list[str] = []
+    host: HostSpeed | None = None
     try:
         for n in ns:
             for spec in contenders:
@@ -213,13 +217,18 @@ def measure(
                     continue
                 trainers.append(t)
         with CpuHog(hog):
+            host = HostSpeed()
             for r in range(rounds):
                 # Each round starts one contender later, so none always follows the same one.
                 shift = r % len(trainers)
                 for t in trainers[shift:] + trainers[:shift]:
                     t.run_round(duration)
+                    t.rounds[-1]["host_probes"] = host.after_slot()
                 loads.append(os.getloadavg()[0])
                 log(f"  round {r + 1}/{rounds} done, load average {loads[-1]:.2f}")
+        for t in trainers:
+            for done in t.rounds:
+                done["host_speed"] = host.speed(done.pop("host_probes"))
     finally:
         for t in trainers:
             t.close()
@@ -231,6 +240,7 @@ def measure(
         rounds=rounds,
         train_env=env,
         skipped=skipped,
+        host_probe_fastest_s=None if host is None else host.fastest_s,
         rows=rows,
         ratios=ratios(rows),
     )
@@ -239,19 +249,29 @@ def measure(
 def ratios(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The ratios of medians of :data:`TARGETS` where both were measured, each
     with its ratio round by round (``rounds``: the two contenders' rates of
-    the same round, which ran them one after the other), then their CPU per
-    step inverted (> 1: the numerator is cheaper)."""
+    the same round, which ran them one after the other) and, with enough
+    rounds, their geometric mean and its interval (``paired``: ``[mean, low,
+    high]``, :func:`~remoteenv.benchmarks.harness.paired_interval.paired_interval`;
+    None with too few), then their CPU per step inverted (> 1: the numerator
+    is cheaper)."""
     by = {(r["name"], r["num_envs"]): r for r in rows}
     out = []
     for num, den, n, target in TARGETS:
         a, b = by.get((num, n)), by.get((den, n))
         if a and b:
+            rounds = paired_rounds(a, b)
+            interval = paired_interval(rounds)
+            full = full_speed_rounds(a, b, rounds)
+            full_interval = paired_interval(full)
             out.append(
                 {
                     "ratio": f"{num} / {den}, N={n}",
                     "value": a["median"] / b["median"],
                     "target": target,
-                    "rounds": paired_rounds(a, b),
+                    "rounds": rounds,
+                    "paired": None if interval is None else list(interval),
+                    "full_speed_rounds": full,
+                    "paired_full_speed": None if full_interval is None else list(full_interval),
                 }
             )
     for num, den, n, _ in TARGETS:
@@ -281,16 +301,43 @@ def paired_rounds(a: dict[str, Any], b: dict[str, Any]) -> list[float]:
     return [x / y for x, y in zip(ra, rb)]
 
 
+def full_speed_rounds(a: dict[str, Any], b: dict[str, Any], paired: list[float]) -> list[float]:
+    """The ratios of ``paired`` (rows ``a`` over ``b``, round by round) of the
+    rounds in which both were timed on a host at full speed
+    (:data:`~remoteenv.benchmarks.harness.host_speed.FULL_SPEED` or more;
+    [] when either row lacks its host speeds)."""
+    sa, sb = a.get("host_speeds") or [], b.get("host_speeds") or []
+    if not paired or len(sa) != len(paired) or len(sb) != len(paired):
+        return []
+    return [x for x, u, v in zip(paired, sa, sb) if min(u, v) >= FULL_SPEED]
+
+
 def _verdict(r: dict[str, Any]) -> str:
     """The target column of ratio ``r``: met or missed by the ratio of medians,
-    and in how many rounds the round's own ratio met it."""
+    in how many rounds the round's own ratio met it and, with an interval of
+    the rounds' mean, whether that settles it."""
     if r["target"] is None:
         return ""
     verdict = f">={r['target']:.1f} {'met' if r['value'] >= r['target'] else 'MISSED'}"
     paired = r.get("rounds") or []
     if paired:
         verdict += f" ({sum(x >= r['target'] for x in paired)}/{len(paired)} rounds)"
+    interval = r.get("paired")
+    if interval:
+        verdict += f"; by the interval: {settled(tuple(interval), r['target'])}"
+    full = r.get("paired_full_speed")
+    if full:
+        verdict += (
+            f"; host at full speed ({len(r['full_speed_rounds'])}/{len(paired)} rounds): "
+            f"{full[0]:.2f} [{full[1]:.2f}-{full[2]:.2f}] {settled(tuple(full), r['target'])}"
+        )
     return verdict
+
+
+def _paired(r: dict[str, Any]) -> str:
+    """The rounds' geometric mean and its interval, as ``mean [low-high]`` (blank without one)."""
+    interval = r.get("paired")
+    return f"{interval[0]:.2f} [{interval[1]:.2f}-{interval[2]:.2f}]" if interval else ""
 
 
 def _spread(r: dict[str, Any]) -> str:
@@ -318,11 +365,25 @@ def format_table(result: dict[str, Any]) -> str:
         "vol/invol: context switches per step of every thread of the process tree; "
         "act/step/update: shares of the trainer's wall time",
         "",
-        f"{'ratio of medians (> 1: numerator better)':44s} {'value':>6s} {'rounds':>9s}   target",
+        f"{'ratio of medians (> 1: numerator better)':44s} {'value':>6s} {'rounds':>9s} {'paired':>16s}   target",
     ]
     for r in result["ratios"]:
-        lines.append(f"{r['ratio']:44s} {r['value']:6.2f} {_spread(r):>9s}   {_verdict(r)}".rstrip())
+        lines.append(f"{r['ratio']:44s} {r['value']:6.2f} {_spread(r):>9s} {_paired(r):>16s}   {_verdict(r)}".rstrip())
     lines.append("rounds: the lowest and highest ratio of one round's two rates (they ran one after the other)")
+    lines.append(
+        f"paired: the rounds' ratios' geometric mean [its {CONFIDENCE:.0%} bootstrap interval]; a target is "
+        "settled by a run when the whole interval is on one side of it"
+    )
+    lines.append(
+        f"host at full speed: the same over the rounds whose two slots both had probes at {FULL_SPEED:.0%} or more "
+        "of the run's fastest (a fixed loop timed on every CPU before and after each slot)"
+    )
+    speeds = [min(r["host_speeds"]) for r in result["rows"] if r.get("host_speeds")]
+    if speeds and result.get("host_probe_fastest_s"):
+        lines.append(
+            f"host speed: the fastest probe {result['host_probe_fastest_s'] * 1e3:.1f} ms (on its slowest CPU); "
+            f"the slowest slot ran at {min(speeds):.2f} of it"
+        )
     m = result["machine"]
     loads = ", ".join(f"{x:.2f}" for x in result["load_avg_per_round"])
     extra = " ".join(f"{k}={v}" for k, v in result["train_env"].items())

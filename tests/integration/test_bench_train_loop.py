@@ -26,9 +26,12 @@ def test_a_tiny_training_loop_benchmark_writes_every_contender_and_the_ratios(tm
     for row in rows.values():
         assert row["num_envs"] == 2 and len(row["rates"]) == 2 and row["median"] > 0
         assert row["cpu_us_per_step"] > 0 and set(row["wall_share"]) == {"act", "env_step", "update"}
+        # Each slot's host speed: the run's fastest probe over the slower of its two, so (0, 1].
+        assert len(row["host_speeds"]) == 2 and all(0 < x <= 1 for x in row["host_speeds"])
     assert rows["SyncVectorEnv:OMP_NUM_THREADS=1"]["torch_threads"] == 1
     assert rows["remoteenv"]["processes"] >= 2  # the trainer and its sim
     assert len(result["load_avg_per_round"]) == 2 and result["machine"]["cpus"] >= 1
+    assert result["host_probe_fastest_s"] > 0
 
     # The run shown again and drawn from its JSON, nothing run.
     figure = tmp_path / "train.png"
