@@ -179,7 +179,7 @@ def _row(t: Trainer) -> dict[str, Any]:
         "num_envs": t.num_envs,
         "median": statistics.median(r["steps_per_s"] for r in rounds),
         "rates": [r["steps_per_s"] for r in rounds],
-        "host_speeds": [r["host_speed"] for r in rounds if "host_speed" in r],
+        "host_speeds": [r["host_speed"] for r in rounds],
         "cpu_us_per_step": statistics.median(r["cpu_us_per_step"] for r in rounds),
         "trainer_cpu_us_per_step": per_step("trainer_cpu_s") * 1e6,
         "voluntary_switches_per_step": per_step("voluntary_switches"),
@@ -329,15 +329,20 @@ def _verdict(r: dict[str, Any]) -> str:
     if full:
         verdict += (
             f"; host at full speed ({len(r['full_speed_rounds'])}/{len(paired)} rounds): "
-            f"{full[0]:.2f} [{full[1]:.2f}-{full[2]:.2f}] {settled(tuple(full), r['target'])}"
+            f"{_interval_text(full)} {settled(tuple(full), r['target'])}"
         )
     return verdict
 
 
+def _interval_text(interval: list[float]) -> str:
+    """A mean and its interval, as ``mean [low-high]``."""
+    return f"{interval[0]:.2f} [{interval[1]:.2f}-{interval[2]:.2f}]"
+
+
 def _paired(r: dict[str, Any]) -> str:
-    """The rounds' geometric mean and its interval, as ``mean [low-high]`` (blank without one)."""
+    """The rounds' geometric mean and its interval (blank without one)."""
     interval = r.get("paired")
-    return f"{interval[0]:.2f} [{interval[1]:.2f}-{interval[2]:.2f}]" if interval else ""
+    return _interval_text(interval) if interval else ""
 
 
 def _spread(r: dict[str, Any]) -> str:
