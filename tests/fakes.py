@@ -111,3 +111,14 @@ def heads_up_once_asked(sim_bell: Doorbell, sock: socket.socket, seq: int) -> No
     """The stand-in sim's physics is done: once the agent sleeps asking, send it a heads-up for ``seq``."""
     until(sim_bell.agent_wants_heads_up)
     sock.sendall(protocol.stream_frame(protocol.reply_soon(seq)))
+
+
+class IdleRouter:
+    """A channel on which nothing comes (the sim server's ZeroMQ router, here a quiet socket)."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.closed, self.more = False, False
+        self.pollable = self.fd = sock.fileno()
+
+    def receive_nowait(self) -> list[tuple[Any, Any]]:
+        return []

@@ -115,9 +115,11 @@ class FakePipe:
 
 @linux_only
 def test_the_sims_end_serves_the_pipe_only(monkeypatch):
+    from remoteenv.sim.transport import lane_requests
     from remoteenv.sim.transport import shared_lane_server as shared_lane
 
     monkeypatch.setattr(shared_lane, "PipeChannel", FakePipe)
+    monkeypatch.setattr(lane_requests, "PipeChannel", FakePipe)  # the lane's requests side
     lane = SharedLane(BOX_ACT, BOX_OBS, 4)
     with pytest.raises(RequestError, match="local pipe"):
         lane.attach({}, None, None)  # e.g. a ZeroMQ client

@@ -8,6 +8,7 @@ import socket
 from typing import Any
 
 import numpy as np
+from fakes import IdleRouter
 
 from remoteenv.sim.serving.waits import ServingWaits
 from remoteenv.sim.transport.channels import PipeChannel
@@ -50,17 +51,6 @@ class Lane:
     def agent_away(self) -> bool:
         self.looks += 1
         return self.away_from is not None and self.looks >= self.away_from
-
-
-class IdleRouter:
-    """A channel on which nothing comes (the server's ZeroMQ router, here a quiet socket)."""
-
-    def __init__(self, sock: socket.socket) -> None:
-        self.closed, self.more = False, False
-        self.pollable = self.fd = sock.fileno()
-
-    def receive_nowait(self) -> list[tuple[Any, Any]]:
-        return []
 
 
 def _waits(pipe: PipeChannel, quiet: socket.socket, answer: Any) -> ServingWaits:

@@ -23,6 +23,7 @@ from remoteenv.sim.serving.attributes import AttributeCommands
 from remoteenv.sim.serving.commands import Commands, Handler, RegionHandler
 from remoteenv.sim.serving.stepping_modes import stepping_and_commands
 from remoteenv.sim.stepping.interfaces import Stepping
+from remoteenv.sim.stepping.plain_region_step import PlainRegionStep
 from remoteenv.sim.stepping.real_time import Clock
 from remoteenv.sim.transport.channels import Channel, PipeChannel
 from remoteenv.sim.transport.checks import RequestError
@@ -35,10 +36,14 @@ from remoteenv.wire.wire_errors import INVALID_ACTION, PROTOCOL, SCENE, InvalidA
 class CommandTable:
     """Command name -> handler; :meth:`handle` answers a decoded request with it."""
 
-    def __init__(self, handlers: dict[str, Handler], region: RegionHandler | None = None) -> None:
+    def __init__(
+        self, handlers: dict[str, Handler], region: RegionHandler | None = None, plain: PlainRegionStep | None = None
+    ) -> None:
         self.handlers = handlers
         #: The handler of the requests found posted in the pipe's region (lock-step), or None.
         self.region = region
+        #: Those of them that step every world plainly, served without the dispatch (lock-step), or None.
+        self.plain = plain
 
     @property
     def commands(self) -> list[str]:
@@ -64,6 +69,19 @@ class CommandTable:
         if self.region is None:
             return self.handle(msg, pipe, None)
         return self._answered(msg["seq"], self.region, msg, pipe)
+
+    def handle_plain_region(self, seq: int, pipe: Channel) -> tuple[bool, dict[str, Any] | None]:
+        """Request ``seq``, found posted in the launching agent's ``pipe``'s
+        region, if it is a plain step of every world (:attr:`plain`):
+        ``(True, reply)``, served (the reply :meth:`handle_region` would give;
+        None: answered in the region); ``(False, None)``, not taken: serve it
+        with :meth:`handle_region`. Never raises."""
+        plain = self.plain
+        actions = None if plain is None else plain.take(seq, pipe)
+        if actions is None:
+            return False, None
+        assert plain is not None
+        return True, self._answered(seq, plain.step, actions, seq)
 
     def _answered(self, seq: int, handler: Callable[..., dict[str, Any] | None], *args: Any) -> dict[str, Any] | None:
         """``handler(*args)``'s reply to request ``seq``, every failure a typed error reply."""
@@ -98,7 +116,7 @@ def build_table(
     :func:`~remoteenv.sim.serving.stepping_modes.stepping_and_commands`'s;
     ``world_factory`` makes a scratch world for the handshake's cost
     measurement (:class:`~remoteenv.sim.serving.commands.Commands`)."""
-    stepping, mode_commands, physics, region = stepping_and_commands(envs, instance, run, seed=seed, clock=clock)
+    stepping, mode_commands, physics, region, plain = stepping_and_commands(envs, instance, run, seed=seed, clock=clock)
     common = Commands(envs, stepping, instance, stop, launcher_channel=pipe, world_factory=world_factory)
     common.physics = physics
     handlers: dict[str, Handler] = common.handlers()
@@ -112,7 +130,7 @@ def build_table(
         handlers["reset_batch"] = drivers.guard_reset_batch(handlers["reset_batch"])
         handlers["step_batch"] = drivers.guard_step_batch(handlers["step_batch"])
     common.advertised = sorted(handlers)
-    return stepping, CommandTable(handlers, region), drivers
+    return stepping, CommandTable(handlers, region, plain), drivers
 
 
 def pack_reply(reply: dict[str, Any]) -> bytes:

@@ -195,6 +195,8 @@ class RemoteControlledAgent:
 
     def _serve_until_stopped(self) -> None:
         stepping, clock, pipe = self.stepping, self.clock, self._pipe
+        # A sim the agent pinned takes its CPUs back from a busy neighbour (lock step only).
+        pin = None if self.real_time else PinRelease(self.instance)
         # Busy-waiting for the agent's next request pays in lock-step; in real
         # time the loop's own waits are paced by the deadlines instead.
         waits = ServingWaits(
@@ -204,10 +206,10 @@ class RemoteControlledAgent:
             hot_patience=SIM_SPIN_PATIENCE,
             think_limit_s=AGENT_THINK_SPIN_S,
             spin_s=self.deadline_spin_s,
-            # A sim the agent pinned takes its CPUs back from a busy neighbour (lock step only).
-            answer=self._answer if self.real_time else PinRelease(self.instance).watching(self._answer),
+            answer=self._answer if pin is None else pin.watching(self._answer),
             send=self._send_later,
             pipe_closed=self.pipe_closed,
+            plain=None if pin is None or self._table.plain is None else self._plain_answer(pin),
         )
         last_check = clock()
         while self._running:
@@ -225,8 +227,25 @@ class RemoteControlledAgent:
                 self.check_parent()
                 last_check = now
 
+    def _plain_answer(self, pin: PinRelease) -> Callable[[int, PipeChannel], bool]:
+        """What serves a plain step of every world posted in the pipe's region
+        (:meth:`~remoteenv.sim.serving.command_table.CommandTable.handle_plain_region`),
+        watched by ``pin`` as :meth:`_answer` is; False when it took nothing."""
+        table = self._table
+
+        def plain(seq: int, pipe: PipeChannel) -> bool:
+            taken, reply = table.handle_plain_region(seq, pipe)
+            if not taken:
+                return False
+            if reply is not None:
+                self._reply(pipe, None, reply)
+            pin.answered()
+            return True
+
+        return plain
+
     def _answer(self, channel: Channel, frames: list[tuple[Any, Any]]) -> None:
-        stepping, router = self.stepping, self.router
+        router = self.router
         for i, (reply_to, frame) in enumerate(frames):
             reply: dict[str, Any] | None
             if type(frame) is dict:  # a request found in the pipe's region, decoded (protocol.region_request)
@@ -244,12 +263,16 @@ class RemoteControlledAgent:
                         self._expensive_left -= 1
                     reply = self.handle(msg, channel, reply_to)
             if reply is not None:
-                payload = pack_reply(reply)
-                if stepping.clock_waiting:  # a reset was answered: its world's clock starts as the reply goes
-                    # Read before sending: the reset's reply never reaches the
-                    # agent before substep 0's deadline, so no action can.
-                    stepping.start_clocks(self.clock())
-                channel.send(reply_to, payload)
+                self._reply(channel, reply_to, reply)
+
+    def _reply(self, channel: Channel, reply_to: Any, reply: dict[str, Any]) -> None:
+        """Send ``reply`` to ``reply_to`` on ``channel``."""
+        payload = pack_reply(reply)
+        if self.stepping.clock_waiting:  # a reset was answered: its world's clock starts as the reply goes
+            # Read before sending: the reset's reply never reaches the
+            # agent before substep 0's deadline, so no action can.
+            self.stepping.start_clocks(self.clock())
+        channel.send(reply_to, payload)
 
     def _send_later(self, outgoing: Outgoing) -> None:
         channel, reply_to, reply = outgoing

@@ -8,7 +8,11 @@ between its vector steps (the doorbell's ``AGENT_THINK_US``), else blocking
 on every channel for up to :data:`~remoteenv.sim.process.orphan.CHECK_INTERVAL_S`.
 With a deadline (real time) a pass sleeps with ``select`` until ``spin_s``
 before it, spins the rest, runs the work due and reads every channel. What
-arrives goes to the server's ``answer``; an ended pipe to its ``pipe_closed``.
+arrives goes to the server's ``answer``, except a request posted in the
+pipe's region that came alone, which goes to its ``plain`` first (a plain
+step of every world, served without the dispatch:
+:class:`~remoteenv.sim.stepping.plain_region_step.PlainRegionStep`); an
+ended pipe to its ``pipe_closed``.
 """
 
 from __future__ import annotations
@@ -41,6 +45,9 @@ class ServingWaits:
             policy, an update) then runs on the CPUs a spinning sim would take.
         spin_s: wall seconds before a deadline at which waiting turns from sleeping to spinning.
         answer: answers the frames a channel gave.
+        plain: serves a request found posted in the pipe's region, given its
+            ``seq`` and the pipe, when it is a plain step of every world; False
+            if it took nothing (then ``answer`` gets it). None: ``answer`` gets all.
         send: sends a reply the stepping completed.
         pipe_closed: called when the pipe has ended.
     """
@@ -57,6 +64,7 @@ class ServingWaits:
         answer: Callable[[Channel, list[tuple[Any, Any]]], None],
         send: Callable[[Outgoing], None],
         pipe_closed: Callable[[], None],
+        plain: Callable[[int, PipeChannel], bool] | None = None,
     ) -> None:
         self.router, self.pipe = router, pipe
         self.hot = HotWait(hot_window_s, hot_patience)
@@ -68,6 +76,7 @@ class ServingWaits:
         self.spin_s = spin_s
         self.think_limit_s = think_limit_s
         self._answer, self._send, self._pipe_closed = answer, send, pipe_closed
+        self._plain = plain
 
     def for_requests(self) -> bool | None:
         """One lock-step pass: wait for requests and answer them. Returns whether
@@ -83,7 +92,7 @@ class ServingWaits:
             frames = pipe.receive_spinning(hot)
             if frames:
                 hot.waited(time.perf_counter() - hot.since)
-                self._answer(pipe, frames)
+                self._answer_pipe(pipe, frames)
                 hot.since = time.perf_counter()
                 return None
             if pipe.closed:
@@ -93,7 +102,7 @@ class ServingWaits:
             # About to block: a request posted in the pipe's region comes with a frame from now on.
             frames = pipe.settle()
             if frames:
-                self._answer(pipe, frames)
+                self._answer_pipe(pipe, frames)
                 return None
         # Frames left waiting in the router's backlog: look, do not wait.
         events = dict(self.poller.poll(0 if router.more else _CHECK_INTERVAL_MS))
@@ -101,14 +110,26 @@ class ServingWaits:
             if channel.pollable not in events and not channel.more:
                 continue
             frames = channel.receive_nowait()
-            if channel is pipe and frames and not thinks:
-                hot.waited(time.perf_counter() - hot.since)
-            self._answer(channel, frames)
             if channel is pipe:
+                if frames and not thinks:
+                    hot.waited(time.perf_counter() - hot.since)
+                self._answer_pipe(pipe, frames)
                 hot.since = time.perf_counter()
+            else:
+                self._answer(channel, frames)
             if channel.closed:
                 self._pipe_closed()
         return not events
+
+    def _answer_pipe(self, pipe: PipeChannel, frames: list[tuple[Any, Any]]) -> None:
+        """Answer what the pipe gave: a request posted in its region alone goes
+        to ``plain`` first (see the constructor), anything else to ``answer``."""
+        plain = self._plain
+        if plain is not None and len(frames) == 1:
+            frame = frames[0][1]
+            if type(frame) is dict and plain(frame["seq"], pipe):  # a region request (protocol.region_request)
+                return
+        self._answer(pipe, frames)
 
     def _agent_thinks(self, pipe: PipeChannel) -> bool:
         """Whether the agent said it thinks longer than :attr:`think_limit_s` between

@@ -26,6 +26,7 @@ from gymnasium import spaces
 from remoteenv.sim.scene.batch_result import BatchResult
 from remoteenv.sim.stepping.batch_step import WorldsStepper, steps_together
 from remoteenv.sim.stepping.lock_step import LockStepper
+from remoteenv.sim.stepping.plain_region_step import PlainRegionStep, batch_infos, plain_step_reply, region_reply
 from remoteenv.sim.transport.channels import Channel
 from remoteenv.sim.transport.checks import RequestError, options_value, require_reset, seed_list, world_list
 from remoteenv.sim.transport.shared_lane_server import SharedLane
@@ -65,6 +66,12 @@ class BatchCommands:
         self.lane = SharedLane(action_space, envs[0].observation_space, len(worlds)) if together else None
         #: Every world has been reset (then no step needs the per-world check).
         self._all_reset = False
+        #: Plain steps of every world posted in the region, served from the sim's wait (None: no region here).
+        self.plain_region = (
+            PlainRegionStep(self.lane, self.stepper, self._check, lambda: self._all_reset)
+            if self.lane is not None and self.stepper is not None
+            else None
+        )
 
     def close(self) -> None:
         """Stop the physics threads; unmap the shared region."""
@@ -194,13 +201,8 @@ class BatchCommands:
             resets = not all_step or OP_STEP_RESET in ops or (OP_STEP_AUTORESET in ops and batch.terminated.any())
             if not resets:
                 if seq and lane is not None:
-                    done, reply = lane.answer(seq, batch)
-                    if done:
-                        return reply
-                    if reply is not None:
-                        reply["info"] = batch_infos(batch)
-                        return reply
-                elif shared and lane is not None:
+                    return region_reply(lane, seq, batch)
+                if shared and lane is not None:
                     reply = lane.reply(batch, batch_infos(batch))
                     if reply is not None:
                         return reply
@@ -271,29 +273,9 @@ class BatchCommands:
         return reply
 
 
-def batch_infos(batch: BatchResult) -> dict[str, Any]:
-    """The infos of a batch in their wire form (see :func:`columnar_infos`)."""
-    info = batch.wire_columns()
-    if info is None:
-        info = columnar_infos([batch.world_info(j) for j in range(len(batch.reward))])
-    return info
-
-
 def _stacked(obs: Any) -> Any:
     """Observations for the wire: an array of rows as it is, a list stacked where it can be."""
     return obs if isinstance(obs, np.ndarray) else stack(obs)
-
-
-def plain_step_reply(batch: BatchResult) -> dict[str, Any]:
-    """The reply of a ``step_batch`` that stepped every world and reset none."""
-    return {
-        "obs": batch.obs if isinstance(batch.obs, np.ndarray) else stack(batch.obs),
-        "reward": batch.reward.tolist(),
-        "terminated": batch.terminated.tolist(),
-        "truncated": [False] * len(batch.reward),
-        "info": batch_infos(batch),
-        "final": [],
-    }
 
 
 def _per_world_results(batch: BatchResult, stepped: list[int], n: int) -> list[dict[str, Any] | None]:

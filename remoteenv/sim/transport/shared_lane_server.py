@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import sys
 import time
 from typing import Any
 
@@ -27,11 +26,12 @@ from gymnasium import spaces
 from remoteenv.sim.scene.batch_result import BatchResult
 from remoteenv.sim.transport.channels import Channel, PipeChannel
 from remoteenv.sim.transport.checks import RequestError
+from remoteenv.sim.transport.lane_requests import LaneRequests
 from remoteenv.wire.codec.arrays import wire_dtype
-from remoteenv.wire.protocol import OPS, reply_soon
+from remoteenv.wire.protocol import reply_soon
 from remoteenv.wire.shared_memory.doorbell import Doorbell
-from remoteenv.wire.shared_memory.shared_batch import SharedArrays, SharedLayout, create_region
-from remoteenv.wire.wire_errors import PROTOCOL, STATE
+from remoteenv.wire.shared_memory.shared_batch import SharedLayout, create_region
+from remoteenv.wire.wire_errors import STATE
 
 #: Info columns the region of a sim holds for the fast lane.
 INFO_COLUMNS = 16
@@ -40,7 +40,6 @@ INFO_COLUMNS = 16
 HEADS_UP_TAIL_S = 0.5e-3
 #: The dtype an info column of python scalars travels in, by numpy kind.
 _WIDE = {"b": np.dtype(np.bool_), "i": np.dtype("<i8"), "u": np.dtype("<i8"), "f": np.dtype("<f8")}
-_LAST_OP = max(OPS)
 
 
 def layout_for(action_space: spaces.Space, obs_space: spaces.Space, worlds: int) -> SharedLayout | None:
@@ -61,8 +60,9 @@ def layout_for(action_space: spaces.Space, obs_space: spaces.Space, worlds: int)
     return SharedLayout(worlds, action[0], tuple(action[1]), obs_dtype, tuple(obs_space.shape))
 
 
-class SharedLane:
-    """The region of one sim process's worlds, created on the agent's first ``shared_batch``.
+class SharedLane(LaneRequests):
+    """The region of one sim process's worlds, created on the agent's first ``shared_batch``:
+    its requests as :class:`~remoteenv.sim.transport.lane_requests.LaneRequests` takes them, its replies.
 
     Args:
         action_space, obs_space: the worlds' spaces.
@@ -72,24 +72,14 @@ class SharedLane:
     def __init__(self, action_space: spaces.Space, obs_space: spaces.Space, worlds: int) -> None:
         base = layout_for(action_space, obs_space, worlds)
         self.layout = None if base is None else dataclasses.replace(base, info_columns=INFO_COLUMNS)
+        super().__init__()
         self._fd: int | None = None
-        self._arrays: SharedArrays | None = None
-        #: The fast lane's doorbell (once the region exists).
-        self.doorbell: Doorbell | None = None
-        #: ``seq`` of the last request taken from the region.
-        self.served = 0
-        #: The agent's think time before that request (seconds, 0: not told; the doorbell's ``AGENT_THINK_US``).
-        self.agent_think_s = 0.0
         self._info_version = 0
         self._info_signature: tuple[tuple[str, np.dtype, bool], ...] | None = None
         #: Views of rows ``0 .. n-1`` of the region's info columns, by column, dtype and ``n`` (made once).
         self._column_views: dict[tuple[int, np.dtype, int], np.ndarray] = {}
         #: Views of the region's obs, reward, terminated and truncated rows ``0 .. n-1``, by ``n`` (made once).
         self._row_views: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
-        #: Why the region is no longer used (its header was tampered with), or None.
-        self.tampered: str | None = None
-        #: The pipe the last region request came on (heads-ups go there).
-        self._channel: PipeChannel | None = None
         #: When the physics of the request being served was done (perf_counter s; 0: not yet).
         self._physics_done = 0.0
         #: Seconds from the physics to the region answer, last time (0: not known).
@@ -110,90 +100,6 @@ class SharedLane:
             self.doorbell = Doorbell(self._arrays.header)
         channel.lane = self  # its waits look at the doorbell too
         return {"pid": os.getpid(), "fd": self._fd, "layout": self.layout.to_wire()}
-
-    # ------------------------------------------------------------ the pipe channel's watch
-
-    def posted(self) -> int:
-        """``seq`` of a request posted in the region and not yet served (0: none)."""
-        return 0 if self.doorbell is None else self.doorbell.posted(self.served)
-
-    def agent_away(self) -> bool:
-        """Whether the agent said its caller began a long think after the last
-        reply (the doorbell's ``AGENT_AWAY``): a hot wait for its next request stops."""
-        doorbell = self.doorbell
-        return doorbell is not None and doorbell.agent_away()
-
-    def settle(self) -> int:
-        """The sim is about to block: stop watching the region (a request posted
-        from now on comes with its frame); a request that came meanwhile (0: none)."""
-        if self.doorbell is None or self._found_tampered():
-            return 0
-        return self.doorbell.sim_sleeps(self.served)
-
-    def _found_tampered(self) -> bool:
-        """Whether the header is not what the two sides can have written: then
-        the region is dropped (poisoned for the agent to see, see
-        :mod:`remoteenv.wire.shared_memory.doorbell`) and every later step takes the pipe."""
-        doorbell = self.doorbell
-        if doorbell is None:
-            return self.tampered is not None
-        why = doorbell.sim_tampered(self.served)
-        if why is None:
-            return False
-        doorbell.poison()
-        self.doorbell = None
-        self.tampered = why
-        print(
-            f"remoteenv sim: the shared-memory region was tampered with ({why}); it is no longer used, "
-            "batched steps take the pipe",
-            file=sys.stderr,
-            flush=True,
-        )
-        return True
-
-    def _refuse_tampered(self) -> None:
-        if self._found_tampered():
-            raise RequestError(STATE, f"the shared-memory region was tampered with ({self.tampered}) and is not used")
-
-    # ------------------------------------------------------------ requests
-
-    def actions(self, n: int, channel: Channel | None) -> np.ndarray:
-        """A copy of the actions of request positions ``0 .. n-1`` (checked by the caller)."""
-        arrays = self._arrays
-        if arrays is None or not isinstance(channel, PipeChannel):
-            raise RequestError(STATE, "a 'shared' step_batch needs the region of shared_batch, over the local pipe")
-        self._refuse_tampered()
-        if not 0 < n <= len(arrays.actions):
-            raise RequestError(PROTOCOL, f"a 'shared' step_batch covers 1..{len(arrays.actions)} worlds, got {n}")
-        return arrays.actions[:n].copy()
-
-    def take(self, seq: int, channel: Channel | None) -> tuple[list[int], list[int] | None, np.ndarray] | None:
-        """The request ``seq`` posted in the region: ``(ops, worlds, actions)``
-        for its ``n`` positions (copies; ops checked, worlds as listed or None
-        for ``0 .. n-1``, actions for the caller to check), or None if it was
-        served already (its frame came after the watch found it: nothing to answer)."""
-        self._refuse_tampered()
-        arrays, doorbell = self._arrays, self.doorbell
-        if arrays is None or doorbell is None or not isinstance(channel, PipeChannel):
-            raise RequestError(STATE, "a region step_batch needs the region of shared_batch, over the local pipe")
-        if seq <= self.served:
-            return None
-        posted, n, named = doorbell.request()
-        if posted != seq:
-            raise RequestError(PROTOCOL, f"a region step_batch {seq}, but the region holds request {posted}")
-        self.served = seq
-        self._channel = channel
-        self.agent_think_s = doorbell.agent_think_s()
-        k = arrays.layout.worlds
-        if not 0 < n <= k:
-            raise RequestError(PROTOCOL, f"a region request covers 1..{k} worlds, got {n}")
-        assert arrays.ops is not None and arrays.worlds is not None
-        # A list of at most K Python ints is checked faster than numpy reduces its array.
-        ops: list[int] = arrays.ops[:n].tolist()
-        if min(ops) < 0 or max(ops) > _LAST_OP:
-            raise RequestError(PROTOCOL, f"a region request's ops must be in {OPS}")
-        worlds = arrays.worlds[:n].tolist() if named else None
-        return ops, worlds, arrays.actions[:n].copy()
 
     # ------------------------------------------------------------ replies
 
