@@ -77,10 +77,11 @@ class CommandTable:
         None: answered in the region); ``(False, None)``, not taken: serve it
         with :meth:`handle_region`. Never raises."""
         plain = self.plain
-        actions = None if plain is None else plain.take(seq, pipe)
+        if plain is None:
+            return False, None
+        actions = plain.take(seq, pipe)
         if actions is None:
             return False, None
-        assert plain is not None
         return True, self._answered(seq, plain.step, actions, seq)
 
     def _answered(self, seq: int, handler: Callable[..., dict[str, Any] | None], *args: Any) -> dict[str, Any] | None:

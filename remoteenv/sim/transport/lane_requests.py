@@ -116,9 +116,7 @@ class LaneRequests:
         posted, n, named = doorbell.request()
         if posted != seq:
             raise RequestError(PROTOCOL, f"a region step_batch {seq}, but the region holds request {posted}")
-        self.served = seq
-        self._channel = channel
-        self.agent_think_s = doorbell.agent_think_s()
+        self._taken(seq, channel, doorbell)
         k = arrays.layout.worlds
         if not 0 < n <= k:
             raise RequestError(PROTOCOL, f"a region request covers 1..{k} worlds, got {n}")
@@ -156,10 +154,15 @@ class LaneRequests:
             return None
         if not isinstance(checked, np.ndarray):
             return None
+        self._taken(seq, channel, doorbell)
+        return checked
+
+    def _taken(self, seq: int, channel: PipeChannel, doorbell: Doorbell) -> None:
+        """Request ``seq`` has been taken from the region, from ``channel``: served,
+        heads-ups go there, and its agent's think time is read."""
         self.served = seq
         self._channel = channel
         self.agent_think_s = doorbell.agent_think_s()
-        return checked
 
 
 __all__ = ["LaneRequests"]
