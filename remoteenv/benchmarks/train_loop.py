@@ -41,6 +41,7 @@ from typing import IO, Any
 
 from remoteenv.benchmarks.harness.anchors import CpuHog
 from remoteenv.benchmarks.harness.host_speed import FULL_SPEED, HostSpeed
+from remoteenv.benchmarks.harness.host_steal import HostSteal
 from remoteenv.benchmarks.harness.loop_plot import plot_train_loop
 from remoteenv.benchmarks.harness.paired_interval import CONFIDENCE, paired_interval, settled
 from remoteenv.benchmarks.harness.report import emit, progress_log, rounds_record
@@ -71,6 +72,8 @@ TARGETS = [
     ("waits-floor", "EnvPool", 64, None),
     ("waits-floor", "SyncVectorEnv", 16, None),
 ]
+#: A slot whose host held at least this share of the CPUs' time is counted in the report's steal line.
+STEAL_NOTED = 0.05
 #: Longest a contender may take to build and warm up, or to answer a round beyond its length (seconds).
 _PATIENCE_S = 300.0
 
@@ -180,6 +183,7 @@ def _row(t: Trainer) -> dict[str, Any]:
         "median": statistics.median(r["steps_per_s"] for r in rounds),
         "rates": [r["steps_per_s"] for r in rounds],
         "host_speeds": [r["host_speed"] for r in rounds],
+        "host_steals": [r.get("host_steal") for r in rounds],
         "cpu_us_per_step": statistics.median(r["cpu_us_per_step"] for r in rounds),
         "trainer_cpu_us_per_step": per_step("trainer_cpu_s") * 1e6,
         "voluntary_switches_per_step": per_step("voluntary_switches"),
@@ -218,11 +222,14 @@ def measure(
                 trainers.append(t)
         with CpuHog(hog):
             host = HostSpeed()
+            steal = HostSteal()
             for r in range(rounds):
                 # Each round starts one contender later, so none always follows the same one.
                 shift = r % len(trainers)
                 for t in trainers[shift:] + trainers[:shift]:
+                    steal.start()
                     t.run_round(duration)
+                    t.rounds[-1]["host_steal"] = steal.stop()
                     t.rounds[-1]["host_probes"] = host.after_slot()
                 loads.append(os.getloadavg()[0])
                 log(f"  round {r + 1}/{rounds} done, load average {loads[-1]:.2f}")
@@ -303,13 +310,18 @@ def paired_rounds(a: dict[str, Any], b: dict[str, Any]) -> list[float]:
 
 def full_speed_rounds(a: dict[str, Any], b: dict[str, Any], paired: list[float]) -> list[float]:
     """The ratios of ``paired`` (rows ``a`` over ``b``, round by round) of the
-    rounds in which both were timed on a host at full speed
-    (:data:`~remoteenv.benchmarks.harness.host_speed.FULL_SPEED` or more;
-    [] when either row lacks its host speeds)."""
+    rounds in which both were timed on a host at full speed: probes at
+    :data:`~remoteenv.benchmarks.harness.host_speed.FULL_SPEED` or more and,
+    where the rows have it, a steal share under :data:`STEAL_NOTED` ([] when
+    either row lacks its host speeds)."""
     sa, sb = a.get("host_speeds") or [], b.get("host_speeds") or []
     if not paired or len(sa) != len(paired) or len(sb) != len(paired):
         return []
-    return [x for x, u, v in zip(paired, sa, sb) if min(u, v) >= FULL_SPEED]
+    ta, tb = a.get("host_steals") or [None] * len(paired), b.get("host_steals") or [None] * len(paired)
+    if len(ta) != len(paired) or len(tb) != len(paired):
+        ta = tb = [None] * len(paired)
+    quiet = [all(x is None or x < STEAL_NOTED for x in pair) for pair in zip(ta, tb)]
+    return [x for x, u, v, q in zip(paired, sa, sb, quiet) if min(u, v) >= FULL_SPEED and q]
 
 
 def _verdict(r: dict[str, Any]) -> str:
@@ -381,13 +393,20 @@ def format_table(result: dict[str, Any]) -> str:
     )
     lines.append(
         f"host at full speed: the same over the rounds whose two slots both had probes at {FULL_SPEED:.0%} or more "
-        "of the run's fastest (a fixed loop timed on every CPU before and after each slot)"
+        f"of the run's fastest (a fixed loop timed on every CPU before and after each slot) and, where measured, "
+        f"the host's steal under {STEAL_NOTED:.0%}"
     )
     speeds = [min(r["host_speeds"]) for r in result["rows"] if r.get("host_speeds")]
     if speeds and result.get("host_probe_fastest_s"):
         lines.append(
             f"host speed: the fastest probe {result['host_probe_fastest_s'] * 1e3:.1f} ms (on its slowest CPU); "
             f"the slowest slot ran at {min(speeds):.2f} of it"
+        )
+    steals = [x for r in result["rows"] for x in r.get("host_steals") or [] if x is not None]
+    if steals:
+        lines.append(
+            f"host steal: the VM's host held {min(steals):.0%}-{max(steals):.0%} of the CPUs' time in a slot "
+            f"(/proc/stat; {sum(x >= STEAL_NOTED for x in steals)} of {len(steals)} slots at {STEAL_NOTED:.0%} or more)"
         )
     m = result["machine"]
     loads = ", ".join(f"{x:.2f}" for x in result["load_avg_per_round"])

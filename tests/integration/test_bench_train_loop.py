@@ -28,6 +28,8 @@ def test_a_tiny_training_loop_benchmark_writes_every_contender_and_the_ratios(tm
         assert row["cpu_us_per_step"] > 0 and set(row["wall_share"]) == {"act", "env_step", "update"}
         # Each slot's host speed: the run's fastest probe over the slower of its two, so (0, 1].
         assert len(row["host_speeds"]) == 2 and all(0 < x <= 1 for x in row["host_speeds"])
+        # Each slot's steal share: the part of the CPUs' time the VM's host held (None without /proc/stat).
+        assert len(row["host_steals"]) == 2 and all(x is None or 0 <= x <= 1 for x in row["host_steals"])
     assert rows["SyncVectorEnv:OMP_NUM_THREADS=1"]["torch_threads"] == 1
     assert rows["remoteenv"]["processes"] >= 2  # the trainer and its sim
     assert len(result["load_avg_per_round"]) == 2 and result["machine"]["cpus"] >= 1

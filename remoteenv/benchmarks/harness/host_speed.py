@@ -4,7 +4,8 @@ Benchmarks only (``bench --train-loop``). On a virtual machine the host's
 own speed comes and goes: for minutes at a time every CPU of the guest can
 run at half its speed or less (measured here: a fixed loop taking 13-15 ms
 where it takes 6-7 ms at best), with no sign in the guest's load average
-and little in its steal time. A ratio of two contenders timed one after
+and, in some of those minutes, little in its steal time (which the run
+reports beside, :mod:`~remoteenv.benchmarks.harness.host_steal`). A ratio of two contenders timed one after
 the other is then a ratio of two hosts. :class:`HostSpeed` times a
 fixed piece of pure-Python work on each CPU the benchmark may use
 (:func:`probe_s`, the slowest CPU's time) before the first slot and after
