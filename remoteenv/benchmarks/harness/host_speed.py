@@ -5,11 +5,11 @@ own speed comes and goes: for minutes at a time every CPU of the guest can
 run at half its speed or less (measured here: a fixed loop taking 13-15 ms
 where it takes 6-7 ms at best), with no sign in the guest's load average
 and, in some of those minutes, little in its steal time (which the run
-reports beside, :mod:`~remoteenv.benchmarks.harness.host_steal`). A ratio of two contenders timed one after
-the other is then a ratio of two hosts. :class:`HostSpeed` times a
-fixed piece of pure-Python work on each CPU the benchmark may use
-(:func:`probe_s`, the slowest CPU's time) before the first slot and after
-every slot, while no contender runs; a slot's *host speed* is the run's
+reports beside: :mod:`~remoteenv.benchmarks.harness.host_steal`). A ratio
+of two contenders timed one after the other is then a ratio of two hosts.
+:class:`HostSpeed` times a fixed piece of pure-Python work on each CPU the
+benchmark may use (:func:`probe_s`, the slowest CPU's time) before the first
+slot and after every slot, while no contender runs; a slot's *host speed* is the run's
 fastest probe over the slower of the probes either side of it (1.0: as fast
 as the host was at its best in this run). A slot at :data:`FULL_SPEED` or
 more ran on a host at full speed, as far as the probes can tell.

@@ -3,7 +3,7 @@
 Benchmarks only (``bench --train-loop``). A virtual CPU the host gives to
 another guest for a while runs nothing of this machine meanwhile; Linux
 counts that time as *steal* in ``/proc/stat``. On the reference VM it
-comes in bursts of seconds, up to a quarter of both CPUs' time, with quiet
+comes in bursts of seconds, up to a third of both CPUs' time, with quiet
 minutes between (docs/performance.md, "The host's bursts of steal time"),
 and a contender timed in a burst pays for it. :class:`HostSteal` reads the
 counters before and after each slot; a slot's *steal share* is the fraction
