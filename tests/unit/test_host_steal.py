@@ -7,7 +7,9 @@ import time
 
 import pytest
 
+from remoteenv.benchmarks.harness import report
 from remoteenv.benchmarks.harness.host_steal import HostSteal, cpu_times, share
+from remoteenv.benchmarks.harness.report import rounds_record
 from remoteenv.benchmarks.train_loop import format_table, full_speed_rounds
 
 
@@ -48,7 +50,7 @@ def test_the_real_counters_give_a_share_between_zero_and_one():
     assert got is not None and 0.0 <= got <= 1.0
 
 
-def test_the_report_names_the_runs_steal_and_the_slots_that_met_much_of_it():
+def test_the_report_names_the_runs_steal_and_the_slots_that_met_much_of_it(monkeypatch):
     row = {
         "name": "remoteenv",
         "num_envs": 16,
@@ -62,19 +64,9 @@ def test_the_report_names_the_runs_steal_and_the_slots_that_met_much_of_it():
         "involuntary_switches_per_step": 0.0,
         "wall_share": {"act": 0.3, "env_step": 0.4, "update": 0.3},
     }
-    result = {
-        "rows": [row],
-        "ratios": [],
-        "machine": {"cpus": 2, "platform": "x", "python": "3"},
-        "load_avg_per_round": [1.0],
-        "train_env": {},
-        "date": "d",
-        "rounds": 3,
-        "duration_s": 1.0,
-        "hogs": 0,
-        "skipped": [],
-    }
-    text = format_table(result)
+    monkeypatch.setattr(report, "machine_record", lambda: {"cpus": 2, "platform": "x", "python": "3"})
+    record = {"loads": [1.0], "hogs": 0, "duration_s": 1.0, "rounds": 3, "train_env": {}, "skipped": []}
+    text = format_table(rounds_record(rows=[row], ratios=[], **record))
     assert "held 0%-12% of the CPUs' time in a slot" in text and "1 of 2 slots at 5% or more" in text
 
 

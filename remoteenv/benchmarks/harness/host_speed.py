@@ -9,9 +9,9 @@ reports beside: :mod:`~remoteenv.benchmarks.harness.host_steal`). A ratio
 of two contenders timed one after the other is then a ratio of two hosts.
 :class:`HostSpeed` times a fixed piece of pure-Python work on each CPU the
 benchmark may use (:func:`probe_s`, the slowest CPU's time) before the first
-slot and after every slot, while no contender runs; a slot's *host speed* is the run's
-fastest probe over the slower of the probes either side of it (1.0: as fast
-as the host was at its best in this run). A slot at :data:`FULL_SPEED` or
+slot and after every slot, while no contender runs; a slot's *host speed* is
+the run's fastest probe over the slower of the probes either side of it
+(1.0: as fast as the host was at its best in this run). A slot at :data:`FULL_SPEED` or
 more ran on a host at full speed, as far as the probes can tell.
 """
 
