@@ -38,6 +38,9 @@ class ReacherEnv(BaseEnv):
     # The batched hooks read and write state through stacked(): the worlds of a
     # process step in one mujoco.batch call.
     stacked_hooks = True
+    #: Counts every setting of any world's reward weight: the batched hooks' remembered
+    #: weights (:func:`_stacked_weights`) are stale once it has moved.
+    weights_version = 0
 
     def __init__(
         self,
@@ -73,6 +76,26 @@ class ReacherEnv(BaseEnv):
         self.reward_control_weight = float(reward_control_weight)
         self._fingertip = self.model.body("fingertip").id
         self._target = self.model.body("target").id
+
+    @property
+    def reward_dist_weight(self) -> float:
+        """The distance term's weight in the reward (1: Gymnasium's)."""
+        return self._reward_dist_weight
+
+    @reward_dist_weight.setter
+    def reward_dist_weight(self, value: float) -> None:
+        self._reward_dist_weight = value
+        ReacherEnv.weights_version += 1
+
+    @property
+    def reward_control_weight(self) -> float:
+        """The control cost's weight in the reward (1: Gymnasium's)."""
+        return self._reward_control_weight
+
+    @reward_control_weight.setter
+    def reward_control_weight(self, value: float) -> None:
+        self._reward_control_weight = value
+        ReacherEnv.weights_version += 1
 
     def reset_model(self, options: dict[str, Any] | None) -> tuple[np.ndarray, dict[str, Any]]:
         self.set_state(*self._draw_start())
@@ -136,9 +159,7 @@ class ReacherEnv(BaseEnv):
         state = stacked(envs)
         qpos, qvel, xpos = state.get("qpos"), state.get("qvel"), state.get("xpos")
         vec = xpos[:, tip] - xpos[:, target]
-        dist_w, ctrl_w = _weights(
-            tuple(env.reward_dist_weight for env in reachers), tuple(env.reward_control_weight for env in reachers)
-        )
+        dist_w, ctrl_w = _stacked_weights(reachers)
         # The same operations as post_step, so the numbers (and types) match
         # exactly: a stacked matmul is the dot product np.linalg.norm takes;
         # a weight of 1 everywhere is left out (multiplying by 1 changes no bit).
@@ -174,6 +195,25 @@ def _stacked_obs(qpos: np.ndarray, qvel: np.ndarray, tip_minus_target: np.ndarra
     return np.concatenate(
         (np.cos(angles), np.sin(angles), qpos[:, 2:], qvel[:, :2], tip_minus_target[:, :2]), axis=1, dtype=np.float64
     )
+
+
+def _stacked_weights(reachers: Sequence[ReacherEnv]) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """:func:`_weights` of the worlds ``reachers``, remembered on the worlds'
+    list while no world's weight is set (:attr:`ReacherEnv.weights_version`):
+    the list of every world, which the stepper builds once, then costs no look
+    at each world per step. A list without attributes (a plain list) is read afresh."""
+    memo = getattr(reachers, "__dict__", None)
+    version = ReacherEnv.weights_version
+    if memo is not None:
+        known = memo.get("_reacher_weights")
+        if known is not None and known[0] == version:
+            return known[1]
+    weights = _weights(
+        tuple([env.reward_dist_weight for env in reachers]), tuple([env.reward_control_weight for env in reachers])
+    )
+    if memo is not None:
+        memo["_reacher_weights"] = (version, weights)
+    return weights
 
 
 @functools.lru_cache(maxsize=16)

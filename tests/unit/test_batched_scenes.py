@@ -96,6 +96,40 @@ def test_batched_and_per_world_paths_give_identical_replies(scene: str, threads:
             w.env.close()
 
 
+def test_a_reward_weight_set_between_steps_counts_from_the_next_step() -> None:
+    """The batched hooks remember the worlds' reward weights between steps; a
+    weight set on a world (as ``set_attr`` sets it) is used from the next step
+    on, as the per-world path, which reads it at every step, uses it."""
+    make, _ = SCENES["reacher"]
+    batched, per_world, unchanged = _commands(make, 1, True), _commands(make, 1, False), _commands(make, 1, True)
+    every = (batched, per_world, unchanged)
+    rng = np.random.default_rng(3)
+    try:
+        for commands in every:
+            commands.reset_batch({"worlds": list(range(K)), "seeds": list(range(K))}, None, None)
+        for t in range(6):
+            if t == 3:
+                for commands in (batched, per_world):
+                    commands.worlds[1].env.reward_dist_weight = 3.0
+                    commands.worlds[4].env.reward_control_weight = 0.5
+            msg = {"ops": [OP_STEP] * K, "actions": _actions(batched.worlds[0].env.action_space, K, rng)}
+            a, b, c = (commands.step_batch(dict(msg), None, None) for commands in every)
+            assert protocol.pack(a) == protocol.pack(b), t
+            dist, ctrl = (a["info"]["columns"][key][0] for key in ("reward_dist", "reward_ctrl"))
+            dist_1, ctrl_1 = (c["info"]["columns"][key][0] for key in ("reward_dist", "reward_ctrl"))
+            if t < 3:
+                assert protocol.pack(a) == protocol.pack(c), t
+            else:  # exactly the weight's product, in the dtype post_step multiplies in
+                assert dist[1] == dist_1[1] * 3.0 and ctrl[4] == ctrl_1[4] * np.float32(0.5), t
+                assert np.delete(dist, 1).tolist() == np.delete(dist_1, 1).tolist()
+                assert np.delete(ctrl, 4).tolist() == np.delete(ctrl_1, 4).tolist()
+    finally:
+        for commands in (batched, unchanged):
+            commands.close()
+        for w in batched.worlds + per_world.worlds + unchanged.worlds:
+            w.env.close()
+
+
 def test_plain_batch_reply_is_the_scenes_arrays() -> None:
     """A step of every world that resets none sends the scene's columns as they are."""
     make, _ = SCENES["reacher"]
