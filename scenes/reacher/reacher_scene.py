@@ -198,10 +198,11 @@ def _stacked_obs(qpos: np.ndarray, qvel: np.ndarray, tip_minus_target: np.ndarra
 
 
 def _stacked_weights(reachers: Sequence[ReacherEnv]) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """:func:`_weights` of the worlds ``reachers``, remembered on the worlds'
-    list while no world's weight is set (:attr:`ReacherEnv.weights_version`):
-    the list of every world, which the stepper builds once, then costs no look
-    at each world per step. A list without attributes (a plain list) is read afresh."""
+    """:func:`_weights` of the worlds ``reachers``, kept on that list of worlds
+    while no world's weight has been set since (:attr:`ReacherEnv.weights_version`).
+    The stepper hands every step of all its worlds the same list, built once and
+    never changed, so such a step reads no world's weights; any other list is
+    read when it comes, a plain ``list`` (which takes no attributes) every time."""
     memo = getattr(reachers, "__dict__", None)
     version = ReacherEnv.weights_version
     if memo is not None:
