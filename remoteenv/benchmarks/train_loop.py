@@ -72,7 +72,8 @@ TARGETS = [
     ("waits-floor", "EnvPool", 64, None),
     ("waits-floor", "SyncVectorEnv", 16, None),
 ]
-#: A slot whose host held at least this share of the CPUs' time is counted in the report's steal line.
+#: A slot whose host held at least this share of the CPUs' time is counted in the report's steal line,
+#: and its round is not one at full speed (:func:`full_speed_rounds`).
 STEAL_NOTED = 0.05
 #: Longest a contender may take to build and warm up, or to answer a round beyond its length (seconds).
 _PATIENCE_S = 300.0
