@@ -267,7 +267,25 @@ def format_profile(ns: list[int]) -> str:
     totals = {n: (sum(by_n[n][0].values()), sum(by_n[n][1].values())) for n in ns}
     lines.append(f"{'total':40s}" + "".join(f"{totals[n][0]:12.1f}{totals[n][1]:12.1f}" for n in ns))
     lines.append(f"{'total per world':40s}" + "".join(f"{totals[n][0] / n:12.2f}{totals[n][1] / n:12.2f}" for n in ns))
+    lines.append("")
+    lines.append(format_reply_profile(ns))
     lines.append(f"load average {os.getloadavg()[0]:.2f}; {time.strftime('%Y-%m-%d %H:%M %Z')}")
+    return "\n".join(lines)
+
+
+def format_reply_profile(ns: list[int]) -> str:
+    """The sim's reply to a step that starts episodes, world by world and from the arrays
+    (:func:`remoteenv.benchmarks.harness.reply_profile.reply_profile`), for each N, as a table."""
+    from remoteenv.benchmarks.harness.reply_profile import CASES, reply_profile
+
+    by_n = {n: reply_profile(n) for n in ns}
+    head = "".join(f"{f'N={n} per world':>16s}{f'N={n} arrays':>14s}{'ratio':>7s}" for n in ns)
+    lines = [f"{'sim: build and pack the reply (microseconds)':44s}{head}"]
+    for case in CASES:
+        cells = "".join(
+            f"{by_n[n][case][0]:16.1f}{by_n[n][case][1]:14.1f}{by_n[n][case][1] / by_n[n][case][0]:7.2f}" for n in ns
+        )
+        lines.append(f"{case:44s}{cells}")
     return "\n".join(lines)
 
 

@@ -25,6 +25,38 @@ def _scene_class(name: str, cls: str) -> type[BaseEnv]:
 Reacher = _scene_class("reacher", "ReacherEnv")
 CartPole = _scene_class("cartpole", "CartPoleEnv")
 _made = itertools.count()
+
+
+class TaggedReacher(Reacher):  # type: ignore[misc,valid-type]
+    """Reacher whose starts say so in their infos (from every third world on)
+    and whose steps add a numpy-bool info column: the replies of steps that
+    start episodes then take the per-world encoding's other branches. World
+    w of either path is tagged alike (K % 3 == 0)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.tagged = next(_made) % 3 == 2
+
+    def reset_model(self, options):
+        obs, info = super().reset_model(options)
+        return obs, {**info, "started": 1} if self.tagged else info
+
+    @classmethod
+    def reset_models(cls, envs, options):
+        obs, infos = super().reset_models(envs, options)
+        return obs, [{**info, "started": 1} if env.tagged else info for env, info in zip(envs, infos)]
+
+    def post_step(self, action):
+        obs, reward, terminated, info = super().post_step(action)
+        return obs, reward, terminated, {**info, "near": np.bool_(info["reward_dist"] > -0.1)}
+
+    @classmethod
+    def post_steps(cls, envs, actions):
+        batch = super().post_steps(envs, actions)
+        batch.infos["near"] = batch.infos["reward_dist"] > -0.1
+        return batch
+
+
 SCENES = {
     "reacher": (lambda: Reacher(), {}),
     # Weights that differ between worlds (1 among them), the same for world w of both paths (K % 3 == 0).
@@ -32,6 +64,7 @@ SCENES = {
         lambda: Reacher(reward_dist_weight=(1.0, 0.5, 2.0)[next(_made) % 3], reward_control_weight=0.25),
         {},
     ),
+    "reacher-tagged": (lambda: TaggedReacher(), {}),
     "cartpole": (lambda: CartPole(), {}),
     "cartpole-continuous": (lambda: CartPole(continuous=True), {}),
 }

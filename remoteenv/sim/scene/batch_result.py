@@ -70,7 +70,8 @@ class BatchResult:
             if isinstance(column, np.ndarray):
                 if column.dtype.kind not in _COLUMN_KINDS or column.shape != (n,):
                     return None
-                if key in self.python_scalars:
+                # A numpy bool is no numpy number: its column goes as a list, as columnar_infos sends it.
+                if key in self.python_scalars or column.dtype.kind == "b":
                     columns[key] = [column.astype(_WIDE[column.dtype.kind]).tolist(), present]
                 else:
                     columns[key] = [np.ascontiguousarray(column), present]

@@ -24,6 +24,7 @@ import numpy as np
 from gymnasium import spaces
 
 from remoteenv.sim.scene.batch_result import BatchResult
+from remoteenv.sim.stepping.autoreset_reply import autoreset_reply
 from remoteenv.sim.stepping.batch_step import WorldsStepper, steps_together
 from remoteenv.sim.stepping.lock_step import LockStepper
 from remoteenv.sim.stepping.plain_region_step import PlainRegionStep, batch_infos, plain_step_reply, region_reply
@@ -123,6 +124,10 @@ class BatchCommands:
             self.worlds[w].started(obs[j], seeds[j], float(times[j]))
         return obs, infos
 
+    def _start_at(self, worlds: list[int], starts: list[int]) -> tuple[Any, list[dict[str, Any]]]:
+        """Start an episode, unseeded, in the worlds at request positions ``starts`` (``worlds[j]``): see :meth:`_start`."""
+        return self._start([worlds[j] for j in starts], [None] * len(starts), None)
+
     def step_batch(self, msg: dict[str, Any], channel: Channel | None, reply_to: Any) -> dict[str, Any] | None:
         """A ``step_batch``: its ops, worlds and actions in the message, or with
         ``"region": true`` posted in the region (see :meth:`from_region`)."""
@@ -207,7 +212,12 @@ class BatchCommands:
                     if reply is not None:
                         return reply
                 return plain_step_reply(batch)  # the scene's arrays as they are
-            results = _per_world_results(batch, stepped if stepped is not None else list(range(n)), n)
+            positions = stepped if stepped is not None else list(range(n))
+            # Some worlds start an episode: the reply from the arrays where they allow it.
+            reply = autoreset_reply(batch, ops, positions, lambda starts: self._start_at(worlds, starts))
+            if reply is not None:
+                return reply
+            results = _per_world_results(batch, positions, n)
         else:
             if isinstance(actions, np.ndarray) and self._discrete:
                 actions = actions.tolist()
@@ -251,7 +261,7 @@ class BatchCommands:
             else:
                 obs[j], infos[j] = r["obs"], r["info"]
         if starts:
-            started, started_infos = self._start([worlds[j] for j in starts], [None] * len(starts), None)
+            started, started_infos = self._start_at(worlds, starts)
             if len(starts) == n and isinstance(started, np.ndarray):
                 obs = started  # type: ignore[assignment]
             else:
