@@ -18,6 +18,18 @@ import numpy as np
 _COLUMN_KINDS = {"b": bool, "i": int, "u": int, "f": float}
 #: The dtype whose ``tolist()`` gives the python scalars of a column of each kind.
 _WIDE = {"b": np.bool_, "i": np.int64, "u": np.int64, "f": np.float64}
+_INT64 = np.iinfo(np.int64)
+
+
+def widened(column: np.ndarray) -> np.ndarray | None:
+    """An info column of python scalars (or of numpy bools) in the dtype whose
+    ``tolist()`` gives them: bool, int64 or float64. None when a value does
+    not fit (a uint64 above int64's range, which only a per-world map carries,
+    as :func:`~remoteenv.wire.messages.batch_encoding.columnar_infos` sends it)."""
+    kind = column.dtype.kind
+    if kind == "u" and column.size and column.max() > _INT64.max:
+        return None
+    return column.astype(_WIDE[kind], copy=False)
 
 
 @dataclass
@@ -72,7 +84,10 @@ class BatchResult:
                     return None
                 # A numpy bool is no numpy number: its column goes as a list, as columnar_infos sends it.
                 if key in self.python_scalars or column.dtype.kind == "b":
-                    columns[key] = [column.astype(_WIDE[column.dtype.kind]).tolist(), present]
+                    wide = widened(column)
+                    if wide is None:
+                        return None
+                    columns[key] = [wide.tolist(), present]
                 else:
                     columns[key] = [np.ascontiguousarray(column), present]
                 continue
@@ -81,8 +96,10 @@ class BatchResult:
             kinds = {type(v) for v in column}
             if len(kinds) > 1:
                 return None
+            if int in kinds and not all(_INT64.min <= v <= _INT64.max for v in column):
+                return None  # a column is int64; a per-world map carries any int
             columns[key] = [list(column), present]
         return {"columns": columns}
 
 
-__all__ = ["BatchResult"]
+__all__ = ["BatchResult", "widened"]

@@ -32,10 +32,6 @@ from remoteenv.wire.codec.scalar_types import describe_scalars
 from remoteenv.wire.messages.batch_encoding import columnar_infos, stack
 from remoteenv.wire.protocol import OP_RESET, OP_STEP_AUTORESET, OP_STEP_RESET
 
-#: The dtype whose ``tolist()`` gives a python-scalar column's values, by dtype kind
-#: (``u`` is left out: a python int above int64 goes as a map, see :func:`columnar_infos`).
-_PYTHON_WIDE = {"b": np.bool_, "i": np.int64, "f": np.float64}
-
 #: Starts the episodes of the given worlds (request positions, in order): their observations and info maps.
 Start = Callable[[list[int]], tuple[Any, list[dict[str, Any]]]]
 
@@ -118,14 +114,15 @@ def autoreset_reply(
 def _spread_columns(
     batch: BatchResult, stepped: Sequence[int], kept: Sequence[int], n: int
 ) -> dict[str, tuple[Any, list[bool]]] | None:
-    """The info columns of the stepped worlds (positions ``stepped``) over
-    ``n`` positions, present at positions ``kept`` only (zero elsewhere;
-    no column when ``kept`` is empty), with their masks, in the form :func:`columnar_infos` gives per-world
-    maps: a numpy column as an array of its dtype, a python-scalar one as a
-    list. None for infos that are maps, or a column that would not encode
-    as a column of its own."""
-    infos = batch.infos
-    if not isinstance(infos, dict):
+    """The stepped worlds' info columns in their wire form
+    (:meth:`BatchResult.wire_columns`, as :func:`columnar_infos` encodes
+    per-world maps: an array of its dtype, or a list of python scalars) over
+    ``n`` positions: a stepped world's value at its position ``stepped[i]``,
+    present at positions ``kept`` only (zero elsewhere, as columnar_infos
+    fills a world without the key; no column when ``kept`` is empty), with
+    their masks. None when the infos do not encode as columns."""
+    wire = batch.wire_columns()
+    if wire is None:
         return None
     if not kept:
         return {}  # no world keeps its step's infos: none of their keys is in the reply
@@ -133,24 +130,12 @@ def _spread_columns(
     for j in kept:
         mask[j] = True
     absent = [j for j, present in enumerate(mask) if not present]
-    python = batch.python_scalars
     out: dict[str, tuple[Any, list[bool]]] = {}
-    for key, column in infos.items():
-        if not isinstance(column, np.ndarray) or column.shape != (len(stepped),):
-            return None
-        kind = column.dtype.kind
-        # A numpy bool is no numpy number: its column goes as a list, as a python scalar's does.
-        as_list = key in python or kind == "b"
-        if as_list:
-            if kind not in _PYTHON_WIDE:
-                return None
-            dtype = np.dtype(_PYTHON_WIDE[kind])
-        elif kind in "iuf":
-            dtype = column.dtype
-        else:
-            return None  # a complex column goes as maps: the per-world path's
-        spread = np.zeros(n, dtype=dtype)
-        spread[stepped] = column
+    for key, (values, _) in wire["columns"].items():
+        as_list = not isinstance(values, np.ndarray)
+        # A list holds python bools, ints or floats of one type: numpy's bool, int64 or float64 hold them exactly.
+        spread = np.zeros(n, dtype=type(values[0]) if as_list else values.dtype)
+        spread[stepped] = values
         spread[absent] = 0
         out[key] = (spread.tolist() if as_list else spread, list(mask))
     return out

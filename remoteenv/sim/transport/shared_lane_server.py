@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from remoteenv.sim.scene.batch_result import BatchResult
+from remoteenv.sim.scene.batch_result import BatchResult, widened
 from remoteenv.sim.transport.channels import Channel, PipeChannel
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.sim.transport.lane_requests import LaneRequests
@@ -212,7 +212,10 @@ class SharedLane(LaneRequests):
                 return None
             python = key in batch.python_scalars
             if python:
-                values = values.astype(_WIDE[values.dtype.kind], copy=False)
+                wide = widened(values)
+                if wide is None:
+                    return None
+                values = wide
             elif values.dtype.itemsize > 8:
                 return None
             out.append((key, values, python))
