@@ -36,7 +36,7 @@ AGENT_SPIN_S = 200e-6
 #: region (every world steps, none resets first), on the history of those waits
 #: alone: where the sims' physics threads take every CPU, an agent that waits
 #: hot takes CPU time from them, which costs more than the wake-up it saves once
-#: the wait is longer than about this (docs/performance.md, "Fewer kinds of numpy call, and
+#: the wait is longer than about this (docs/performance-history.md, "Fewer kinds of numpy call, and
 #: the lane's own wait").
 LANE_SPIN_S = 500e-6
 #: Longest busy-wait (seconds) for a reply after the sim's heads-up that it is

@@ -13,7 +13,7 @@ real time:
   work: a woken sim no longer preempts the agent, which finishes waking
   every sim before it waits): its main thread, which serves the requests;
   physics threads it started before keep the normal policy, which trains
-  faster at N = 16 (docs/performance.md, "The physics' second thread"), and
+  faster at N = 16 (docs/performance-history.md, "The physics' second thread"), and
 * when there are at least two sims and no more than the CPUs this process
   may use, and each sim steps its worlds on one thread (no
   ``REMOTEENV_SIM_THREADS`` above 1), pins sim ``i`` to the ``i``-th of

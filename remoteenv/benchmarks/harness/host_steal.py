@@ -4,7 +4,7 @@ Benchmarks only (``bench --train-loop``). A virtual CPU the host gives to
 another guest for a while runs nothing of this machine meanwhile; Linux
 counts that time as *steal* in ``/proc/stat``. On the reference VM it
 comes in bursts of seconds, up to a third of both CPUs' time, with quiet
-minutes between (docs/performance.md, "The host's bursts of steal time"),
+minutes between (docs/performance-history.md, "The host's bursts of steal time"),
 and a contender timed in a burst pays for it. :class:`HostSteal` reads the
 counters before and after each slot; a slot's *steal share* is the fraction
 of all CPUs' time in it that the host held (0.0: none). Where the OS has no

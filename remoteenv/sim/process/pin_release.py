@@ -7,7 +7,7 @@ machine they step faster so. But a CPU that another program keeps busy (a
 CPU hog, another job, a learner running beside the sims) is shared in time
 slices of milliseconds, and a pinned sim cannot move to a CPU that is free:
 beside one CPU hog, pinned sims stepped 2.4–4.7× slower than sims left to
-the OS (docs/performance.md). So every :data:`WINDOW` answers a pinned sim
+the OS (docs/performance-history.md). So every :data:`WINDOW` answers a pinned sim
 reads from the kernel how long its serving thread waited, runnable, for a
 CPU (``run_delay`` in ``/proc/<pid>/task/<tid>/schedstat``, which counts
 the waits after each wake-up too) against how long it ran: when it waited at

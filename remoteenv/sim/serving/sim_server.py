@@ -47,7 +47,7 @@ SIM_SPIN_S = 1e-3
 #: Waits for the agent's next request in a row that outlast :data:`SIM_SPIN_S`
 #: before the next ones start cold: an agent late now and then (its caller
 #: preempted, a slow host's hiccup) is still waited for hot, as a sim asleep
-#: costs the request a wake-up and its physics a slower start (docs/performance.md,
+#: costs the request a wake-up and its physics a slower start (docs/performance-history.md,
 #: "The sim's patience with a late request").
 SIM_SPIN_PATIENCE = 3
 #: Longest think time (seconds) of an agent whose next request is waited for

@@ -13,7 +13,7 @@ because rollout works on state vectors and scratch ``MjData``: derived
 quantities such as ``xpos`` that scenes read after a step would have to be
 recomputed, and every world's ``MjData`` copied in and out each step. On the
 2-core reference machine the two measured alike for Reacher at N = 64
-(see docs/performance.md).
+(see docs/performance-history.md).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def default_threads(num_worlds: int) -> int:
     2-core reference machine, quiet, N = 64 stepped at 58.9k steps/s with
     K = 32 and one thread against 52.7k with K = 64 and two; on the same
     machine loaded (load average 7) a second thread per process cost a third
-    (docs/performance.md). Set it to the CPUs a process may use when one
+    (docs/performance-history.md). Set it to the CPUs a process may use when one
     sim process hosts many worlds on an otherwise idle machine (e.g. a
     remote host serving one agent); it is capped at one thread per
     :data:`MIN_WORLDS_PER_THREAD` worlds.
