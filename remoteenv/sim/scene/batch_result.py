@@ -14,10 +14,10 @@ from typing import Any
 
 import numpy as np
 
-#: numpy kinds an info column may have, and the python type of one element.
-_COLUMN_KINDS = {"b": bool, "i": int, "u": int, "f": float}
 #: The dtype whose ``tolist()`` gives the python scalars of a column of each kind.
 _WIDE = {"b": np.bool_, "i": np.int64, "u": np.int64, "f": np.float64}
+#: numpy kinds an info column may have (bool, int, uint, float): the ones :func:`widened` takes.
+COLUMN_KINDS = frozenset(_WIDE)
 _INT64 = np.iinfo(np.int64)
 
 
@@ -80,7 +80,7 @@ class BatchResult:
         columns: dict[str, Any] = {}
         for key, column in self.infos.items():
             if isinstance(column, np.ndarray):
-                if column.dtype.kind not in _COLUMN_KINDS or column.shape != (n,):
+                if column.dtype.kind not in COLUMN_KINDS or column.shape != (n,):
                     return None
                 # A numpy bool is no numpy number: its column goes as a list, as columnar_infos sends it.
                 if key in self.python_scalars or column.dtype.kind == "b":
@@ -102,4 +102,4 @@ class BatchResult:
         return {"columns": columns}
 
 
-__all__ = ["BatchResult", "widened"]
+__all__ = ["COLUMN_KINDS", "BatchResult", "widened"]

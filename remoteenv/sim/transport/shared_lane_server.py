@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from remoteenv.sim.scene.batch_result import BatchResult, widened
+from remoteenv.sim.scene.batch_result import COLUMN_KINDS, BatchResult, widened
 from remoteenv.sim.transport.channels import Channel, PipeChannel
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.sim.transport.lane_requests import LaneRequests
@@ -38,8 +38,6 @@ INFO_COLUMNS = 16
 #: A sim whose last region answer came this long (seconds) or longer after its
 #: physics sends no heads-up: the agent would wait hot through the rest of the tick.
 HEADS_UP_TAIL_S = 0.5e-3
-#: The dtype an info column of python scalars travels in, by numpy kind.
-_WIDE = {"b": np.dtype(np.bool_), "i": np.dtype("<i8"), "u": np.dtype("<i8"), "f": np.dtype("<f8")}
 
 
 def layout_for(action_space: spaces.Space, obs_space: spaces.Space, worlds: int) -> SharedLayout | None:
@@ -208,7 +206,7 @@ class SharedLane(LaneRequests):
             return None
         out = []
         for key, values in infos.items():
-            if not isinstance(values, np.ndarray) or values.shape != (n,) or values.dtype.kind not in _WIDE:
+            if not isinstance(values, np.ndarray) or values.shape != (n,) or values.dtype.kind not in COLUMN_KINDS:
                 return None
             python = key in batch.python_scalars
             if python:
