@@ -10,6 +10,7 @@ here.
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import unicodedata
@@ -43,8 +44,10 @@ def slug(heading: str) -> str:
     return "".join("-" if ch == " " else ch for ch in text if ch in "-_ " or unicodedata.category(ch)[0] in "LN")
 
 
-def anchors(path: str) -> set[str]:
-    """Every heading anchor of a page (a repeated heading's later ones get ``-1``, ``-2``, ...)."""
+@functools.cache
+def anchors(path: str) -> frozenset[str]:
+    """Every heading anchor of a page (a repeated heading's later ones get ``-1``, ``-2``, ...);
+    read once per page, however many links point into it."""
     seen: dict[str, int] = {}
     out = set()
     for match in _HEADING.finditer(_text(path)):
@@ -52,7 +55,7 @@ def anchors(path: str) -> set[str]:
         count = seen.get(base, 0)
         seen[base] = count + 1
         out.add(base if count == 0 else f"{base}-{count}")
-    return out
+    return frozenset(out)
 
 
 def test_the_anchor_rule_follows_github():
