@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from remoteenv.wire.messages.batch_encoding import COLUMN_KINDS
 from remoteenv.wire.wire_errors import ERROR_KINDS, short_repr
 
 #: Spaces whose values are numpy arrays of the space's shape and dtype.
@@ -144,7 +145,7 @@ def infos_problem(infos: Any, n: int) -> str | None:
             return f"info column {short_repr(key)} must be [values, present], got {short_repr(column)}"
         values, present = column
         if isinstance(values, np.ndarray):  # the spec also allows an array of a numpy dtype
-            if values.shape != (n,) or values.dtype.kind not in "biuf":
+            if values.shape != (n,) or values.dtype.kind not in COLUMN_KINDS:
                 return (
                     f"info column {short_repr(key)}: values must be a list of {n} or a numeric array of shape "
                     f"({n},), got {short_repr(values)}"

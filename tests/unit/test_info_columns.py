@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from remoteenv.sim.scene.batch_result import BatchResult
+from remoteenv.sim.scene.batch_result import BatchResult, widened
 from remoteenv.sim.stepping.plain_region_step import batch_infos
 from remoteenv.sim.transport.shared_lane_server import SharedLane
-from remoteenv.wire.messages.batch_encoding import columnar_infos
+from remoteenv.wire.messages.batch_encoding import COLUMN_KINDS, columnar_infos
 
 BIG = 2**63 + 5
 
@@ -56,3 +56,15 @@ def test_the_region_leaves_a_column_it_cannot_hold_exactly_to_the_pipe() -> None
         assert (key, values.dtype, values.tolist(), python) == ("count", np.dtype(np.int64), [1, 2, 3], True)
     finally:
         lane.close()
+
+
+def test_every_column_kind_the_wire_carries_widens_to_python_scalars() -> None:
+    """The sim widens a python-scalar column of each kind the wire takes as a
+    column (``COLUMN_KINDS``) into the dtype whose ``tolist()`` gives bools, ints or floats."""
+    python_type = {"b": bool, "i": int, "u": int, "f": float}
+    samples = {"b": np.bool_, "i": np.int16, "u": np.uint8, "f": np.float32}
+    assert set(samples) == COLUMN_KINDS
+    for kind, dtype in samples.items():
+        wide = widened(np.array([1, 0, 1], dtype=dtype))
+        assert wide is not None and wide.dtype.kind in COLUMN_KINDS
+        assert [type(v) for v in wide.tolist()] == [python_type[kind]] * 3

@@ -32,6 +32,7 @@ import numpy as np
 from gymnasium import spaces
 
 from remoteenv.agent.errors import RemoteProtocolError
+from remoteenv.wire.messages.batch_encoding import COLUMN_KINDS
 from remoteenv.wire.wire_errors import short_repr
 
 #: Spaces whose values are numpy arrays of the space's dtype and shape.
@@ -331,7 +332,7 @@ def _infos_problem(infos: Any, n: int) -> str | None:
         if type(key) is not str or not (isinstance(column, list) and len(column) == 2):
             return f"column {short_repr(key)} is {_describe(column)}, not [values, present]"
         values, present = _as_array(column[0]), _bools(column[1], n)
-        if values is None or values.shape != (n,) or values.dtype.kind not in "biuf":
+        if values is None or values.shape != (n,) or values.dtype.kind not in COLUMN_KINDS:
             return f"column {key!r} values are {_describe(column[0])}, not {n} bools, ints or floats"
         if present is None:
             return f"column {key!r} present is {_describe(column[1])}, not {n} bools"

@@ -14,10 +14,10 @@ from typing import Any
 
 import numpy as np
 
-#: The dtype whose ``tolist()`` gives the python scalars of a column of each kind.
+from remoteenv.wire.messages.batch_encoding import COLUMN_KINDS
+
+#: The dtype whose ``tolist()`` gives the python scalars of a column of each kind (:data:`COLUMN_KINDS`).
 _WIDE = {"b": np.bool_, "i": np.int64, "u": np.int64, "f": np.float64}
-#: numpy kinds an info column may have (bool, int, uint, float): the ones :func:`widened` takes.
-COLUMN_KINDS = frozenset(_WIDE)
 _INT64 = np.iinfo(np.int64)
 
 
@@ -102,4 +102,4 @@ class BatchResult:
         return {"columns": columns}
 
 
-__all__ = ["COLUMN_KINDS", "BatchResult", "widened"]
+__all__ = ["BatchResult", "widened"]

@@ -23,11 +23,12 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from remoteenv.sim.scene.batch_result import COLUMN_KINDS, BatchResult, widened
+from remoteenv.sim.scene.batch_result import BatchResult, widened
 from remoteenv.sim.transport.channels import Channel, PipeChannel
 from remoteenv.sim.transport.checks import RequestError
 from remoteenv.sim.transport.lane_requests import LaneRequests
 from remoteenv.wire.codec.arrays import wire_dtype
+from remoteenv.wire.messages.batch_encoding import COLUMN_KINDS
 from remoteenv.wire.protocol import reply_soon
 from remoteenv.wire.shared_memory.doorbell import Doorbell
 from remoteenv.wire.shared_memory.shared_batch import SharedLayout, create_region

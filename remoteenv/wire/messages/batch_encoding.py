@@ -25,6 +25,10 @@ _SCALAR_TYPES: dict[type, tuple[type, str]] = {
 
 _INT64_MIN, _INT64_MAX = -(2**63), 2**63 - 1
 
+#: numpy kinds an info column's values may have (bool, int, uint, float), in a reply's
+#: ``{"columns": ...}`` and in a region's info columns alike.
+COLUMN_KINDS = frozenset("biuf")
+
 
 def columnar_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
     """Encode the info maps of ``n`` worlds for the wire.
