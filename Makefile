@@ -18,6 +18,9 @@ $(VENV)/.deps: pyproject.toml Makefile
 deps: $(VENV)/.deps
 
 install: deps
+	# setuptools builds in the tree and copies all of build/lib into the wheel: a module
+	# deleted from the tree would stay importable in the venv. Build from scratch.
+	rm -rf build
 	$(PIP) install --quiet --no-deps --force-reinstall .
 
 demo: install
